@@ -1,0 +1,41 @@
+# Quick start: `make demo` and `make test`. Every target sets up .venv idempotently.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+OUT ?= out/demo
+
+.PHONY: venv demo test test-slow lint bench clean
+
+$(STAMP): pyproject.toml Makefile
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	# The CPU build of torch first: a bare `torch` requirement would pull a multi-GB CUDA build.
+	$(PY) -m pip install -q "torch==2.13.0"
+	$(PY) -m pip install -q -e ".[dev]"
+	@# Headless rendering needs an EGL (or OSMesa) library; install it from Debian if missing.
+	@MUJOCO_GL=egl $(PY) -c "import mujoco; mujoco.GLContext(16, 16).make_current()" 2>/dev/null || \
+	  (command -v apt-get >/dev/null && (apt-get update -qq && apt-get install -y -qq libegl1 libgl1 libosmesa6 >/dev/null) || \
+	   echo "warning: no EGL/OSMesa: rendering disabled")
+	@touch $(STAMP)
+
+venv: $(STAMP)
+
+demo: venv
+	$(PY) -m agents.cli demo --out $(OUT)
+
+test: venv
+	$(PY) -m pytest -m "not slow" -n 2 -q
+
+test-slow: venv
+	$(PY) -m pytest -m slow -n 2 -q
+
+lint: venv
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+bench: venv
+	$(PY) benchmarks/env_throughput.py
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

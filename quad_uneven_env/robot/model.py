@@ -1,0 +1,160 @@
+"""Build the MuJoCo model of the paper's robot (Table 1) as generated MJCF.
+
+``robot_mjcf`` gives the robot alone (what Pinocchio loads); ``scene_mjcf`` adds the
+terrain height field, actuators, lights and a tracking camera for the environment.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+
+from quad_uneven_env import constants as C
+from quad_uneven_env.config import LinkParams, RobotConfig, load_robot_config
+from quad_uneven_env.robot.kinematics import hip_positions_B, standing_joint_angles
+
+MIN_INERTIA = mujoco.mjMINVAL
+"""kg m^2: the smallest principal inertia MuJoCo accepts; replaces Table 1's zeros."""
+
+NOMINAL_HIP_HEIGHT = 0.34
+"""m: hip-to-foot-point height of the default standing pose (81 % of the leg length)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PhysicsOptions:
+    """Simulator settings the paper leaves open."""
+
+    timestep: float = 0.002
+    """physics step (s); <= 2 ms."""
+    integrator: str = "implicitfast"
+    """MuJoCo integrator."""
+    cone: str = "elliptic"
+    """friction cone model; elliptic with a high impratio keeps stance feet from creeping."""
+    impratio: float = 10.0
+    """ratio of frictional to normal constraint impedance."""
+
+
+def _fmt(values) -> str:
+    return " ".join(f"{float(v):.10g}" for v in np.atleast_1d(values))
+
+
+def _link_inertia(link: LinkParams) -> np.ndarray:
+    """(Ixx, Iyy, Izz) in the link frame whose z axis is the link's long axis."""
+    axial, other1, other2 = (max(v, MIN_INERTIA) for v in link.inertia)
+    return np.array([other1, other2, axial])
+
+
+def _leg_xml(cfg: RobotConfig, leg: str, hip_pos: np.ndarray) -> str:
+    rng = cfg.joint_range
+    kfe = cfg.knee_range(leg)
+    l1, l2 = cfg.thigh.length, cfg.shank.length
+    group = f'contype="{C.ROBOT_CONTYPE}" conaffinity="{C.ROBOT_CONAFFINITY}"'
+    fr = f'friction="{cfg.friction:.6g} 0.005 0.0001"'
+    return f"""
+      <body name="{C.thigh_body(leg)}" pos="{_fmt(hip_pos)}">
+        <joint name="{C.joint_name(leg, "HAA")}" axis="1 0 0" range="{_fmt(rng["HAA"])}" damping="{cfg.joint_damping:.6g}"/>
+        <joint name="{C.joint_name(leg, "HFE")}" axis="0 1 0" range="{_fmt(rng["HFE"])}" damping="{cfg.joint_damping:.6g}"/>
+        <inertial pos="0 0 {-cfg.thigh.com:.10g}" mass="{cfg.thigh.mass:.10g}" diaginertia="{_fmt(_link_inertia(cfg.thigh))}"/>
+        <site name="{C.hip_site(leg)}" pos="0 0 0" size="0.01"/>
+        <geom name="{leg}_thigh_geom" type="capsule" fromto="0 0 0 0 0 {-l1:.10g}" size="{cfg.link_radius:.6g}" mass="0" {group} {fr} rgba="0.3 0.3 0.35 1"/>
+        <body name="{C.shank_body(leg)}" pos="0 0 {-l1:.10g}">
+          <joint name="{C.joint_name(leg, "KFE")}" axis="0 1 0" range="{_fmt(kfe)}" damping="{cfg.joint_damping:.6g}"/>
+          <inertial pos="0 0 {-cfg.shank.com:.10g}" mass="{cfg.shank.mass:.10g}" diaginertia="{_fmt(_link_inertia(cfg.shank))}"/>
+          <geom name="{leg}_shank_geom" type="capsule" fromto="0 0 0 0 0 {-(l2 - cfg.foot_radius):.10g}" size="{0.7 * cfg.link_radius:.6g}" mass="0" {group} {fr} rgba="0.55 0.55 0.6 1"/>
+          <geom name="{C.foot_geom(leg)}" type="sphere" pos="0 0 {-l2:.10g}" size="{cfg.foot_radius:.6g}" mass="0" {group} {fr} rgba="0.1 0.1 0.1 1"/>
+          <site name="{C.foot_site(leg)}" pos="0 0 {-l2:.10g}" size="0.012" rgba="1 0.2 0.2 1"/>
+        </body>
+      </body>"""
+
+
+def _trunk_xml(cfg: RobotConfig, with_camera: bool) -> str:
+    b = cfg.body
+    half = np.asarray(b.size) / 2.0
+    hips = hip_positions_B(cfg)
+    legs = "".join(_leg_xml(cfg, leg, hips[i]) for i, leg in enumerate(C.LEG_NAMES))
+    camera = (
+        f'<camera name="{C.TRACK_CAMERA}" mode="trackcom" pos="0.4 -2.2 0.9" xyaxes="1 0 0 0 0.35 1"/>'
+        if with_camera
+        else ""
+    )
+    h0 = NOMINAL_HIP_HEIGHT + cfg.foot_radius
+    return f"""
+    <body name="{C.TRUNK_BODY}" pos="0 0 {h0:.10g}">
+      <freejoint name="{C.ROOT_JOINT}"/>
+      <inertial pos="0 0 0" mass="{b.mass:.10g}" diaginertia="{_fmt(b.inertia)}"/>
+      <geom name="{C.TRUNK_GEOM}" type="box" size="{_fmt(half)}" mass="0" contype="{C.ROBOT_CONTYPE}" conaffinity="{C.ROBOT_CONAFFINITY}" rgba="0.85 0.55 0.15 1"/>
+      {camera}{legs}
+    </body>"""
+
+
+def robot_mjcf(cfg: RobotConfig | None = None) -> str:
+    """MJCF of the robot alone (no terrain, no actuators): loadable by ``pin.buildModelFromMJCF``.
+
+    :param cfg: robot parameters; default ``configs/robot/paper.yaml`` (Table 1).
+    :return: the MJCF document as a string (write it to a file for Pinocchio).
+    """
+    cfg = cfg or load_robot_config()
+    return f"""<mujoco model="{cfg.name}_robot">
+  <compiler angle="radian" autolimits="true"/>
+  <worldbody>{_trunk_xml(cfg, with_camera=False)}
+  </worldbody>
+</mujoco>
+"""
+
+
+def actuators_xml(cfg: RobotConfig) -> str:
+    """Direct-drive torque motors (N m), one per joint, limited to the config's torque limits."""
+    lines = []
+    for leg in C.LEG_NAMES:
+        for kind in C.JOINT_KINDS:
+            lim = cfg.torque_limit[kind]
+            j = C.joint_name(leg, kind)
+            lines.append(f'    <motor name="{j}_motor" joint="{j}" gear="1" ctrlrange="{-lim:.6g} {lim:.6g}"/>')
+    return "\n".join(lines)
+
+
+def home_qpos(cfg: RobotConfig, ground_height: float = 0.0) -> np.ndarray:
+    """Standing configuration (19,) with the feet touching flat ground at ``ground_height`` (m)."""
+    q = np.zeros(C.NQ)
+    q[2] = ground_height + NOMINAL_HIP_HEIGHT + cfg.foot_radius
+    q[3] = 1.0
+    q[7:] = standing_joint_angles(cfg, NOMINAL_HIP_HEIGHT)
+    return q
+
+
+def scene_mjcf(
+    cfg: RobotConfig,
+    hfield_asset: str,
+    hfield_geom: str,
+    physics: PhysicsOptions | None = None,
+) -> str:
+    """MJCF of the robot on a height-field terrain with actuators, lights and a tracking camera.
+
+    :param hfield_asset: the ``<hfield .../>`` asset element of the terrain.
+    :param hfield_geom: the ``<geom type="hfield" .../>`` element of the terrain.
+    """
+    p = physics or PhysicsOptions()
+    return f"""<mujoco model="{cfg.name}_on_terrain">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{p.timestep:.6g}" integrator="{p.integrator}" cone="{p.cone}" impratio="{p.impratio:.6g}"/>
+  <visual>
+    <global offwidth="1280" offheight="720"/>
+    <headlight ambient="0.35 0.35 0.35" diffuse="0.6 0.6 0.6"/>
+  </visual>
+  <asset>
+    <texture name="sky" type="skybox" builtin="gradient" rgb1="0.55 0.7 0.9" rgb2="0.1 0.15 0.25" width="256" height="256"/>
+    <texture name="grid" type="2d" builtin="checker" rgb1="0.45 0.5 0.45" rgb2="0.35 0.4 0.35" width="256" height="256"/>
+    <material name="terrain_mat" texture="grid" texrepeat="20 20" texuniform="false"/>
+    {hfield_asset}
+  </asset>
+  <worldbody>
+    <light name="sun" directional="true" pos="0 0 5" dir="-0.3 0.3 -1" castshadow="false"/>
+    {hfield_geom}{_trunk_xml(cfg, with_camera=True)}
+  </worldbody>
+  <actuator>
+{actuators_xml(cfg)}
+  </actuator>
+</mujoco>
+"""
