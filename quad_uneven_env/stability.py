@@ -59,7 +59,7 @@ def stability_index(
     n = feet.shape[0]
     lead = cog.shape[:-1]
     if n < 3:
-        return np.full(lead, NO_SUPPORT), np.full(lead + (n,), np.nan)
+        return np.full(lead, NO_SUPPORT), np.full((*lead, n), np.nan)
     ordered = feet[order_clockwise(feet)]
     edges = np.roll(ordered, -1, axis=0) - ordered
     kappa = edges / np.linalg.norm(edges, axis=1, keepdims=True)

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
+import pinocchio as pin
 import pytest
 
-import mujoco
-import pinocchio as pin
 from quad_uneven_env import constants as C
-from quad_uneven_env.config import load_robot_config, robot_config_from_dict, read_yaml, resolve_config_path
+from quad_uneven_env.config import load_robot_config, read_yaml, resolve_config_path, robot_config_from_dict
 from quad_uneven_env.robot import conventions as conv
 from quad_uneven_env.robot.kinematics import leg_fk_hip, leg_ik_hip
 from quad_uneven_env.robot.model import MIN_INERTIA, home_qpos, robot_mjcf
