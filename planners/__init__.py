@@ -1,0 +1,1 @@
+"""Planners: gait, footholds, COG path, swing legs, joint references (pure functions, no simulator)."""

@@ -1,0 +1,55 @@
+"""Data passed from the planners to the controller (agents.control).
+
+A :class:`ReferenceSample` is the planned state of the whole robot at one instant in the
+canonical coordinates (MuJoCo's): the controller builds beta_ref, its derivatives and the
+stance set from it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+
+@dataclasses.dataclass(frozen=True)
+class ReferenceSample:
+    """Planned whole-robot motion at one time ``t`` (SI units, canonical frames)."""
+
+    t: float
+    """time (s) from the start of the plan."""
+    p_base_W: np.ndarray
+    """(3,) base (trunk frame origin) position in the world frame (m)."""
+    quat_WB: np.ndarray
+    """(4,) base orientation, unit quaternion (w, x, y, z)."""
+    v_base_W: np.ndarray
+    """(3,) base linear velocity in the world frame (m/s)."""
+    omega_base_B: np.ndarray
+    """(3,) base angular velocity in the base frame (rad/s)."""
+    a_base_W: np.ndarray
+    """(3,) base linear acceleration in the world frame (m/s^2)."""
+    domega_base_B: np.ndarray
+    """(3,) base angular acceleration in the base frame (rad/s^2)."""
+    q_joints: np.ndarray
+    """(12,) joint angles (rad), JOINT_NAMES order."""
+    qd_joints: np.ndarray
+    """(12,) joint velocities (rad/s)."""
+    qdd_joints: np.ndarray
+    """(12,) joint accelerations (rad/s^2)."""
+    stance: tuple[bool, bool, bool, bool]
+    """planned stance flags in leg order LF, RF, LH, RH."""
+
+    @property
+    def qpos(self) -> np.ndarray:
+        """(19,) canonical qpos of the reference."""
+        return np.concatenate([self.p_base_W, self.quat_WB, self.q_joints])
+
+    @property
+    def qvel(self) -> np.ndarray:
+        """(18,) canonical qvel of the reference."""
+        return np.concatenate([self.v_base_W, self.omega_base_B, self.qd_joints])
+
+    @property
+    def qacc(self) -> np.ndarray:
+        """(18,) d/dt of the canonical qvel."""
+        return np.concatenate([self.a_base_W, self.domega_base_B, self.qdd_joints])
