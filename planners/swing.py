@@ -1,0 +1,138 @@
+"""Collision-free swing-leg paths (paper §5): clamped cubic splines of the foot site over the terrain.
+
+The foot site (the centre of the foot sphere of radius ``foot_radius``) goes from its lift-off
+position (foothold + radius x normal) to its touch-down position through ``N - 2`` intermediate
+points (eq. 29): a lift point just above the lift-off foothold, apex points above the highest
+terrain between the footholds, a descent point just above the touch-down foothold, all
+``clearance`` above the terrain and inside the leg's workspace along the planned hip path. The
+dense path is then checked against the height field: a cubic between two safe knots can dip
+into an obstacle, so the intermediate points are raised by the deficit and the spline re-solved.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+
+from planners.errors import PlanningError
+from planners.spline import ClampedCubicSpline
+from planners.terrain_query import HeightMap, max_height_in_disk, sphere_clearance
+
+KNOT_TIME = (0.0, 0.2, 0.5, 0.8, 1.0)
+"""Default knot times as fractions of the swing duration (N = 5)."""
+KNOT_TRAVEL = (0.0, 0.04, 0.5, 0.96, 1.0)
+"""Horizontal progress of each knot as a fraction of the lift-off -> touch-down step."""
+CHECK_SAMPLES = 120
+"""Dense samples per swing for the clearance check."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SwingPath:
+    """Foot-site path of one swing leg in the world frame (m, s; absolute times)."""
+
+    leg: str
+    """leg name."""
+    t_start: float
+    """lift-off time (s)."""
+    t_end: float
+    """touch-down time (s)."""
+    spline: ClampedCubicSpline
+    """the clamped cubic spline of the foot site."""
+    min_clearance: float
+    """smallest sphere-terrain gap (m) between the first and last intermediate knots."""
+    end_clearance: float
+    """smallest sphere-terrain gap (m) near lift-off and touch-down, relative to resting on the foothold."""
+
+    @property
+    def knots(self) -> np.ndarray:
+        """(N, 3) foot-site knots (m): lift-off, intermediate points, touch-down."""
+        return self.spline.points
+
+    def position(self, t: np.ndarray) -> np.ndarray:
+        """Foot-site position (T, 3) in m at absolute times ``t`` (s)."""
+        return self.spline(t, 0)
+
+    def velocity(self, t: np.ndarray) -> np.ndarray:
+        """Foot-site velocity (T, 3) in m/s."""
+        return self.spline(t, 1)
+
+    def acceleration(self, t: np.ndarray) -> np.ndarray:
+        """Foot-site acceleration (T, 3) in m/s^2."""
+        return self.spline(t, 2)
+
+
+def _dense_clearance(
+    spline: ClampedCubicSpline, terrain: HeightMap, radius: float, t_in: tuple[float, float], rest_gap: float
+) -> tuple[float, float, np.ndarray, np.ndarray]:
+    t = np.linspace(spline.tau[0], spline.tau[-1], CHECK_SAMPLES)
+    gap = sphere_clearance(terrain, spline(t), radius)
+    inner = (t >= t_in[0]) & (t <= t_in[1])
+    return float(gap[inner].min()), float(gap[~inner].min() - rest_gap), t, gap
+
+
+def plan_swing(
+    leg: str,
+    site_lift: np.ndarray,
+    site_touch: np.ndarray,
+    t_start: float,
+    t_end: float,
+    terrain: HeightMap,
+    clearance: float,
+    foot_radius: float,
+    hip_position: Callable[[np.ndarray], np.ndarray] | None = None,
+    reach: tuple[float, float] = (0.0, np.inf),
+    max_raises: int = 6,
+) -> SwingPath:
+    """Plan the swing of ``leg``'s foot site from ``site_lift`` to ``site_touch`` (world, m).
+
+    :param site_lift: foot-site position at lift-off (foothold + radius x normal) (m).
+    :param site_touch: foot-site position at touch-down (m).
+    :param t_start: lift-off time (s); ``t_end``: touch-down time (s).
+    :param terrain: height map (world frame).
+    :param clearance: required sphere-terrain gap (m) between the first and last intermediate points.
+    :param foot_radius: foot sphere radius (m).
+    :param hip_position: ``t (T,) -> (T, 3)`` planned hip position (m) for the workspace check (eq. 29).
+    :param reach: (min, max) hip-to-foot-site distance (m) allowed at the intermediate points.
+    :raises PlanningError: naming the leg when no collision-free reachable path is found.
+    """
+    p0, p1 = np.asarray(site_lift, dtype=float), np.asarray(site_touch, dtype=float)
+    if not t_end > t_start:
+        raise ValueError(f"swing of {leg}: t_end must be > t_start, got {t_start}, {t_end}")
+    if clearance < 0.0:
+        raise ValueError(f"clearance must be >= 0 m, got {clearance}")
+    tau = t_start + (t_end - t_start) * np.asarray(KNOT_TIME)
+    travel = np.asarray(KNOT_TRAVEL)
+    xy = p0[:2] + travel[:, None] * (p1[:2] - p0[:2])
+    # Highest terrain under the whole step (sphere footprint plus a margin), and near each end.
+    line = p0[:2] + np.linspace(0.0, 1.0, 40)[:, None] * (p1[:2] - p0[:2])
+    top = float(max_height_in_disk(terrain, line, foot_radius + 0.01).max())
+    z_apex = max(top + foot_radius + clearance, max(p0[2], p1[2]) + clearance)
+    z = np.array([p0[2], z_apex, z_apex, z_apex, p1[2]])
+    points = np.column_stack([xy, z])
+    # Resting on a slope, the conservative gap is already r (n_z - 1) < 0: ends are judged against it.
+    rest_gap = float(min(0.0, sphere_clearance(terrain, np.stack([p0, p1]), foot_radius).min()))
+    t_in = (float(tau[1]), float(tau[-2]))
+    for _ in range(max_raises + 1):
+        spline = ClampedCubicSpline(tau, points)
+        inner, ends, _, _ = _dense_clearance(spline, terrain, foot_radius, t_in, rest_gap)
+        deficit = max(clearance - inner, -ends)
+        if deficit <= 1e-9:
+            break
+        points[1:-1, 2] += deficit + 0.005
+    else:
+        raise PlanningError(
+            f"swing of {leg}: no collision-free path after {max_raises} raises: clearance {inner:.4f} m "
+            f"between the intermediate points (need {clearance:.4f} m), {ends:.4f} m near the ends (need >= 0)"
+        )
+    if hip_position is not None:
+        dist = np.linalg.norm(points[1:-1] - np.asarray(hip_position(tau[1:-1])), axis=1)
+        bad = np.flatnonzero((dist < reach[0]) | (dist > reach[1]))
+        if bad.size:
+            k = int(bad[0])
+            raise PlanningError(
+                f"swing of {leg}: intermediate point {k + 1} at {points[k + 1].round(4).tolist()} is "
+                f"{dist[k]:.4f} m from the hip, outside the workspace [{reach[0]:.4f}, {reach[1]:.4f}] m"
+            )
+    return SwingPath(leg, float(t_start), float(t_end), spline, inner, ends)

@@ -1,0 +1,104 @@
+"""What the planners need from a terrain map, and the conservative queries built on it.
+
+Planners take any object with vectorised ``height(x, y)`` (m, world frame) and ``normal(x, y)``
+(unit normals, (..., 3)): the environment's ``quad_uneven_env.terrain.HeightField`` (the
+expert's privileged map) satisfies it.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+
+class HeightMap(Protocol):
+    """Terrain surface ``z = height(x, y)`` in the world frame (m)."""
+
+    def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Surface height (m) at world (x, y) (m), vectorised."""
+        ...
+
+    def normal(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Unit upward surface normal (..., 3) at world (x, y) (m)."""
+        ...
+
+
+_RING = np.stack(
+    [np.cos(np.linspace(0, 2 * np.pi, 8, endpoint=False)), np.sin(np.linspace(0, 2 * np.pi, 8, endpoint=False))], 1
+)
+_DISK = np.concatenate(
+    [
+        [[0.0, 0.0]],
+        _RING,
+        0.5 * _RING,
+        np.array([[1.0, 1.0], [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0]]) * 0.75**0.5 / 2**0.5,
+    ]
+)
+
+
+def max_height_in_disk(terrain: HeightMap, xy: np.ndarray, radius: float) -> np.ndarray:
+    """Highest terrain point (m) within ``radius`` (m) of each world point ``xy`` (T, 2), sampled.
+
+    Samples the centre, rings at ``radius`` and ``radius / 2`` and four diagonals: conservative
+    to within the height change over the gap between samples.
+    """
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    pts = xy[:, None, :] + radius * _DISK[None, :, :]
+    return terrain.height(pts[..., 0], pts[..., 1]).max(axis=1)
+
+
+def sphere_clearance(terrain: HeightMap, centres: np.ndarray, radius: float) -> np.ndarray:
+    """Lower bound (m) of the gap between a sphere at ``centres`` (T, 3) and the terrain.
+
+    Any terrain point inside the sphere lies within ``radius`` horizontally of the centre and
+    above ``z - radius``; so ``z - radius - max height in the disk`` bounds the gap from below
+    (it is the exact gap on flat ground, pessimistic by ``r (1 - n_z)`` on slopes).
+    """
+    centres = np.asarray(centres, dtype=float).reshape(-1, 3)
+    return centres[:, 2] - radius - max_height_in_disk(terrain, centres[:, :2], radius)
+
+
+def surface_point(terrain: HeightMap, xy: np.ndarray) -> np.ndarray:
+    """Points on the terrain surface (..., 3) above world ``xy`` (..., 2) (m)."""
+    xy = np.asarray(xy, dtype=float)
+    z = terrain.height(xy[..., 0], xy[..., 1])
+    return np.concatenate([xy, np.asarray(z)[..., None]], axis=-1)
+
+
+def foot_site_on(terrain: HeightMap, foothold: np.ndarray, foot_radius: float) -> np.ndarray:
+    """Foot-site (sphere centre) positions (..., 3) for feet resting on surface points ``foothold`` (m)."""
+    f = np.asarray(foothold, dtype=float)
+    return f + foot_radius * terrain.normal(f[..., 0], f[..., 1])
+
+
+class BlockTerrain:
+    """Analytic height map: a plane ``ground + slope . (x, y)`` plus axis-aligned boxes (m).
+
+    A small exact stand-in for tests and scripts that need no grid: ``blocks`` rows are
+    ``(x_min, x_max, y_min, y_max, top_height)``; a box replaces the plane where it is higher.
+    """
+
+    def __init__(self, ground: float = 0.0, slope: tuple[float, float] = (0.0, 0.0), blocks: np.ndarray | None = None):
+        self.ground = float(ground)
+        self.slope = np.asarray(slope, dtype=float)
+        self.blocks = np.zeros((0, 5)) if blocks is None else np.asarray(blocks, dtype=float).reshape(-1, 5)
+
+    def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Surface height (m) at world (x, y)."""
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        h = self.ground + self.slope[0] * x + self.slope[1] * y
+        for x0, x1, y0, y1, top in self.blocks:
+            inside = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+            h = np.where(inside, np.maximum(h, top), h)
+        return h
+
+    def normal(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Unit normal of the plane (block tops are horizontal)."""
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        plane = self.ground + self.slope[0] * x + self.slope[1] * y
+        on_block = self.height(x, y) > plane + 1e-12
+        n = np.array([-self.slope[0], -self.slope[1], 1.0]) / np.sqrt(1.0 + self.slope @ self.slope)
+        out = np.broadcast_to(n, (*np.shape(x), 3)).copy()
+        out[on_block] = (0.0, 0.0, 1.0)
+        return out
