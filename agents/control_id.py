@@ -1,0 +1,238 @@
+"""Inverse dynamics on the constraint-eliminated model (paper §2.3, eq. 16-18).
+
+Given the commanded ``beta_ddot`` (derivative of beta_dot in canonical velocity coordinates),
+the full commanded acceleration is ``qacc = S beta_ddot + Sdot beta_dot`` and the torques solve
+``S_a^T tau = rhs`` with ``rhs = M_beta beta_ddot + V_beta + G_beta = S^T (M qacc + h)``.
+
+Structure used for speed (identical to the paper's formula): the base rows of S_a^T involve
+only the stance legs' torques and a swing leg's rows are the identity, so S_a^T is block
+diagonal after a permutation and its pseudo-inverse is the pseudo-inverse of each block:
+``tau_swing = rhs_swing`` and ``tau_stance = A^# rhs_base`` with ``A = -[J_b,i^T J_L,i^-T]_i``
+(6 x 3p). With 3 or 4 stance feet A has full row rank and ``A^# = A^T (A A^T)^-1``.
+
+Contact forces: the printed eq. 18 uses only the six base rows, which leave F
+under-determined with 3 or 4 stance feet (6 equations, 9 or 12 unknowns). Here F comes from
+all 18 rows, ``J^T F = M qacc + h - B tau``: when the projected equation holds exactly
+(2 or more stance feet with a consistent command), the residual lies in range(J^T) and the
+leg rows ``J_L,i^T F_i = (M qacc + h - B tau)_i`` give F exactly; otherwise (0 or 1 stance
+foot, or an unreachable base acceleration) F is the least-squares solution over all 18 rows
+and ``result.exact`` is False.
+
+Distributions: ``"pinv"`` is the paper's Moore-Penrose choice. ``"qp"`` picks, among all torques
+solving eq. 16 (their null space only changes the internal contact forces), the one closest to
+the pinv torques whose stance forces lie in a linearised friction cone (4-sided pyramid inside
+the cone of the model's mu) with a minimum normal force. It is posed in the contact forces:
+``min (F - F_pinv)^T W (F - F_pinv)`` (``W = blockdiag(J_L,i J_L,i^T)``, so the cost is
+``|tau - tau_pinv|^2``) subject to the six base rows ``sum_i J_b,i^T F_i = (M qacc + h)_base``
+and the cone rows; then ``tau_i = (M qacc + h)_i - J_L,i^T F_i``. Solver: ProxQP (proxsuite,
+dense backend): already a project dependency, maintained by the Pinocchio team, handles
+equality and inequality rows natively and reports primal infeasibility. An infeasible or
+unsolved QP falls back to "pinv" and sets ``result.qp_fallback``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+import proxsuite
+
+from agents.control_elimination import ProjectedDynamics, check_stance, eliminate_constraints
+from quad_uneven_env import constants as C
+from quad_uneven_env.robot.dynamics import Dynamics, DynamicsTerms
+
+DISTRIBUTIONS: tuple[str, ...] = ("pinv", "qp")
+"""Allowed values of ``InverseDynamics(distribution=...)``."""
+
+
+@dataclasses.dataclass
+class IDResult:
+    """Inverse-dynamics solution at one state (canonical coordinates, SI, world frame)."""
+
+    tau: np.ndarray
+    """(12,) joint torques (N m), JOINT_NAMES order."""
+    contact_forces: np.ndarray
+    """(4, 3) forces of the terrain on the feet (N, world frame); zeros for swing legs."""
+    qacc: np.ndarray
+    """(18,) commanded full acceleration S beta_ddot + Sdot beta_dot."""
+    stance: tuple[bool, bool, bool, bool]
+    """stance set used."""
+    distribution: str
+    """distribution actually used ("pinv" or "qp")."""
+    qp_fallback: bool = False
+    """"qp" was asked but infeasible or unsolved: the "pinv" torques were returned."""
+    exact: bool = True
+    """the projected equation (eq. 16) is solved exactly (False: least squares, e.g. < 2 stance feet)."""
+    damped: bool = False
+    """a stance leg Jacobian was singular and inverted with damping."""
+
+
+def friction_pyramid(normal_W: np.ndarray, mu: float) -> np.ndarray:
+    """(5, 3) rows c with ``c . F >= 0`` for F inside the 4-sided pyramid inscribed in the cone of ``mu``.
+
+    Rows: ``mu' n - t1``, ``mu' n + t1``, ``mu' n - t2``, ``mu' n + t2`` with ``mu' = mu / sqrt(2)``,
+    then ``n`` itself (normal force, for the minimum).
+    """
+    n = np.asarray(normal_W, dtype=float)
+    n = n / np.linalg.norm(n)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    t1 = np.cross(n, helper)
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n, t1)
+    mu_in = mu / np.sqrt(2.0)
+    return np.stack([mu_in * n - t1, mu_in * n + t1, mu_in * n - t2, mu_in * n + t2, n])
+
+
+class InverseDynamics:
+    """Torques and contact forces realising a commanded ``beta_ddot`` for a stance set.
+
+    :param dynamics: a backend from :func:`quad_uneven_env.robot.dynamics.make_dynamics`.
+    :param distribution: ``"pinv"`` (paper) or ``"qp"`` (friction-cone aware, see module doc).
+    :param mu: friction coefficient of the cone (default: the model's foot friction, if the
+        backend has a model, else 1.0).
+    :param min_normal_force: N, lower bound of each stance foot's normal force in "qp".
+    """
+
+    def __init__(
+        self,
+        dynamics: Dynamics,
+        distribution: str = "pinv",
+        mu: float | None = None,
+        min_normal_force: float = 5.0,
+    ) -> None:
+        if distribution not in DISTRIBUTIONS:
+            raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {distribution!r}")
+        if min_normal_force < 0:
+            raise ValueError(f"min_normal_force must be >= 0 N, got {min_normal_force}")
+        self.dynamics = dynamics
+        self.distribution = distribution
+        if mu is None:
+            model = getattr(dynamics, "model", None)
+            mu = (
+                float(model.geom_friction[model.geom(C.FOOT_GEOMS[0]).id, 0])
+                if isinstance(model, mujoco.MjModel)
+                else 1.0
+            )
+        if not mu > 0:
+            raise ValueError(f"mu must be > 0, got {mu}")
+        self.mu = float(mu)
+        self.min_normal_force = float(min_normal_force)
+        self._up = np.tile(np.array([0.0, 0.0, 1.0]), (C.N_LEGS, 1))
+
+    # ---------------------------------------------------------------- public API
+    def solve(
+        self,
+        qpos: np.ndarray,
+        qvel: np.ndarray,
+        beta_ddot: np.ndarray,
+        stance,
+        normals_W: np.ndarray | None = None,
+    ) -> IDResult:
+        """Inverse dynamics at (qpos (19,), qvel (18,)) for ``beta_ddot`` (n_beta,) and a stance set.
+
+        :param beta_ddot: [base acceleration (6: world linear m/s^2, base-frame angular rad/s^2);
+            swing-leg joint accelerations (rad/s^2) in leg order].
+        :param stance: 4 booleans, leg order LF, RF, LH, RH.
+        :param normals_W: (4, 3) terrain normals at the feet for the "qp" cones (default +z).
+        """
+        return self.solve_terms(self.dynamics.terms(qpos, qvel), beta_ddot, stance, normals_W)
+
+    def solve_terms(
+        self, terms: DynamicsTerms, beta_ddot: np.ndarray, stance, normals_W: np.ndarray | None = None
+    ) -> IDResult:
+        """As :meth:`solve`, from dynamics terms already computed (e.g. ``terms_from_data``)."""
+        proj = eliminate_constraints(terms, check_stance(stance))
+        beta_ddot = np.asarray(beta_ddot, dtype=float)
+        if beta_ddot.shape != (proj.layout.n_beta,):
+            raise ValueError(
+                f"beta_ddot must have shape ({proj.layout.n_beta},) for stance {proj.layout.stance}, "
+                f"got {beta_ddot.shape}"
+            )
+        return self._solve(proj, beta_ddot, normals_W)
+
+    # ---------------------------------------------------------------- internals
+    def _solve(self, proj: ProjectedDynamics, beta_ddot: np.ndarray, normals_W: np.ndarray | None) -> IDResult:
+        lay, terms = proj.layout, proj.terms
+        qacc = proj.S @ beta_ddot + proj.Sdot_betadot
+        r = terms.M @ qacc + terms.h  # (18,) = B tau + J^T F when consistent
+        rhs = proj.S.T @ r  # = M_beta beta_ddot + V_beta + G_beta
+        tau = np.zeros(C.N_JOINTS)
+        sw_dofs = lay.beta_index[6:] - 6
+        tau[sw_dofs] = rhs[6:]
+        st_dofs = lay.stance_dofs - 6
+        p = len(lay.stance_legs)
+        F = np.zeros((C.N_LEGS, 3))
+        exact = True
+        if p:
+            # A = base rows of S_a^T restricted to the stance legs: -J_b^T J_L^-T, (6, 3p)
+            A = -np.einsum("pji,pkj->ipk", proj.J_b, proj.J_L_inv).reshape(6, 3 * p)
+            if p >= 3:
+                tau[st_dofs] = A.T @ np.linalg.solve(A @ A.T, rhs[:6])
+            else:
+                tau[st_dofs] = np.linalg.pinv(A) @ rhs[:6]
+                exact = bool(np.abs(A @ tau[st_dofs] - rhs[:6]).max() < 1e-9 * max(1.0, np.abs(rhs[:6]).max()))
+            F = self._forces(proj, r, tau, exact)
+        else:
+            exact = bool(np.abs(rhs[:6]).max() < 1e-9 * max(1.0, np.abs(r).max()))
+        result = IDResult(tau, F, qacc, lay.stance, "pinv", exact=exact, damped=proj.damped)
+        if self.distribution == "qp" and p >= 1:
+            if exact:
+                self._distribute_qp(proj, r, result, normals_W)
+            else:
+                result.qp_fallback = True
+        return result
+
+    def _forces(self, proj: ProjectedDynamics, r: np.ndarray, tau: np.ndarray, exact: bool) -> np.ndarray:
+        """Contact forces from J^T F = r - B tau (18 rows): leg rows if consistent, else least squares."""
+        lay = proj.layout
+        F = np.zeros((C.N_LEGS, 3))
+        resid = r.copy()
+        resid[6:] -= tau
+        if exact:
+            leg_rows = resid[lay.stance_dofs].reshape(-1, 3)
+            F[lay.stance_legs] = np.einsum("pji,pj->pi", proj.J_L_inv, leg_rows)  # J_L^-T (r - tau)_leg
+        else:
+            J_st = proj.terms.J_feet[lay.stance_legs].reshape(-1, C.NV)
+            F[lay.stance_legs] = np.linalg.lstsq(J_st.T, resid, rcond=None)[0].reshape(-1, 3)
+        return F
+
+    def _distribute_qp(
+        self, proj: ProjectedDynamics, r: np.ndarray, result: IDResult, normals_W: np.ndarray | None
+    ) -> None:
+        lay = proj.layout
+        st = lay.stance_legs
+        p = len(st)
+        normals = self._up if normals_W is None else np.asarray(normals_W, dtype=float)
+        J_L = np.stack([proj.terms.J_feet[leg, :, 6 + 3 * leg : 9 + 3 * leg] for leg in st])  # (p, 3, 3)
+        W = np.zeros((3 * p, 3 * p))
+        Cmat = np.zeros((5 * p, 3 * p))
+        lower = np.zeros(5 * p)
+        for k, leg in enumerate(st):
+            W[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = J_L[k] @ J_L[k].T
+            Cmat[5 * k : 5 * k + 5, 3 * k : 3 * k + 3] = friction_pyramid(normals[leg], self.mu)
+            lower[5 * k + 4] = self.min_normal_force
+        F0 = result.contact_forces[st].reshape(-1)
+        A_eq = proj.J_b.transpose(0, 2, 1).transpose(1, 0, 2).reshape(6, 3 * p)  # [J_b,i^T]_i
+        H = W + 1e-9 * np.eye(3 * p)
+        g = -W @ F0
+        upper = np.full(5 * p, 1e20)
+        res = proxsuite.proxqp.dense.solve(
+            H, g, A_eq, r[:6], Cmat, lower, upper, eps_abs=1e-9, max_iter=200, verbose=False
+        )
+        x = res.x
+        ok = res.info.status == proxsuite.proxqp.PROXQP_SOLVED and np.all(np.isfinite(x))
+        if ok:
+            ok = bool(
+                np.all(Cmat @ x >= lower - 1e-6) and np.abs(A_eq @ x - r[:6]).max() < 1e-6 * max(1.0, abs(r[:6]).max())
+            )
+        if not ok:
+            result.qp_fallback = True
+            return
+        F_st = x.reshape(p, 3)
+        tau = result.tau.copy()
+        tau[lay.stance_dofs - 6] = r[lay.stance_dofs] - np.einsum("pji,pj->pi", J_L, F_st).reshape(-1)
+        result.tau = tau
+        result.contact_forces = np.zeros((C.N_LEGS, 3))
+        result.contact_forces[st] = F_st
+        result.distribution = "qp"
