@@ -1,5 +1,30 @@
-"""Terrain: kinds -> height grids, MuJoCo height fields, and the pure-numpy :class:`HeightField`."""
+"""Terrain: kinds -> height grids, MuJoCo height fields, and the pure-numpy :class:`HeightField`.
 
+Parameters of every kind: docs/terrain.md. Typical use::
+
+    terrain = Terrain({"kind": "stairs", "riser": 0.1})
+    xml = scene_mjcf(cfg, terrain.hfield_asset_xml(), terrain.hfield_geom_xml(cfg.friction))
+    model = mujoco.MjModel.from_xml_string(xml)
+    terrain.generate(rng)   # at every reset
+    terrain.upload(model)   # rewrites model.hfield_data, no recompilation
+"""
+
+from quad_uneven_env.terrain.grid import SPAWN_XY, Grid
 from quad_uneven_env.terrain.heightfield import MAX_CELLS, HeightField, PatchStats
+from quad_uneven_env.terrain.kinds.paper import PAPER_BLOCKS
+from quad_uneven_env.terrain.spec import TERRAIN_KINDS, TerrainSpec, parse_terrain_spec, preset_names
+from quad_uneven_env.terrain.terrain import Terrain
 
-__all__ = ["MAX_CELLS", "HeightField", "PatchStats"]
+__all__ = [
+    "MAX_CELLS",
+    "PAPER_BLOCKS",
+    "SPAWN_XY",
+    "TERRAIN_KINDS",
+    "Grid",
+    "HeightField",
+    "PatchStats",
+    "Terrain",
+    "TerrainSpec",
+    "parse_terrain_spec",
+    "preset_names",
+]
