@@ -82,8 +82,11 @@ class Terrain:
 
     @property
     def spawn_height(self) -> float:
-        """Terrain height (m) of the spawn area (``paper``: the highest start-block top, see docs/terrain.md)."""
-        return float(self._kind.spawn_height(self.spec.params))
+        """Terrain height (m) of the spawn area (``paper``: the highest start-block top, see docs/terrain.md).
+
+        Rounded as MuJoCo stores heights (float32 data), so it equals :meth:`height` there exactly.
+        """
+        return float(self._quantise(np.array(self._kind.spawn_height(self.spec.params)))[1])
 
     @property
     def hfield_data(self) -> np.ndarray:
@@ -138,12 +141,14 @@ class Terrain:
             raise RuntimeError(
                 f"terrain kind {self.kind!r} left its bounds [{self.z_min}, {self.z_max}] m: [{h.min()}, {h.max()}]"
             )
-        data = np.clip((h - self.z_min) / self.z_range, 0.0, 1.0).astype(np.float32)
-        self._data = data
-        self.heightfield = HeightField(
-            self.z_min + data.astype(np.float64) * self.z_range, self.grid.cell_size, self.grid.origin
-        )
+        self._data, heights = self._quantise(h)
+        self.heightfield = HeightField(heights, self.grid.cell_size, self.grid.origin)
         return self.heightfield
+
+    def _quantise(self, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(float32 normalised data, heights (m) MuJoCo reconstructs from it) of heights ``h`` (m)."""
+        data = np.clip((h - self.z_min) / self.z_range, 0.0, 1.0).astype(np.float32)
+        return data, self.z_min + data.astype(np.float64) * self.z_range
 
     def upload(self, model: mujoco.MjModel, context: mujoco.MjrContext | None = None) -> None:
         """Write the current surface into ``model.hfield_data`` (no recompilation; call before ``mj_forward``).

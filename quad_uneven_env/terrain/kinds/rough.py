@@ -9,7 +9,7 @@ from quad_uneven_env.terrain.kinds.base import Params, TerrainKind
 from quad_uneven_env.terrain.params import Param
 
 BANDWIDTH = 0.5
-"""Relative width (standard deviation / centre) of the spectral ring around 1 / wavelength."""
+"""Relative width (standard deviation / centre) of the radial power spectrum around 1 / wavelength."""
 
 
 def _check(p: Params, where: str) -> None:
@@ -29,11 +29,14 @@ def _generate(p: Params, grid: Grid, rng: np.random.Generator) -> np.ndarray:
     noise = rng.standard_normal((grid.nrow, grid.ncol))
     if amplitude == 0.0:
         return np.zeros_like(noise)
-    # Spectral synthesis: white noise filtered to a Gaussian ring around spatial frequency 1 / wavelength.
+    # Spectral synthesis: white noise filtered to a band of spatial frequencies around f0 = 1 / wavelength.
     fy = np.fft.fftfreq(grid.nrow, d=grid.cell_size)[:, None]
     fx = np.fft.rfftfreq(grid.ncol, d=grid.cell_size)[None, :]
     f0 = 1.0 / p["wavelength"]
-    ring = np.exp(-0.5 * ((np.hypot(fx, fy) - f0) / (BANDWIDTH * f0)) ** 2)
+    f = np.hypot(fx, fy)
+    f[0, 0] = 1.0
+    # Amplitude ring / sqrt(f): the power per frequency band (ring area ~ f) then peaks at f0 itself.
+    ring = np.exp(-0.5 * ((f - f0) / (BANDWIDTH * f0)) ** 2) / np.sqrt(f / f0)
     ring[0, 0] = 0.0
     field = np.fft.irfft2(np.fft.rfft2(noise) * ring, s=noise.shape)
     # Fade in from 0 outside the spawn disc (smoothstep), so every triangle touching the disc is flat.
@@ -52,9 +55,10 @@ def _bounds(p: Params) -> tuple[float, float]:
 KIND = TerrainKind(
     name="rough",
     doc=(
-        "Smooth random ground: white noise filtered to a ring of spatial frequencies around 1 / wavelength "
-        "(relative bandwidth 0.5), faded in by a smoothstep over max(wavelength / 2, 2 cell_size) outside the "
-        "spawn disc, then scaled so that the peak-to-peak height of the whole grid is exactly `amplitude`. "
+        "Smooth random ground: white noise filtered so that its radially summed power spectrum is a Gaussian "
+        "around the spatial frequency 1 / wavelength (standard deviation 0.5 / wavelength), faded in by a "
+        "smoothstep over max(wavelength / 2, 2 cell_size) outside the spawn disc, "
+        "then scaled so that the peak-to-peak height of the whole grid is exactly `amplitude`. "
         "The spawn area stays at height 0. The default kind."
     ),
     params=(
