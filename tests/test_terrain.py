@@ -476,3 +476,14 @@ def test_heightmap_spawn_area_must_be_flat():
 def test_generate_needs_a_generator():
     with pytest.raises(ValueError, match="rng"):
         Terrain("flat").generate(42)  # type: ignore[arg-type]
+
+
+def test_docs_parameter_tables_are_in_sync():
+    from pathlib import Path
+
+    from quad_uneven_env.terrain.docs import parameter_tables
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "terrain.md").read_text()
+    assert parameter_tables().strip() in doc
+    for kind in TERRAIN_KINDS:
+        assert f"### `{kind}`" in doc
