@@ -1,0 +1,220 @@
+"""Computed-torque control on the constraint-eliminated dynamics (paper §2), usable as the env hook.
+
+``ComputedTorqueController(reference, ...)`` is called by the environment at physics rate as
+``tau = controller(model, data, action)`` right after ``mj_step1``. Each call:
+
+1. samples the plan, ``reference(t) -> planners.types.ReferenceSample`` with ``t = data.time - t0``;
+2. picks the stance set (see *Stance fallback*);
+3. forms ``beta_ddot_cmd = beta_ddot_ref + K_d (beta_dot_ref - beta_dot) + K_p (beta_ref - beta)``
+   with beta = [base position (world), base orientation, swing-leg joints]; the orientation
+   error is the rotation vector ``log(R^T R_ref)`` in the base frame (on SO(3), not a
+   difference of Euler angles); the reference angular velocity and acceleration are mapped
+   into the current base frame with ``R^T R_ref``;
+4. solves the inverse dynamics (:class:`agents.control_id.InverseDynamics`) and clips the
+   torques to the model's motor limits (actuator ctrlrange).
+
+*Stance fallback.* The stance set used is the planned set restricted to the feet that
+measurably touch the terrain (MuJoCo contact between the foot geom and the terrain geom),
+so a late touch-down keeps the leg on its joint reference (treated as swing) and an early
+one is not loaded. If that leaves fewer stance feet than ``min(3, planned)``, the plan is
+used unchanged: losing control of the base (fewer than three feet cannot hold it) is worse
+than commanding a force on a foot a few millimetres from the ground. ``stance_mode``
+``"planned"`` or ``"measured"`` uses one source only.
+
+Public API: :class:`Gains`, :class:`ComputedTorqueController`, and re-exports of
+:class:`InverseDynamics`, :class:`IDResult`, :func:`eliminate_constraints`,
+:func:`verify_inverse_dynamics`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from agents.control_elimination import ProjectedDynamics, eliminate_constraints, stance_layout
+from agents.control_id import DISTRIBUTIONS, IDResult, InverseDynamics, friction_pyramid
+from agents.control_verify import IDCheck, verify_inverse_dynamics
+from planners.types import ReferenceSample
+from quad_uneven_env import constants as C
+from quad_uneven_env.robot.dynamics import make_dynamics
+
+__all__ = [
+    "ComputedTorqueController",
+    "Gains",
+    "IDCheck",
+    "IDResult",
+    "InverseDynamics",
+    "ProjectedDynamics",
+    "eliminate_constraints",
+    "friction_pyramid",
+    "verify_inverse_dynamics",
+]
+
+STANCE_MODES: tuple[str, ...] = ("both", "planned", "measured")
+"""Allowed values of ``ComputedTorqueController(stance_mode=...)``."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Gains:
+    """PD gains of the computed-torque law (per unit mass/inertia: they act on accelerations)."""
+
+    kp_pos: float = 400.0
+    """1/s^2, base position."""
+    kd_pos: float = 40.0
+    """1/s, base linear velocity."""
+    kp_rot: float = 400.0
+    """1/s^2, base orientation (rotation vector)."""
+    kd_rot: float = 40.0
+    """1/s, base angular velocity."""
+    kp_joint: float = 900.0
+    """1/s^2, swing-leg joints."""
+    kd_joint: float = 60.0
+    """1/s, swing-leg joint velocities."""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if not np.isfinite(v) or v < 0:
+                raise ValueError(f"Gains.{f.name} must be a finite number >= 0, got {v!r}")
+
+
+def measured_foot_contacts(data: mujoco.MjData, foot_geoms: np.ndarray, terrain_geom: int) -> np.ndarray:
+    """(4,) bool: foot geom ``i`` has a contact with the terrain geom in ``data.contact``."""
+    ncon = data.ncon
+    if ncon == 0:
+        return np.zeros(C.N_LEGS, dtype=bool)
+    g = data.contact.geom[:ncon]
+    g1, g2 = g[:, 0], g[:, 1]
+    other = np.where(g1 == terrain_geom, g2, np.where(g2 == terrain_geom, g1, -1))
+    return (other[:, None] == foot_geoms[None, :]).any(axis=0)
+
+
+class ComputedTorqueController:
+    """Computed-torque controller on the constraint-eliminated dynamics; an env physics-rate hook.
+
+    :param reference: ``reference(t) -> ReferenceSample`` with t (s) since the controller's reset.
+    :param backend: dynamics backend (``"mujoco"`` uses what ``mj_step1`` computed: fastest).
+    :param distribution: ``"pinv"`` (paper) or ``"qp"`` (friction-cone aware).
+    :param gains: PD gains; default :class:`Gains`.
+    :param stance_mode: ``"both"`` (plan and measured contacts, see module doc), ``"planned"``, ``"measured"``.
+    :param min_normal_force: N, minimum normal force per stance foot in "qp".
+    """
+
+    def __init__(
+        self,
+        reference: Callable[[float], ReferenceSample],
+        backend: str = "mujoco",
+        distribution: str = "pinv",
+        gains: Gains | None = None,
+        stance_mode: str = "both",
+        min_normal_force: float = 5.0,
+    ) -> None:
+        if distribution not in DISTRIBUTIONS:
+            raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {distribution!r}")
+        if stance_mode not in STANCE_MODES:
+            raise ValueError(f"stance_mode must be one of {list(STANCE_MODES)}, got {stance_mode!r}")
+        self.reference = reference
+        self.backend = backend
+        self.distribution = distribution
+        self.gains = gains or Gains()
+        self.stance_mode = stance_mode
+        self.min_normal_force = float(min_normal_force)
+        self.t0 = 0.0
+        self.terrain: Any = None
+        self._model: mujoco.MjModel | None = None
+        self.last: IDResult | None = None
+        """the last inverse-dynamics result (diagnostics)."""
+        self.last_reference: ReferenceSample | None = None
+
+    # ------------------------------------------------------------------ setup
+    def _bind(self, model: mujoco.MjModel) -> None:
+        self._model = model
+        self.dynamics = make_dynamics(self.backend, model)
+        self.id = InverseDynamics(self.dynamics, self.distribution, min_normal_force=self.min_normal_force)
+        act = [model.actuator(a).id for a in C.ACTUATOR_NAMES]
+        if [int(model.actuator_trnid[a, 0]) for a in act] != [model.joint(j).id for j in C.JOINT_NAMES]:
+            raise ValueError("actuators must drive the joints in JOINT_NAMES order")
+        self.torque_limit = model.actuator_ctrlrange[act, 1].copy()
+        self.foot_geoms = np.array([model.geom(g).id for g in C.FOOT_GEOMS])
+        self.terrain_geom = model.geom(C.TERRAIN_GEOM).id
+
+    def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any = None) -> None:
+        """Bind to ``model``, restart the reference clock at ``data.time``, keep ``terrain`` for normals."""
+        self._bind(model)
+        self.t0 = float(data.time)
+        self.terrain = terrain
+        self.last = None
+
+    # ------------------------------------------------------------------ control law
+    def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray | None = None) -> np.ndarray:
+        """Joint torques (12, N m, clipped to the motor limits) at ``data``'s state (after mj_step1)."""
+        if model is not self._model:
+            self._bind(model)
+        ref = self.reference(float(data.time) - self.t0)
+        stance = self.select_stance(ref.stance, measured_foot_contacts(data, self.foot_geoms, self.terrain_geom))
+        beta_ddot = self.beta_ddot_command(data.qpos, data.qvel, ref, stance)
+        if self.backend == "mujoco":
+            terms = self.dynamics.terms_from_data(data)
+        else:
+            terms = self.dynamics.terms(data.qpos, data.qvel)
+        normals = self._normals(data) if self.distribution == "qp" else None
+        result = self.id.solve_terms(terms, beta_ddot, stance, normals)
+        self.last, self.last_reference = result, ref
+        return np.clip(result.tau, -self.torque_limit, self.torque_limit)
+
+    def select_stance(self, planned, measured: np.ndarray) -> tuple[bool, bool, bool, bool]:
+        """Stance set from the plan and the measured contacts (rule in the module docstring)."""
+        planned = np.asarray(planned, dtype=bool)
+        if self.stance_mode == "planned":
+            chosen = planned
+        elif self.stance_mode == "measured":
+            chosen = np.asarray(measured, dtype=bool)
+        else:
+            chosen = planned & measured
+            if chosen.sum() < min(3, int(planned.sum())):
+                chosen = planned
+        return tuple(bool(s) for s in chosen)  # type: ignore[return-value]
+
+    def beta_ddot_command(
+        self, qpos: np.ndarray, qvel: np.ndarray, ref: ReferenceSample, stance: tuple[bool, bool, bool, bool]
+    ) -> np.ndarray:
+        """beta_ddot_cmd (n_beta,): reference acceleration plus PD on position, SO(3) orientation and swing joints."""
+        g = self.gains
+        lay = stance_layout(stance)
+        R = np.empty(9)
+        mujoco.mju_quat2Mat(R, qpos[3:7])
+        R_ref = np.empty(9)
+        mujoco.mju_quat2Mat(R_ref, ref.quat_WB)
+        R_rel = R.reshape(3, 3).T @ R_ref.reshape(3, 3)  # R^T R_ref: reference base frame -> current base frame
+        e_rot = np.empty(3)
+        mujoco.mju_subQuat(e_rot, ref.quat_WB, qpos[3:7])  # log(R^T R_ref), current base frame
+        out = np.empty(lay.n_beta)
+        out[0:3] = ref.a_base_W + g.kd_pos * (ref.v_base_W - qvel[0:3]) + g.kp_pos * (ref.p_base_W - qpos[0:3])
+        out[3:6] = R_rel @ ref.domega_base_B + g.kd_rot * (R_rel @ ref.omega_base_B - qvel[3:6]) + g.kp_rot * e_rot
+        j = lay.beta_index[6:] - 6
+        if len(j):
+            out[6:] = (
+                ref.qdd_joints[j]
+                + g.kd_joint * (ref.qd_joints[j] - qvel[6 + j])
+                + g.kp_joint * (ref.q_joints[j] - qpos[7 + j])
+            )
+        return out
+
+    def _normals(self, data: mujoco.MjData) -> np.ndarray | None:
+        hf = getattr(self.terrain, "heightfield", None)
+        if hf is None or not hasattr(hf, "normal"):
+            return None
+        sites = [self._model.site(s).id for s in C.FOOT_SITES]
+        p = data.site_xpos[sites]
+        return np.asarray(hf.normal(p[:, 0], p[:, 1]), dtype=float).reshape(C.N_LEGS, 3)
+
+
+def verify(
+    model: mujoco.MjModel, qpos: np.ndarray, qvel: np.ndarray, beta_ddot: np.ndarray, result: IDResult
+) -> IDCheck:
+    """Alias of :func:`agents.control_verify.verify_inverse_dynamics` (MuJoCo's M, h, J at the same state)."""
+    return verify_inverse_dynamics(model, qpos, qvel, beta_ddot, result)

@@ -1,0 +1,348 @@
+"""Constraint elimination, inverse dynamics (checked with MuJoCo) and the computed-torque controller."""
+
+from __future__ import annotations
+
+import itertools
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.control import (
+    ComputedTorqueController,
+    Gains,
+    InverseDynamics,
+    eliminate_constraints,
+    friction_pyramid,
+    verify_inverse_dynamics,
+)
+from planners.types import ReferenceSample
+from quad_uneven_env import constants as C
+from quad_uneven_env.robot.dynamics import BACKENDS, make_dynamics
+from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
+from quad_uneven_env.robot.model import home_qpos, robot_mjcf
+
+ALL_STANCES = list(itertools.product((True, False), repeat=4))
+
+
+@pytest.fixture(scope="module")
+def mj_model(robot_cfg) -> mujoco.MjModel:
+    return mujoco.MjModel.from_xml_string(robot_mjcf(robot_cfg))
+
+
+@pytest.fixture(scope="module")
+def dyn(mj_model):
+    return make_dynamics("mujoco", mj_model)
+
+
+def perturbed_stand(cfg, rng, tilt=0.1):
+    """Standing pose with random joint offsets, a tilted base and random velocities."""
+    qpos = home_qpos(cfg)
+    qpos[7:] += rng.normal(0.0, 0.1, C.N_JOINTS)
+    axis = rng.normal(size=3)
+    quat = np.empty(4)
+    mujoco.mju_axisAngle2Quat(quat, axis / np.linalg.norm(axis), tilt)
+    qpos[3:7] = quat
+    qvel = rng.normal(0.0, 0.5, C.NV)
+    return qpos, qvel
+
+
+# ----------------------------------------------------------------------------- elimination
+def test_elimination_constraint_and_spd(robot_cfg, dyn, rng):
+    for _ in range(5):
+        qpos, qvel = perturbed_stand(robot_cfg, rng)
+        terms = dyn.terms(qpos, qvel)
+        for stance in ALL_STANCES:
+            proj = eliminate_constraints(terms, stance)
+            p = sum(stance)
+            assert proj.S.shape == (C.NV, C.NV - 3 * p)
+            legs = [i for i in range(4) if stance[i]]
+            if legs:
+                J_st = terms.J_feet[legs].reshape(-1, C.NV)
+                assert np.abs(J_st @ proj.S).max() < 1e-10  # eq. 14
+            np.testing.assert_array_equal(proj.S_ua, np.eye(6, C.NV - 3 * p))
+            assert proj.S_a.shape == (C.N_JOINTS, C.NV - 3 * p)
+            np.testing.assert_allclose(proj.M_beta, proj.M_beta.T, atol=1e-12)
+            assert np.linalg.eigvalsh(proj.M_beta).min() > 1e-6
+
+
+def test_elimination_without_stance_is_the_full_dynamics(robot_cfg, dyn, rng):
+    qpos, qvel = perturbed_stand(robot_cfg, rng)
+    terms = dyn.terms(qpos, qvel)
+    proj = eliminate_constraints(terms, (False,) * 4)
+    np.testing.assert_array_equal(proj.S, np.eye(C.NV))
+    np.testing.assert_array_equal(proj.Sdot_betadot, np.zeros(C.NV))
+    np.testing.assert_allclose(proj.M_beta, terms.M, atol=1e-12)
+    np.testing.assert_allclose(proj.V_beta + proj.G_beta, terms.h, atol=1e-12)
+
+
+def test_sdot_betadot_keeps_stance_feet_still(robot_cfg, dyn, rng):
+    """With qvel = S beta_dot, d/dt (J S beta_dot) = 0 along the motion: J (S bdd + Sdot bd) + Jdot qdot = 0."""
+    qpos, qvel = perturbed_stand(robot_cfg, rng)
+    stance = (True, False, True, True)
+    proj0 = eliminate_constraints(dyn.terms(qpos, qvel), stance)
+    qvel_c = proj0.S @ qvel[proj0.beta_index]  # a velocity satisfying the constraint
+    terms = dyn.terms(qpos, qvel_c)
+    proj = eliminate_constraints(terms, stance)
+    qacc = proj.S @ rng.normal(size=proj.layout.n_beta) + proj.Sdot_betadot
+    for i in (0, 2, 3):
+        assert np.abs(terms.J_feet[i] @ qacc + terms.Jdot_qdot_feet[i]).max() < 1e-10
+
+
+def test_bad_stance_is_refused(dyn, robot_cfg):
+    ID = InverseDynamics(dyn)
+    with pytest.raises(ValueError, match="stance must be 4 booleans"):
+        ID.solve(home_qpos(robot_cfg), np.zeros(C.NV), np.zeros(6), (True, True, True))
+    with pytest.raises(ValueError, match="beta_ddot must have shape"):
+        ID.solve(home_qpos(robot_cfg), np.zeros(C.NV), np.zeros(5), (True,) * 4)
+    with pytest.raises(ValueError, match="distribution must be one of"):
+        InverseDynamics(dyn, "lp")
+
+
+# ----------------------------------------------------------------------------- inverse dynamics
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_pinv_is_the_papers_formula_and_satisfies_mujoco(backend, mj_model, robot_cfg, rng):
+    ID = InverseDynamics(make_dynamics(backend, mj_model, robot_cfg), "pinv")
+    for _ in range(3):
+        qpos, qvel = perturbed_stand(robot_cfg, rng)
+        for stance in ALL_STANCES:
+            nb = C.NV - 3 * sum(stance)
+            bdd = rng.normal(0.0, 2.0, nb)
+            res = ID.solve(qpos, qvel, bdd, stance)
+            proj = eliminate_constraints(ID.dynamics.terms(qpos, qvel), stance)
+            tau_paper = np.linalg.pinv(proj.S_a.T) @ (proj.M_beta @ bdd + proj.V_beta + proj.G_beta)
+            np.testing.assert_allclose(res.tau, tau_paper, atol=1e-8)
+            assert np.all(res.contact_forces[~np.array(stance)] == 0.0)
+            check = verify_inverse_dynamics(mj_model, qpos, qvel, bdd, res)
+            assert check.stance_foot_acc < 1e-8 and check.base_acc < 1e-8
+            if sum(stance) >= 3:  # exactly solvable: the full 18-row system holds
+                assert res.exact
+                assert check.ok(1e-8), check
+            elif not res.exact:
+                assert check.eom > 1e-6  # least squares: reported as inexact, and it is
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_qp_keeps_forces_in_cone_and_satisfies_mujoco(backend, mj_model, robot_cfg, rng):
+    ID = InverseDynamics(make_dynamics(backend, mj_model, robot_cfg), "qp", min_normal_force=10.0)
+    pinv = InverseDynamics(ID.dynamics, "pinv")
+    n_pinv_outside = 0
+    for _ in range(4):
+        qpos, qvel = perturbed_stand(robot_cfg, rng, tilt=0.05)
+        qvel *= 0.2
+        for stance in [s for s in ALL_STANCES if sum(s) >= 3]:
+            bdd = np.zeros(C.NV - 3 * sum(stance))
+            bdd[:6] = rng.normal(0.0, 0.5, 6)
+            res = ID.solve(qpos, qvel, bdd, stance)
+            ref = pinv.solve(qpos, qvel, bdd, stance)
+            if res.qp_fallback:
+                continue
+            assert res.distribution == "qp"
+            assert verify_inverse_dynamics(mj_model, qpos, qvel, bdd, res).ok(1e-8)
+            for i in np.flatnonzero(stance):
+                cone = friction_pyramid(np.array([0.0, 0.0, 1.0]), ID.mu)
+                assert np.all(cone[:4] @ res.contact_forces[i] >= -1e-6)
+                assert res.contact_forces[i, 2] >= 10.0 - 1e-6
+                n_pinv_outside += bool(np.any(cone[:4] @ ref.contact_forces[i] < 0) or ref.contact_forces[i, 2] < 10)
+            # among all solutions, the QP's torques are never smaller than the minimum-norm ones
+            assert np.linalg.norm(res.tau) >= np.linalg.norm(ref.tau) - 1e-9
+    assert n_pinv_outside > 0  # the cases include some where the paper's pinv leaves the cone
+
+
+def test_qp_infeasible_falls_back_to_pinv(dyn, robot_cfg):
+    qpos = home_qpos(robot_cfg)
+    bdd = np.zeros(6)
+    bdd[2] = -20.0  # faster than free fall: needs pulling feet
+    res = InverseDynamics(dyn, "qp").solve(qpos, np.zeros(C.NV), bdd, (True,) * 4)
+    ref = InverseDynamics(dyn, "pinv").solve(qpos, np.zeros(C.NV), bdd, (True,) * 4)
+    assert res.qp_fallback and res.distribution == "pinv"
+    np.testing.assert_allclose(res.tau, ref.tau)
+    assert np.all(res.contact_forces[:, 2] < 0)
+
+
+def test_stretched_knee_gives_finite_damped_torques(dyn, robot_cfg):
+    qpos = home_qpos(robot_cfg)
+    qpos[7 + 2] = 0.0  # LF knee stretched: its 3x3 leg Jacobian is singular
+    qpos[7 + 1] = 0.0
+    for dist in ("pinv", "qp"):
+        res = InverseDynamics(dyn, dist).solve(qpos, np.zeros(C.NV), np.zeros(6), (True,) * 4)
+        assert res.damped
+        assert np.all(np.isfinite(res.tau)) and np.all(np.isfinite(res.contact_forces))
+
+
+# ----------------------------------------------------------------------------- controller units
+def test_gains_and_stance_selection():
+    with pytest.raises(ValueError, match=r"Gains.kp_pos"):
+        Gains(kp_pos=-1.0)
+    ctrl = ComputedTorqueController(lambda t: None)
+    planned = (True, True, True, False)
+    assert ctrl.select_stance(planned, np.array([True, True, True, True])) == (True, True, True, False)
+    # a planned foot not yet touching with 4 planned: 3 remain -> trusted
+    assert ctrl.select_stance((True,) * 4, np.array([True, False, True, True])) == (True, False, True, True)
+    # only 2 of 3 planned feet touch: fall back to the plan
+    assert ctrl.select_stance(planned, np.array([True, False, True, False])) == planned
+    with pytest.raises(ValueError, match="stance_mode"):
+        ComputedTorqueController(lambda t: None, stance_mode="guess")
+
+
+def test_orientation_error_is_on_so3(robot_cfg):
+    """A 170 deg yaw reference: the command turns the short way, with the rotation-vector magnitude."""
+    ctrl = ComputedTorqueController(lambda t: None, gains=Gains(kd_rot=0.0, kp_rot=1.0))
+    qpos = home_qpos(robot_cfg)
+    quat = np.empty(4)
+    mujoco.mju_axisAngle2Quat(quat, np.array([0.0, 0.0, 1.0]), np.deg2rad(-170.0))
+    ref = ReferenceSample(0.0, qpos[:3], quat, *(np.zeros(3),) * 4, qpos[7:], np.zeros(12), np.zeros(12), (True,) * 4)
+    cmd = ctrl.beta_ddot_command(qpos, np.zeros(C.NV), ref, (True,) * 4)
+    np.testing.assert_allclose(cmd[3:6], [0.0, 0.0, np.deg2rad(-170.0)], atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- acceptance in the env
+def _rx(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _ry(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+class BaseWaveReference:
+    """Feet fixed in the world; base z +/- dz at fz Hz, roll = pitch = ang sin(2 pi fa t); joints by IK.
+
+    Exact base derivatives (R = R_y(pitch) R_x(roll): omega_B = (roll', pitch' cos roll, -pitch' sin roll)).
+    """
+
+    def __init__(self, p0, feet_W, cfg, dz=0.03, fz=0.5, ang=np.deg2rad(5.0), fa=0.3):
+        self.p0, self.feet, self.cfg = np.asarray(p0), np.asarray(feet_W), cfg
+        self.dz, self.wz, self.ang, self.wa = dz, 2 * np.pi * fz, ang, 2 * np.pi * fa
+        self.hips = hip_positions_B(cfg)
+
+    def _base(self, t):
+        s, c = np.sin(self.wz * t), np.cos(self.wz * t)
+        p = self.p0 + [0.0, 0.0, self.dz * s]
+        v = np.array([0.0, 0.0, self.dz * self.wz * c])
+        a = np.array([0.0, 0.0, -self.dz * self.wz**2 * s])
+        sa, ca = np.sin(self.wa * t), np.cos(self.wa * t)
+        phi, phid, phidd = self.ang * sa, self.ang * self.wa * ca, -self.ang * self.wa**2 * sa
+        th, thd, thdd = phi, phid, phidd
+        R = _ry(th) @ _rx(phi)
+        w = np.array([phid, thd * np.cos(phi), -thd * np.sin(phi)])
+        wd = np.array(
+            [phidd, thdd * np.cos(phi) - thd * phid * np.sin(phi), -thdd * np.sin(phi) - thd * phid * np.cos(phi)]
+        )
+        return p, R, v, w, a, wd
+
+    def joints(self, t):
+        p, R, *_ = self._base(t)
+        p_H = (self.feet - p) @ R - self.hips
+        return np.concatenate(
+            [
+                leg_ik_hip(p_H[i], self.cfg.thigh.length, self.cfg.shank.length, C.KNEE_SIGN[leg])
+                for i, leg in enumerate(C.LEG_NAMES)
+            ]
+        )
+
+    def __call__(self, t: float) -> ReferenceSample:
+        p, R, v, w, a, wd = self._base(t)
+        quat = np.empty(4)
+        mujoco.mju_mat2Quat(quat, R.reshape(-1))
+        h = 1e-4  # joint derivatives (unused by the controller in four-foot stance) by central differences
+        q, qp, qm = self.joints(t), self.joints(t + h), self.joints(t - h)
+        return ReferenceSample(t, p, quat, v, w, a, wd, q, (qp - qm) / (2 * h), (qp - 2 * q + qm) / h**2, (True,) * 4)
+
+
+def run_in_env(seconds: float, distribution: str, wave: float, seed: int = 3) -> dict:
+    """Stand (wave=0) or track the base wave (wave=1) on rough terrain (4 cm) with the env hook.
+
+    frame_skip=1 so that every physics step is observed.
+    """
+    env = gym.make(
+        "QuadUneven-v0",
+        terrain={"kind": "rough", "amplitude": 0.04, "spawn_radius": 0.0},
+        frame_skip=1,
+        reset_noise_scale=0.0,
+        max_episode_steps=None,
+    )
+    env.reset(seed=seed)
+    u = env.unwrapped
+    m, d = u.model, u.data
+    sites = [m.site(s).id for s in C.FOOT_SITES]
+    feet0 = d.site_xpos[sites].copy()
+    ground = u.terrain.height(feet0[:, 0], feet0[:, 1])
+    ref = BaseWaveReference(d.qpos[:3].copy(), feet0, u.robot_cfg, dz=0.03 * wave, ang=np.deg2rad(5.0) * wave)
+    ctrl = ComputedTorqueController(ref, backend="mujoco", distribution=distribution)
+    ctrl.reset(m, d, u.terrain)
+    u.set_controller(ctrl)
+    n = round(seconds / u.dt)
+    e_pos, e_rot = np.empty(n), np.empty(n)
+    slip = np.zeros(4)
+    min_fn_measured = np.inf
+    cone_violation = 0.0
+    fallbacks = 0
+    e = np.empty(3)
+    for k in range(n):
+        _, _, term, trunc, info = env.step(np.zeros(C.N_JOINTS))
+        assert not term, info["termination_reason"]
+        r = ref(d.time)
+        e_pos[k] = np.linalg.norm(d.qpos[:3] - r.p_base_W)
+        mujoco.mju_subQuat(e, r.quat_WB, d.qpos[3:7])
+        e_rot[k] = np.linalg.norm(e)
+        slip = np.maximum(slip, np.linalg.norm(d.site_xpos[sites, :2] - feet0[:, :2], axis=1))
+        assert info["foot_contact"].all(), f"a foot lost contact at t={d.time:.3f}"
+        normals = u.terrain.heightfield.normal(d.site_xpos[sites, 0], d.site_xpos[sites, 1])
+        min_fn_measured = min(min_fn_measured, float(np.einsum("ij,ij->i", info["contact_forces"], normals).min()))
+        res = ctrl.last
+        fallbacks += res.qp_fallback
+        for i in range(4):
+            f = res.contact_forces[i]
+            fn = f @ normals[i]
+            ft = np.linalg.norm(f - fn * normals[i])
+            cone_violation = max(cone_violation, ft - u.robot_cfg.friction * fn)
+    env.close()
+    return {
+        "rms_pos": float(np.sqrt(np.mean(e_pos**2))),
+        "rms_rot": float(np.sqrt(np.mean(e_rot**2))),
+        "slip": slip,
+        "min_fn": min_fn_measured,
+        "cone_violation": cone_violation,
+        "fallbacks": fallbacks,
+        "ground_ptp": float(np.ptp(ground)),
+    }
+
+
+def test_stands_on_rough_terrain_short():
+    out = run_in_env(2.0, "pinv", wave=0.0)
+    assert out["ground_ptp"] > 0.005  # the feet really stand at different heights
+    assert out["slip"].max() < 0.01
+    assert out["min_fn"] > 0.0
+    assert out["rms_pos"] < 0.005 and out["rms_rot"] < 0.01
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("distribution", ["pinv", "qp"])
+def test_stands_10s_on_rough_terrain(distribution):
+    out = run_in_env(10.0, distribution, wave=0.0)
+    assert out["slip"].max() < 0.01
+    assert out["min_fn"] > 0.0
+    if distribution == "qp":
+        assert out["fallbacks"] == 0 and out["cone_violation"] <= 1e-6
+
+
+@pytest.mark.parametrize("distribution", ["pinv", "qp"])
+def test_tracks_base_wave_on_rough_terrain(distribution):
+    """z +/- 3 cm at 0.5 Hz with roll and pitch +/- 5 deg at 0.3 Hz for one 0.3 Hz period."""
+    out = run_in_env(10.0 / 3.0, distribution, wave=1.0)
+    assert out["rms_pos"] <= 0.005
+    assert out["rms_rot"] <= 0.01
+    assert out["min_fn"] > 0.0
+    if distribution == "qp":
+        assert out["fallbacks"] == 0 and out["cone_violation"] <= 1e-6
+
+
+@pytest.mark.slow
+def test_tracks_base_wave_10s():
+    out = run_in_env(10.0, "pinv", wave=1.0, seed=11)
+    assert out["rms_pos"] <= 0.005 and out["rms_rot"] <= 0.01 and out["min_fn"] > 0.0
