@@ -215,14 +215,14 @@ class BaseWaveReference:
     Exact base derivatives (R = R_y(pitch) R_x(roll): omega_B = (roll', pitch' cos roll, -pitch' sin roll)).
     """
 
-    def __init__(self, p0, feet_W, cfg, dz=0.03, fz=0.5, ang=np.deg2rad(5.0), fa=0.3):
+    def __init__(self, p0, feet_W, cfg, dz=0.03, fz=0.5, ang=0.0872664626, fa=0.3):
         self.p0, self.feet, self.cfg = np.asarray(p0), np.asarray(feet_W), cfg
         self.dz, self.wz, self.ang, self.wa = dz, 2 * np.pi * fz, ang, 2 * np.pi * fa
         self.hips = hip_positions_B(cfg)
 
     def _base(self, t):
         s, c = np.sin(self.wz * t), np.cos(self.wz * t)
-        p = self.p0 + [0.0, 0.0, self.dz * s]
+        p = self.p0 + np.array([0.0, 0.0, self.dz * s])
         v = np.array([0.0, 0.0, self.dz * self.wz * c])
         a = np.array([0.0, 0.0, -self.dz * self.wz**2 * s])
         sa, ca = np.sin(self.wa * t), np.cos(self.wa * t)
@@ -284,7 +284,7 @@ def run_in_env(seconds: float, distribution: str, wave: float, seed: int = 3) ->
     fallbacks = 0
     e = np.empty(3)
     for k in range(n):
-        _, _, term, trunc, info = env.step(np.zeros(C.N_JOINTS))
+        _, _, term, _, info = env.step(np.zeros(C.N_JOINTS))
         assert not term, info["termination_reason"]
         r = ref(d.time)
         e_pos[k] = np.linalg.norm(d.qpos[:3] - r.p_base_W)
