@@ -183,3 +183,79 @@ def resolve_config_path(name_or_path: str | os.PathLike[str], group: str) -> Pat
 def load_robot_config(name_or_path: str | os.PathLike[str] = "paper") -> RobotConfig:
     """Load a robot config by name (``configs/robot/NAME.yaml``) or path."""
     return robot_config_from_dict(read_yaml(resolve_config_path(name_or_path, "robot")))
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the named reward terms (see :mod:`quad_uneven_env.rewards`)."""
+
+    forward_progress: float = 1.0
+    """per m/s of whole-robot COG velocity along +x."""
+    stability: float = 0.5
+    """per unit of the normalised stability index / ``stability_scale``, clipped to [-1, 1]."""
+    stability_scale: float = 0.1
+    """m: normalised index that earns the full stability term."""
+    torque: float = 0.05
+    """per mean squared torque fraction (tau / limit)^2 over the 12 joints."""
+    energy: float = 0.0
+    """per W of absolute mechanical power sum |tau qd|, divided by m g (dimension m/s)."""
+    alive: float = 0.5
+    """per control step not ended by a fall."""
+    fall: float = 10.0
+    """penalty on the step that ends in a fall or divergence."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TerminationLimits:
+    """When an episode ends in a fall."""
+
+    min_base_height: float = 0.12
+    """m: trunk origin above the terrain under it."""
+    max_base_height: float = 1.0
+    """m: trunk origin above the terrain under it (a jump or a launch)."""
+    max_tilt_deg: float = 60.0
+    """degrees between the trunk z axis and the world z axis."""
+    trunk_contact: bool = True
+    """the trunk touching the terrain ends the episode."""
+
+
+@dataclasses.dataclass(frozen=True)
+class HeightScanConfig:
+    """Grid of terrain heights around the base, in the yaw-aligned base frame."""
+
+    size_x: float = 1.0
+    """m: extent along the heading (centred on the base)."""
+    size_y: float = 0.6
+    """m: extent across the heading."""
+    resolution: float = 0.1
+    """m: grid spacing."""
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(nx, ny) points of the grid."""
+        return (round(self.size_x / self.resolution) + 1, round(self.size_y / self.resolution) + 1)
+
+
+def dataclass_from_mapping(cls: type, raw: Mapping[str, Any] | None, where: str) -> Any:
+    """Build a frozen config dataclass from a mapping, rejecting unknown fields by name."""
+    if raw is None:
+        return cls()
+    if isinstance(raw, cls):
+        return raw
+    if not isinstance(raw, Mapping):
+        raise ValueError(f"{where} must be a mapping of {sorted(f.name for f in dataclasses.fields(cls))}, got {raw!r}")
+    names = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = set(raw) - set(names)
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {sorted(unknown)}; allowed: {sorted(names)}")
+    values = {}
+    for k, v in raw.items():
+        default = getattr(cls(), k)
+        if isinstance(default, bool):
+            values[k] = bool(v)
+            continue
+        x = float(v)
+        if not np.isfinite(x):
+            raise ValueError(f"{where}.{k} must be finite, got {v!r}")
+        values[k] = x
+    return cls(**values)

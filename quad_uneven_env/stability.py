@@ -10,8 +10,8 @@ different heights (uneven terrain). Eq. 23 of the paper prints the opposite edge
 the clockwise order of eq. 19 is what makes an interior COG positive, and is used here.
 
 With fewer than three stance feet there is no support polygon: the index is ``-inf``
-(``NO_SUPPORT``) and the edge moments are NaN, so nothing downstream can read stability
-into it.
+(``NO_SUPPORT``) and so is every edge moment, so nothing downstream can read stability into it
+(and, unlike NaN, equal inputs give equal outputs).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def stability_index(
     :param g: gravity (m/s^2), acting along -z.
     :return: ``(index, edge_moments)``: index shape () or (T,); edge_moments (n,) or (T, n),
         edge ``i`` going from the i-th to the (i+1)-th foot in clockwise order. With fewer
-        than three feet: index ``-inf`` and NaN moments.
+        than three feet: index and moments ``-inf``.
     """
     cog = np.asarray(cog, dtype=float)
     cog_acc = np.asarray(cog_acc, dtype=float)
@@ -59,7 +59,7 @@ def stability_index(
     n = feet.shape[0]
     lead = cog.shape[:-1]
     if n < 3:
-        return np.full(lead, NO_SUPPORT), np.full((*lead, n), np.nan)
+        return np.full(lead, NO_SUPPORT), np.full((*lead, n), NO_SUPPORT)
     ordered = feet[order_clockwise(feet)]
     edges = np.roll(ordered, -1, axis=0) - ordered
     kappa = edges / np.linalg.norm(edges, axis=1, keepdims=True)

@@ -1,0 +1,482 @@
+"""QuadUneven-v0: the paper's 18-DOF quadruped walking along +x over generated uneven terrain."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+from gymnasium import spaces
+
+from quad_uneven_env import constants as C
+from quad_uneven_env.config import (
+    HeightScanConfig,
+    RewardWeights,
+    RobotConfig,
+    TerminationLimits,
+    dataclass_from_mapping,
+    load_robot_config,
+)
+from quad_uneven_env.observations import (
+    STABILITY_CLIP,
+    height_scan_points_B,
+    observation_fields,
+    observation_space,
+    observation_structure,
+    observation_table,
+)
+from quad_uneven_env.physics import (
+    ContactMeasurement,
+    RobotIndex,
+    instability_warnings,
+    measure_contacts,
+    quat_to_rotation,
+)
+from quad_uneven_env.rewards import reward_terms
+from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
+from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT, PhysicsOptions, scene_mjcf
+from quad_uneven_env.stability import stability_index
+from quad_uneven_env.terrain import Terrain, parse_terrain_spec
+
+ACTION_MODES = ("torque", "joint_pd")
+
+
+class PhysicsController(Protocol):
+    """A controller run at physics rate inside :meth:`QuadUnevenEnv.step`.
+
+    Called after ``mujoco.mj_step1`` (so ``data`` holds kinematics, the mass matrix,
+    ``qfrc_bias`` and contacts of the current state) and before ``mujoco.mj_step2``; returns
+    the 12 joint torques (N m, ``JOINT_NAMES`` order), which the env clips to the motor limits.
+    An optional ``reset(model, data, terrain)`` method is called at the end of every reset.
+    """
+
+    def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray: ...
+
+
+class QuadUnevenEnv(gym.Env):
+    """The paper's quadruped (Table 1, 18 DOF) on a MuJoCo height-field terrain.
+
+    **Task.** Walk along +x from the spawn point without falling, keeping the paper's
+    stability index (tumbling moments about the support polygon edges) positive.
+
+    **Action** (``Box(-1, 1, (12,), float32)``, joint order LF RF LH RH x HAA HFE KFE):
+
+    - ``action_mode="torque"`` (default): joint torque = action x torque limit (N m).
+    - ``action_mode="joint_pd"``: joint target = standing pose + ``pd_action_scale`` x action (rad),
+      tracked by PD gains ``pd_kp`` (N m/rad), ``pd_kd`` (N m s/rad) at physics rate (MuJoCo
+      servo actuators), torques saturated at the motor limits.
+
+    Out-of-range actions are clipped to [-1, 1]; NaN/Inf or a wrong shape raises ``ValueError``
+    and leaves the simulation untouched. With a physics-rate ``controller`` (see
+    :class:`PhysicsController`), the controller's torques are applied and it receives the action.
+
+    **Observation**: a flat finite float32 Box; ``env.observation_structure`` maps each name to
+    its slice. Every entry is clipped to its bounds:
+
+    OBSERVATION_TABLE
+
+    **Reward**: the sum of named terms (weights ``reward_weights``, see
+    :class:`quad_uneven_env.config.RewardWeights`), each reported in ``info["reward_terms"]``:
+    ``forward_progress`` (COG velocity along +x), ``stability`` (normalised index, clipped),
+    ``torque`` (mean squared torque fraction), ``energy`` (|tau qd| / m g), ``alive``, ``fall``.
+
+    **Episode end**: terminated on a fall (trunk touches the terrain, trunk origin lower than
+    ``min_base_height`` or higher than ``max_base_height`` above the terrain below it, tilt beyond
+    ``max_tilt_deg``), on leaving the terrain, or on numerical divergence (NaN/Inf state or a
+    MuJoCo bad qpos/qvel/qacc warning; ``info["diverged"] = True``); the reason is in
+    ``info["termination_reason"]``. Truncation by ``max_episode_steps`` (1000 = 20 s by default).
+
+    **Info** every step: ``stability_index`` (N m), ``stability_index_normalized`` (m),
+    ``edge_moments`` (N m), ``contact_forces`` (4 x 3, N, world), ``foot_contact`` (4,),
+    ``cog``, ``cog_vel``, ``cog_acc`` (whole robot, world, the acceleration from Newton's law with
+    the contact forces), ``feet_pos`` (4 x 3 foot sites, world), ``terrain_height_under_base``,
+    ``diverged``, ``termination_reason``, ``reward_terms``, ``distance`` (COG x travelled, m).
+    Measured quantities (contacts, COG, feet, stability) are those of the last physics step's
+    constraint solve, i.e. at the start of that 2 ms step.
+
+    **Arguments**: ``terrain`` (kind name or ``{"kind": ..., **params}``, see docs/terrain.md;
+    default ``"rough"``), ``robot`` (config name or YAML path, default ``"paper"``),
+    ``frame_skip`` (physics steps per control step, default 10), ``timestep`` (s, <= 0.002),
+    ``action_mode``, ``controller``, ``reward_weights``, ``termination``, ``height_scan``,
+    ``gait_period`` (s, default 6.1: the paper's cycle), ``reset_noise_scale`` (rad and rad/s of
+    uniform noise on the joints at reset, default 0.02), ``render_mode``, ``width``, ``height``.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array", "depth_array"], "render_fps": 50}  # noqa: RUF012
+
+    def __init__(
+        self,
+        terrain: str | Mapping[str, Any] | None = "rough",
+        robot: str = "paper",
+        frame_skip: int = 10,
+        timestep: float = 0.002,
+        action_mode: str = "torque",
+        controller: PhysicsController | Callable[..., np.ndarray] | None = None,
+        reward_weights: Mapping[str, float] | RewardWeights | None = None,
+        termination: Mapping[str, Any] | TerminationLimits | None = None,
+        height_scan: Mapping[str, float] | HeightScanConfig | None = None,
+        gait_period: float = 6.1,
+        reset_noise_scale: float = 0.02,
+        pd_kp: float = 100.0,
+        pd_kd: float = 3.0,
+        pd_action_scale: float = 0.5,
+        render_mode: str | None = None,
+        width: int = 640,
+        height: int = 480,
+    ) -> None:
+        if action_mode not in ACTION_MODES:
+            raise ValueError(f"action_mode must be one of {ACTION_MODES}, got {action_mode!r}")
+        if not (isinstance(frame_skip, int | np.integer) and frame_skip >= 1):
+            raise ValueError(f"frame_skip must be an integer >= 1, got {frame_skip!r}")
+        if not 0.0 < float(timestep) <= 0.002:
+            raise ValueError(f"timestep must be in (0, 0.002] s, got {timestep!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        for name, value in (("gait_period", gait_period), ("pd_kp", pd_kp), ("pd_action_scale", pd_action_scale)):
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+        if not np.isfinite(reset_noise_scale) or reset_noise_scale < 0 or not np.isfinite(pd_kd) or pd_kd < 0:
+            raise ValueError("reset_noise_scale and pd_kd must be finite numbers >= 0")
+
+        self.robot_cfg: RobotConfig = load_robot_config(robot)
+        self.terrain = Terrain(parse_terrain_spec(terrain))
+        self.reward_weights: RewardWeights = dataclass_from_mapping(RewardWeights, reward_weights, "reward_weights")
+        self.termination: TerminationLimits = dataclass_from_mapping(TerminationLimits, termination, "termination")
+        self.height_scan: HeightScanConfig = dataclass_from_mapping(HeightScanConfig, height_scan, "height_scan")
+        if self.height_scan.resolution <= 0 or self.height_scan.size_x < 0 or self.height_scan.size_y < 0:
+            raise ValueError("height_scan: resolution must be > 0 and sizes >= 0")
+        self.frame_skip = int(frame_skip)
+        self.action_mode = action_mode
+        self.gait_period = float(gait_period)
+        self.reset_noise_scale = float(reset_noise_scale)
+        self.pd_action_scale = float(pd_action_scale)
+        self._controller = controller
+
+        xml = scene_mjcf(
+            self.robot_cfg,
+            self.terrain.hfield_asset_xml(),
+            self.terrain.hfield_geom_xml(self.robot_cfg.friction),
+            PhysicsOptions(timestep=float(timestep)),
+        )
+        self.model = mujoco.MjModel.from_xml_string(xml)
+        # Divergence must end the episode visibly, not be hidden by MuJoCo's automatic reset.
+        self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
+        self.data = mujoco.MjData(self.model)
+        self.idx = RobotIndex.from_model(self.model)
+        self._mass = self.idx.total_mass
+        self._gravity = self.model.opt.gravity.copy()
+        self._g = float(-self._gravity[2])
+        self._hips_B = hip_positions_B(self.robot_cfg)
+        self._scan_B = height_scan_points_B(self.height_scan)
+
+        self._home_joints = np.zeros(C.N_JOINTS)
+        self._joint_lo = self.model.jnt_range[1:, 0].copy()
+        self._joint_hi = self.model.jnt_range[1:, 1].copy()
+        if action_mode == "joint_pd":
+            self._make_servos(float(pd_kp), float(pd_kd))
+
+        self.action_space = spaces.Box(-1.0, 1.0, (C.N_JOINTS,), dtype=np.float32)
+        self._fields = observation_fields(self.height_scan, C.N_JOINTS)
+        self.observation_structure: dict[str, slice] = observation_structure(self._fields)
+        self.observation_space = observation_space(self._fields)
+        self._obs_low = self.observation_space.low.astype(np.float64)
+        self._obs_high = self.observation_space.high.astype(np.float64)
+
+        self.render_mode = render_mode
+        self.metadata = dict(self.metadata, render_fps=round(1.0 / self.dt))
+        self._width, self._height = int(width), int(height)
+        self._renderer = None
+
+        self._prev_action = np.zeros(C.N_JOINTS)
+        self._last_obs = np.zeros(self.observation_space.shape, dtype=np.float32)
+        self._last: dict[str, Any] = {}
+        self._start_x = 0.0
+        self._warnings_at_reset = 0
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def dt(self) -> float:
+        """Control period (s) = frame_skip x physics timestep."""
+        return self.model.opt.timestep * self.frame_skip
+
+    @property
+    def physics_dt(self) -> float:
+        """Physics timestep (s)."""
+        return float(self.model.opt.timestep)
+
+    @property
+    def controller(self) -> PhysicsController | None:
+        """The physics-rate controller, or None."""
+        return self._controller
+
+    def set_controller(self, controller: PhysicsController | Callable[..., np.ndarray] | None) -> None:
+        """Install (or remove, with None) the physics-rate controller; takes effect at the next step."""
+        self._controller = controller
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Regenerate the terrain from ``np_random``, stand the robot at the spawn point."""
+        super().reset(seed=seed)
+        if options:
+            raise ValueError(f"reset options are not supported (got keys {sorted(options)}); pass terrain to make()")
+        self.terrain.generate(self.np_random)
+        self.terrain.upload(self.model)
+        self._upload_terrain_to_renderer()
+
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[:] = self._spawn_qpos()
+        noise = self.reset_noise_scale
+        if noise > 0:
+            self.data.qpos[7:] = np.clip(
+                self.data.qpos[7:] + self.np_random.uniform(-noise, noise, C.N_JOINTS), self._joint_lo, self._joint_hi
+            )
+            self.data.qvel[6:] = self.np_random.uniform(-noise, noise, C.N_JOINTS)
+        self._home_joints = self.data.qpos[7:].copy()
+        if self.action_mode == "joint_pd":
+            self.data.ctrl[:] = self._home_joints
+        mujoco.mj_forward(self.model, self.data)
+        self._warnings_at_reset = instability_warnings(self.data)
+        if self._controller is not None and hasattr(self._controller, "reset"):
+            self._controller.reset(self.model, self.data, self.terrain)
+
+        self._prev_action[:] = 0.0
+        mujoco.mj_subtreeVel(self.model, self.data)
+        m = self._measure()
+        self._start_x = float(m["cog"][0])
+        info = self._info(m, terms={}, diverged=False, reason=None)
+        return self._observation(m), info
+
+    def _spawn_qpos(self) -> np.ndarray:
+        """Standing pose over the spawn point: each foot on the terrain below its hip."""
+        cfg = self.robot_cfg
+        x0, y0 = self.terrain.spawn_xy
+        feet_xy = self._hips_B[:, :2] + np.array([x0, y0])
+        ground = np.asarray(self.terrain.height(feet_xy[:, 0], feet_xy[:, 1]), dtype=float)
+        base_z = float(np.mean(ground)) + NOMINAL_HIP_HEIGHT + cfg.foot_radius
+        qpos = np.zeros(C.NQ)
+        qpos[:3] = (x0, y0, base_z)
+        qpos[3] = 1.0
+        for i, leg in enumerate(C.LEG_NAMES):
+            target_H = np.array([0.0, 0.0, ground[i] + cfg.foot_radius - base_z])
+            qpos[7 + 3 * i : 10 + 3 * i] = leg_ik_hip(target_H, cfg.thigh.length, cfg.shank.length, C.KNEE_SIGN[leg])
+        qpos[7:] = np.clip(qpos[7:], self._joint_lo, self._joint_hi)
+        return qpos
+
+    # ------------------------------------------------------------------ step
+    def step(self, action: np.ndarray):
+        """Advance ``frame_skip`` physics steps under ``action``; see the class docstring."""
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (C.N_JOINTS,):
+            raise ValueError(f"action must have shape ({C.N_JOINTS},), got {a.shape}")
+        if not np.isfinite(a).all():
+            raise ValueError(
+                f"action must be finite, got NaN/Inf at indices {np.flatnonzero(~np.isfinite(a)).tolist()}"
+            )
+        a = np.clip(a, -1.0, 1.0)
+        m, d = self.model, self.data
+        x_before = float(self._last["cog"][0])
+
+        reason = None
+        if self._controller is not None:
+            lim = self.idx.torque_limit
+            for _ in range(self.frame_skip):
+                mujoco.mj_step1(m, d)
+                tau = np.asarray(self._controller(m, d, a), dtype=np.float64)
+                if tau.shape != (C.N_JOINTS,) or not np.isfinite(tau).all():
+                    reason = "diverged: controller returned non-finite or mis-shaped torques"
+                    break
+                np.clip(tau, -lim, lim, out=d.ctrl)
+                mujoco.mj_step2(m, d)
+        else:
+            if self.action_mode == "torque":
+                np.multiply(a, self.idx.torque_limit, out=d.ctrl)
+            else:
+                np.clip(self._home_joints + self.pd_action_scale * a, self._joint_lo, self._joint_hi, out=d.ctrl)
+            mujoco.mj_step(m, d, self.frame_skip)
+
+        if reason is None:
+            if instability_warnings(d) > self._warnings_at_reset:
+                reason = "diverged: MuJoCo reported a bad qpos/qvel/qacc"
+            elif not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all() and np.isfinite(d.qacc).all()):
+                reason = "diverged: non-finite state"
+        diverged = reason is not None
+
+        if diverged:
+            meas = self._last  # last good measurement keeps the observation finite
+        else:
+            mujoco.mj_subtreeVel(m, d)
+            meas = self._measure()
+            reason = self._fall_reason(meas)
+        fell = reason is not None
+        self._prev_action[:] = a
+
+        cog_vel_x = 0.0 if diverged else (float(meas["cog"][0]) - x_before) / self.dt
+        torque = d.actuator_force
+        tau_frac = np.zeros(C.N_JOINTS) if diverged else torque / self.idx.torque_limit
+        power = 0.0 if diverged else float(np.abs(torque * d.qvel[6:]).sum())
+        terms = reward_terms(
+            self.reward_weights,
+            cog_vel_x,
+            float(meas["index_norm"]),
+            tau_frac,
+            power,
+            self._mass * self._g,
+            fell,
+        )
+        reward = float(sum(terms.values()))
+        # After a divergence the state is garbage: repeat the last good observation.
+        obs = self._last_obs.copy() if diverged else self._observation(meas)
+        info = self._info(meas, terms, diverged, reason)
+        if self.render_mode == "human":
+            self.render()
+        return obs, reward, fell, False, info
+
+    # ------------------------------------------------------------------ measurement
+    def _measure(self) -> dict[str, Any]:
+        m, d, idx = self.model, self.data, self.idx
+        contacts: ContactMeasurement = measure_contacts(m, d, idx, self.robot_cfg.foot_radius)
+        cog = d.subtree_com[idx.trunk_body].copy()
+        cog_vel = d.subtree_linvel[idx.trunk_body].copy()
+        cog_acc = contacts.total_force / self._mass + self._gravity
+        stance = contacts.foot_points[contacts.foot_contact]
+        index, moments = stability_index(cog, cog_acc, stance, self._mass, self._g)
+        R = quat_to_rotation(d.qpos[3:7])
+        base = d.qpos[:3]
+        ground = float(self.terrain.height(np.array([base[0]]), np.array([base[1]]))[0])
+        return {
+            "contacts": contacts,
+            "cog": cog,
+            "cog_vel": cog_vel,
+            "cog_acc": cog_acc,
+            "index": float(index),
+            "index_norm": float(index) / (self._mass * self._g),
+            "moments": moments,
+            "R": R,
+            "base": base.copy(),
+            "ground": ground,
+            "feet_pos": d.site_xpos[idx.foot_sites].copy(),
+        }
+
+    def _fall_reason(self, meas: dict[str, Any]) -> str | None:
+        lim = self.termination
+        height = meas["base"][2] - meas["ground"]
+        if lim.trunk_contact and meas["contacts"].trunk_contact:
+            return "fall: trunk touched the terrain"
+        if height < lim.min_base_height:
+            return f"fall: base height {height:.3f} m < {lim.min_base_height} m"
+        if height > lim.max_base_height:
+            return f"fall: base height {height:.3f} m > {lim.max_base_height} m"
+        if meas["R"][2, 2] < np.cos(np.deg2rad(lim.max_tilt_deg)):
+            tilt = np.rad2deg(np.arccos(np.clip(meas["R"][2, 2], -1, 1)))
+            return f"fall: tilt {tilt:.1f} deg > {lim.max_tilt_deg} deg"
+        (xmin, xmax), (ymin, ymax) = self.terrain.heightfield.extent
+        x, y = meas["base"][:2]
+        if not (xmin + 0.3 < x < xmax - 0.3 and ymin + 0.3 < y < ymax - 0.3):
+            return "left the terrain"
+        return None
+
+    def _observation(self, meas: dict[str, Any]) -> np.ndarray:
+        d = self.data
+        R = meas["R"]
+        st = self.observation_structure
+        obs = np.empty(self.observation_space.shape[0])
+        obs[st["base_height"]] = meas["base"][2] - meas["ground"]
+        obs[st["projected_gravity"]] = -R[2, :]
+        obs[st["base_lin_vel"]] = R.T @ d.qvel[:3]
+        obs[st["base_ang_vel"]] = d.qvel[3:6]
+        obs[st["joint_pos"]] = d.qpos[7:]
+        obs[st["joint_vel"]] = d.qvel[6:]
+        obs[st["foot_contact"]] = meas["contacts"].foot_contact
+        norm = self._mass * self._g
+        obs[st["stability_index"]] = meas["index_norm"] if np.isfinite(meas["index_norm"]) else -STABILITY_CLIP
+        edges = np.zeros(4)
+        moments = meas["moments"]
+        if moments.size and np.isfinite(moments).all():
+            edges[: moments.size] = moments / norm
+        elif moments.size:
+            edges[:] = -STABILITY_CLIP
+        obs[st["edge_moments"]] = edges
+        phase = 2.0 * np.pi * d.time / self.gait_period
+        obs[st["gait_clock"]] = (np.sin(phase), np.cos(phase))
+        if self._scan_B.size:
+            yaw = np.arctan2(R[1, 0], R[0, 0])
+            c, s = np.cos(yaw), np.sin(yaw)
+            px = meas["base"][0] + c * self._scan_B[:, 0] - s * self._scan_B[:, 1]
+            py = meas["base"][1] + s * self._scan_B[:, 0] + c * self._scan_B[:, 1]
+            obs[st["height_scan"]] = self.terrain.height(px, py) - meas["base"][2]
+        obs[st["prev_action"]] = self._prev_action
+        np.clip(obs, self._obs_low, self._obs_high, out=obs)
+        self._last_obs = obs.astype(np.float32)
+        return self._last_obs.copy()
+
+    def _info(
+        self, meas: dict[str, Any], terms: dict[str, float], diverged: bool, reason: str | None
+    ) -> dict[str, Any]:
+        contacts: ContactMeasurement = meas["contacts"]
+        self._last = meas
+        return {
+            "stability_index": meas["index"],
+            "stability_index_normalized": meas["index_norm"],
+            "edge_moments": meas["moments"].copy(),
+            "contact_forces": contacts.foot_forces.copy(),
+            "foot_contact": contacts.foot_contact.copy(),
+            "cog": meas["cog"].copy(),
+            "cog_vel": meas["cog_vel"].copy(),
+            "cog_acc": meas["cog_acc"].copy(),
+            "feet_pos": meas["feet_pos"].copy(),
+            "terrain_height_under_base": meas["ground"],
+            "distance": float(meas["cog"][0]) - self._start_x,
+            "diverged": diverged,
+            "termination_reason": reason,
+            "reward_terms": dict(terms),
+        }
+
+    # ------------------------------------------------------------------ actuators
+    def _make_servos(self, kp: float, kd: float) -> None:
+        """Turn the torque motors into PD position servos (MuJoCo affine bias), limits kept."""
+        m = self.model
+        for i in range(C.N_JOINTS):
+            lim = m.actuator_ctrlrange[i, 1]
+            m.actuator_gainprm[i, 0] = kp
+            m.actuator_biastype[i] = mujoco.mjtBias.mjBIAS_AFFINE
+            m.actuator_biasprm[i, :3] = (0.0, -kp, -kd)
+            m.actuator_forcelimited[i] = 1
+            m.actuator_forcerange[i] = (-lim, lim)
+            m.actuator_ctrlrange[i] = (self._joint_lo[i], self._joint_hi[i])
+
+    # ------------------------------------------------------------------ rendering
+    def _upload_terrain_to_renderer(self) -> None:
+        if self._renderer is None:
+            return
+        for viewer in self._renderer._viewers.values():
+            viewer.make_context_current()
+            mujoco.mjr_uploadHField(self.model, viewer.con, self.idx.hfield)
+
+    def render(self):
+        """Render a frame from the tracking camera (``rgb_array``/``depth_array``) or to a window."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode to gym.make")
+            return None
+        if self._renderer is None:
+            from gymnasium.envs.mujoco.mujoco_rendering import MujocoRenderer
+
+            self._renderer = MujocoRenderer(
+                self.model, self.data, width=self._width, height=self._height, camera_name=C.TRACK_CAMERA
+            )
+            self._renderer._get_viewer(self.render_mode)
+            self._upload_terrain_to_renderer()
+        return self._renderer.render(self.render_mode)
+
+    def close(self) -> None:
+        """Release the renderer."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+if QuadUnevenEnv.__doc__:
+    QuadUnevenEnv.__doc__ = QuadUnevenEnv.__doc__.replace(
+        "OBSERVATION_TABLE", observation_table(observation_fields(HeightScanConfig())).replace("\n", "\n    ")
+    )
