@@ -69,6 +69,11 @@ def test_heightfield_matches_mujoco_triangulation(rng):
     assert np.all(np.isfinite(z_ray))
     np.testing.assert_allclose(hf.height(xe, ye), z_ray, atol=1e-6, rtol=0)
     np.testing.assert_allclose(hf.normal(xe, ye), n_ray, atol=1e-5)
+    # The scalar fast path gives the same surface (including clamping outside the grid).
+    scalar = [hf.height(float(a), float(b)) for a, b in zip(xe[::10], ye[::10], strict=True)]
+    np.testing.assert_allclose(scalar, z_ray[::10], atol=1e-6, rtol=0)
+    for a, b in ((x0 - 1.0, y0 - 2.0), (x1 + 0.3, 0.5), (0.1, y1 + 4.0)):
+        assert hf.height(a, b) == hf.height(np.array([a]), np.array([b]))[0]
     # The other diagonal (the mirrored grid's triangulation) disagrees: the test can fail.
     other = HeightField(h[:, ::-1], cell, origin=(-0.7, 0.3)).height(x0 + x1 - xe, ye)
     assert np.max(np.abs(other - z_ray)) > 1e-2

@@ -16,6 +16,7 @@ nearest point of the grid's rectangle (MuJoCo itself has no surface there).
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -129,17 +130,33 @@ class HeightField:
 
         Points outside the grid are clamped to its border.
         """
+        if isinstance(x, (float, int)) and isinstance(y, (float, int)):
+            return np.float64(self._height_scalar(float(x), float(y)))
         r, c, fv, fu = self._locate(x, y)
-        h = self._h
-        h00, h01, h11 = h[r, c], h[r, c + 1], h[r + 1, c + 1]
-        h10 = h[r + 1, c]
+        flat, ncol = self._h.ravel(), self._h.shape[1]
+        i00 = r * ncol + c
+        h00, h11 = flat[i00], flat[i00 + ncol + 1]
         lower = fu >= fv
-        # lower triangle: h00 + fu (h01 - h00) + fv (h11 - h01); upper: h00 + fv (h10 - h00) + fu (h11 - h10)
-        return np.where(
-            lower,
-            h00 + fu * (h01 - h00) + fv * (h11 - h01),
-            h00 + fv * (h10 - h00) + fu * (h11 - h10),
-        )
+        # Third vertex: (r, c + 1) for the lower triangle, (r + 1, c) for the upper one.
+        h_mid = flat[np.where(lower, i00 + 1, i00 + ncol)]
+        # lower: h00 + fu (h01 - h00) + fv (h11 - h01); upper: h00 + fv (h10 - h00) + fu (h11 - h10)
+        a, b = np.where(lower, fu, fv), np.where(lower, fv, fu)
+        return h00 + a * (h_mid - h00) + b * (h11 - h_mid)
+
+    def _height_scalar(self, x: float, y: float) -> float:
+        """:meth:`height` of one point in plain Python (the same arithmetic, ~20 x faster than numpy)."""
+        nrow, ncol = self._h.shape
+        u = min(max((x - self._origin[0]) / self._cell, 0.0), ncol - 1.0)
+        v = min(max((y - self._origin[1]) / self._cell, 0.0), nrow - 1.0)
+        c, r = min(math.floor(u), ncol - 2), min(math.floor(v), nrow - 2)
+        fu, fv = u - c, v - r
+        h = self._h
+        h00, h11 = float(h[r, c]), float(h[r + 1, c + 1])
+        if fu >= fv:
+            h01 = float(h[r, c + 1])
+            return h00 + fu * (h01 - h00) + fv * (h11 - h01)
+        h10 = float(h[r + 1, c])
+        return h00 + fv * (h10 - h00) + fu * (h11 - h10)
 
     def gradient(self, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(dh/dx, dh/dy) (m/m) of the surface triangle under world (x, y) (m), broadcast.
