@@ -16,53 +16,47 @@ import numpy as np
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 
 
-def time_env(env: gym.Env, steps: int, seed: int = 0) -> float:
-    """Seconds per env.step with zero action (resets excluded)."""
-    env.reset(seed=seed)
-    zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
-    total, done_steps = 0.0, 0
-    while done_steps < steps:
-        t0 = time.perf_counter()
-        _, _, terminated, truncated, _ = env.step(zero)
-        total += time.perf_counter() - t0
-        done_steps += 1
-        if terminated or truncated:
-            env.reset()
-    return total / steps
-
-
-def time_mj_step(model: mujoco.MjModel, qpos: np.ndarray, steps: int) -> float:
-    """Seconds per raw mj_step from the given state, zero control, restarting every 500 steps."""
-    data = mujoco.MjData(model)
-    total = 0.0
-    done = 0
-    while done < steps:
-        mujoco.mj_resetData(model, data)
-        data.qpos[:] = qpos
-        mujoco.mj_forward(model, data)
-        n = min(500, steps - done)
-        t0 = time.perf_counter()
-        for _ in range(n):
-            mujoco.mj_step(model, data)
-        total += time.perf_counter() - t0
-        done += n
-    return total / steps
-
-
 def measure(env_id: str, steps: int, **kwargs) -> dict[str, float]:
-    """Env and raw-physics timings of one registered env."""
+    """Time ``steps`` env steps with zero action, then replay the identical physics with raw mj_step.
+
+    Each episode segment starts from a saved MuJoCo state (controls included) and is replayed
+    in a separate MjData with ``frame_skip`` x ``mj_step`` per env step, so both timings cover
+    exactly the same trajectory, contacts included. Resets are excluded from both.
+    """
     env = gym.make(env_id, **kwargs)
     u = env.unwrapped
+    zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+    spec = mujoco.mjtState.mjSTATE_INTEGRATION
+    state = np.empty(mujoco.mj_stateSize(u.model, spec))
+    replay = mujoco.MjData(u.model)
+    t_env = t_mj = 0.0
+    done = 0
     env.reset(seed=0)
-    qpos = u.data.qpos.copy()
-    t_env = time_env(env, steps)
-    t_mj = time_mj_step(u.model, qpos, steps * u.frame_skip)
+    while done < steps:
+        mujoco.mj_getState(u.model, u.data, state, spec)
+        n, ended = 0, False
+        t0 = time.perf_counter()
+        while done + n < steps and not ended:
+            _, _, terminated, truncated, _ = env.step(zero)
+            n += 1
+            ended = terminated or truncated
+        t_env += time.perf_counter() - t0
+        mujoco.mj_setState(u.model, replay, state, spec)
+        mujoco.mj_forward(u.model, replay)
+        t0 = time.perf_counter()
+        for _ in range(n * u.frame_skip):
+            mujoco.mj_step(u.model, replay)
+        t_mj += time.perf_counter() - t0
+        done += n
+        if ended:
+            env.reset()
     env.close()
+    per_env, per_mj = t_env / steps, t_mj / (steps * u.frame_skip)
     return {
-        "env_steps_per_s": 1.0 / t_env,
-        "mj_steps_per_s": 1.0 / t_mj,
+        "env_steps_per_s": 1.0 / per_env,
+        "mj_steps_per_s": 1.0 / per_mj,
         "frame_skip": u.frame_skip,
-        "ratio": t_env / (u.frame_skip * t_mj),
+        "ratio": per_env / (u.frame_skip * per_mj),
     }
 
 

@@ -74,6 +74,16 @@ FOOT_GEOMS: tuple[str, ...] = tuple(foot_geom(leg) for leg in LEG_NAMES)
 HIP_SITES: tuple[str, ...] = tuple(hip_site(leg) for leg in LEG_NAMES)
 ACTUATOR_NAMES: tuple[str, ...] = tuple(f"{j}_motor" for j in JOINT_NAMES)
 
+
+# Contact sensors (MuJoCo computes them in C every physics step).
+def foot_contact_sensor(leg: str) -> str:
+    """Net-force contact sensor between the foot of ``leg`` and the terrain."""
+    return f"{leg}_foot_contact"
+
+
+ROBOT_CONTACT_SENSOR = "robot_terrain_contact"
+TRUNK_CONTACT_SENSOR = "trunk_terrain_contact"
+
 # Collision groups: robot geoms collide with the terrain only, never with each other.
 ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 1
 TERRAIN_CONTYPE, TERRAIN_CONAFFINITY = 1, 2

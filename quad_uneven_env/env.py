@@ -169,7 +169,8 @@ class QuadUnevenEnv(gym.Env):
         self._gravity = self.model.opt.gravity.copy()
         self._g = float(-self._gravity[2])
         self._hips_B = hip_positions_B(self.robot_cfg)
-        self._scan_B = height_scan_points_B(self.height_scan)
+        # Row 0 is the point under the base, the rest the height scan grid.
+        self._scan_B = np.vstack([np.zeros((1, 2)), height_scan_points_B(self.height_scan)])
 
         self._home_joints = np.zeros(C.N_JOINTS)
         self._joint_lo = self.model.jnt_range[1:, 0].copy()
@@ -344,7 +345,13 @@ class QuadUnevenEnv(gym.Env):
         index, moments = stability_index(cog, cog_acc, stance, self._mass, self._g)
         R = quat_to_rotation(d.qpos[3:7])
         base = d.qpos[:3]
-        ground = float(self.terrain.height(np.array([base[0]]), np.array([base[1]]))[0])
+        # One terrain query for the point under the base and the height scan grid.
+        yaw = np.arctan2(R[1, 0], R[0, 0])
+        c, s = np.cos(yaw), np.sin(yaw)
+        px = base[0] + c * self._scan_B[:, 0] - s * self._scan_B[:, 1]
+        py = base[1] + s * self._scan_B[:, 0] + c * self._scan_B[:, 1]
+        heights = self.terrain.height(px, py)
+        ground = float(heights[0])
         return {
             "contacts": contacts,
             "cog": cog,
@@ -356,6 +363,7 @@ class QuadUnevenEnv(gym.Env):
             "R": R,
             "base": base.copy(),
             "ground": ground,
+            "scan": heights[1:],
             "feet_pos": d.site_xpos[idx.foot_sites].copy(),
         }
 
@@ -400,12 +408,7 @@ class QuadUnevenEnv(gym.Env):
         obs[st["edge_moments"]] = edges
         phase = 2.0 * np.pi * d.time / self.gait_period
         obs[st["gait_clock"]] = (np.sin(phase), np.cos(phase))
-        if self._scan_B.size:
-            yaw = np.arctan2(R[1, 0], R[0, 0])
-            c, s = np.cos(yaw), np.sin(yaw)
-            px = meas["base"][0] + c * self._scan_B[:, 0] - s * self._scan_B[:, 1]
-            py = meas["base"][1] + s * self._scan_B[:, 0] + c * self._scan_B[:, 1]
-            obs[st["height_scan"]] = self.terrain.height(px, py) - meas["base"][2]
+        obs[st["height_scan"]] = meas["scan"] - meas["base"][2]
         obs[st["prev_action"]] = self._prev_action
         np.clip(obs, self._obs_low, self._obs_high, out=obs)
         self._last_obs = obs.astype(np.float32)

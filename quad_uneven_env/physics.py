@@ -29,6 +29,9 @@ class RobotIndex:
     foot_of_geom: np.ndarray  # (ngeom,) leg index of a foot geom, -1 otherwise
     torque_limit: np.ndarray  # (12,) N m, from the actuators' ctrlrange
     total_mass: float  # kg
+    foot_sensor_adr: np.ndarray  # (4,) sensordata address of each foot's contact sensor
+    robot_sensor_adr: int  # sensordata address of the whole-robot contact sensor
+    trunk_sensor_adr: int  # sensordata address of the trunk contact sensor
 
     @classmethod
     def from_model(cls, model: mujoco.MjModel) -> RobotIndex:
@@ -55,6 +58,9 @@ class RobotIndex:
             foot_of_geom=foot_of_geom,
             torque_limit=model.actuator_ctrlrange[act, 1].copy(),
             total_mass=float(model.body_subtreemass[trunk]),
+            foot_sensor_adr=np.array([model.sensor(C.foot_contact_sensor(leg)).adr[0] for leg in C.LEG_NAMES]),
+            robot_sensor_adr=int(model.sensor(C.ROBOT_CONTACT_SENSOR).adr[0]),
+            trunk_sensor_adr=int(model.sensor(C.TRUNK_CONTACT_SENSOR).adr[0]),
         )
 
 
@@ -79,43 +85,97 @@ class ContactMeasurement:
 def measure_contacts(
     model: mujoco.MjModel, data: mujoco.MjData, idx: RobotIndex, foot_radius: float
 ) -> ContactMeasurement:
-    """Per-foot contact forces (N, world frame) from MuJoCo's last constraint solve."""
+    """Per-foot contact forces (N, world frame) from MuJoCo's contact sensors.
+
+    The sensors (see :func:`quad_uneven_env.robot.model.contact_sensors_xml`) are evaluated by
+    MuJoCo after its constraint solve; they report the force the robot exerts on the terrain,
+    so the force on the robot is its negative. :func:`measure_contacts_reference` computes the
+    same from the raw contact list (the test reference).
+    """
+    sd = data.sensordata
+    foot = sd[idx.foot_sensor_adr[:, None] + np.arange(7)]  # found, force (3), pos (3)
+    contact = foot[:, 0] > 0
+    foot_forces = -foot[:, 1:4]
+    points = data.site_xpos[idx.foot_sites].copy()
+    points[:, 2] -= foot_radius
+    points[contact] = foot[contact, 4:7]
+    r = idx.robot_sensor_adr
+    n_robot = sd[r]
+    n_trunk = sd[idx.trunk_sensor_adr]
+    return ContactMeasurement(
+        foot_forces=foot_forces,
+        foot_contact=contact,
+        foot_points=points,
+        total_force=-sd[r + 1 : r + 4],
+        trunk_contact=bool(n_trunk > 0),
+        other_contact=bool(n_robot - foot[:, 0].sum() - n_trunk > 0),
+    )
+
+
+def measure_contacts_reference(
+    model: mujoco.MjModel, data: mujoco.MjData, idx: RobotIndex, foot_radius: float
+) -> ContactMeasurement:
+    """:func:`measure_contacts` from the raw contact list (slower; the independent reference).
+
+    Vectorised over contacts for elliptic cones, where the constraint force rows of a contact
+    are its force in the contact frame; other cones go through ``mj_contactForce``.
+    """
     foot_forces = np.zeros((C.N_LEGS, 3))
-    weighted_pts = np.zeros((C.N_LEGS, 3))
-    weight = np.zeros(C.N_LEGS)
     total = np.zeros(3)
+    weight = np.zeros(C.N_LEGS)
+    weighted_pts = np.zeros((C.N_LEGS, 3))
     trunk_contact = other_contact = False
-    f6 = np.zeros(6)
     ncon = data.ncon
     if ncon:
-        geoms = data.contact.geom[:ncon]
-        for i in range(ncon):
-            g1, g2 = geoms[i]
-            if idx.robot_geoms[g1] == idx.robot_geoms[g2]:
-                continue
-            robot_g = g2 if idx.robot_geoms[g2] else g1
-            mujoco.mj_contactForce(model, data, i, f6)
-            frame = data.contact.frame[i].reshape(3, 3)
-            # f6 is the force geom1 exerts on geom2, in the contact frame (rows of `frame`).
-            f_world = frame.T @ f6[:3]
-            if robot_g == g1:
-                f_world = -f_world
-            total += f_world
+        con = data.contact
+        geom = con.geom[:ncon]
+        rg = idx.robot_geoms[geom]
+        adr = con.efc_address[:ncon]
+        keep = (rg[:, 0] != rg[:, 1]) & (adr >= 0)
+        if keep.any():
+            geom, rg, adr = geom[keep], rg[keep], adr[keep]
+            f_c = _contact_frame_forces(model, data, np.flatnonzero(keep), adr, con.dim[:ncon][keep])
+            frame = con.frame[:ncon][keep].reshape(-1, 3, 3)
+            # f_c is the force geom1 exerts on geom2 in the contact frame (rows of `frame`).
+            f_world = np.einsum("nij,ni->nj", frame, f_c)
+            robot_is_g2 = rg[:, 1]
+            f_world[~robot_is_g2] *= -1.0
+            robot_g = np.where(robot_is_g2, geom[:, 1], geom[:, 0])
+            total = f_world.sum(axis=0)
             leg = idx.foot_of_geom[robot_g]
-            if leg >= 0:
-                foot_forces[leg] += f_world
-                w = max(f6[0], 1e-9)
-                weighted_pts[leg] += w * data.contact.pos[i]
-                weight[leg] += w
-            elif robot_g == idx.trunk_geom:
-                trunk_contact = True
-            else:
-                other_contact = True
+            on_foot = leg >= 0
+            if on_foot.any():
+                legs = leg[on_foot]
+                w = np.maximum(np.linalg.norm(f_c[on_foot], axis=1), 1e-9)
+                pos = con.pos[:ncon][keep][on_foot]
+                for k in range(3):
+                    foot_forces[:, k] = np.bincount(legs, f_world[on_foot, k], C.N_LEGS)
+                    weighted_pts[:, k] = np.bincount(legs, w * pos[:, k], C.N_LEGS)
+                weight = np.bincount(legs, w, C.N_LEGS)
+            trunk_contact = bool((robot_g == idx.trunk_geom).any())
+            other_contact = bool(((~on_foot) & (robot_g != idx.trunk_geom)).any())
     contact = weight > 0
     points = data.site_xpos[idx.foot_sites].copy()
     points[:, 2] -= foot_radius
     points[contact] = weighted_pts[contact] / weight[contact, None]
     return ContactMeasurement(foot_forces, contact, points, total, trunk_contact, other_contact)
+
+
+def _contact_frame_forces(
+    model: mujoco.MjModel, data: mujoco.MjData, ids: np.ndarray, efc_adr: np.ndarray, dim: np.ndarray
+) -> np.ndarray:
+    """(n, 3) contact-frame forces (normal, tangent1, tangent2) of the contacts ``ids``."""
+    if model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC:
+        rows = efc_adr[:, None] + np.arange(3)
+        f = data.efc_force[np.minimum(rows, data.nefc - 1)]
+        f[dim < 3, 1:] = 0.0  # frictionless contacts have only the normal row
+        return f
+    f6 = np.zeros(6)
+    out = np.zeros((len(ids), 3))
+    for k, i in enumerate(ids):
+        mujoco.mj_contactForce(model, data, int(i), f6)
+        out[k] = f6[:3]
+    return out
 
 
 def quat_to_rotation(quat_wxyz: np.ndarray) -> np.ndarray:
@@ -130,13 +190,11 @@ def state_is_finite(data: mujoco.MjData) -> bool:
     return bool(np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all() and np.isfinite(data.qacc).all())
 
 
-_BAD_WARNINGS = (
-    mujoco.mjtWarning.mjWARN_BADQPOS,
-    mujoco.mjtWarning.mjWARN_BADQVEL,
-    mujoco.mjtWarning.mjWARN_BADQACC,
+_BAD_WARNINGS = np.array(
+    [mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL, mujoco.mjtWarning.mjWARN_BADQACC], dtype=int
 )
 
 
 def instability_warnings(data: mujoco.MjData) -> int:
     """Number of MuJoCo bad-qpos/qvel/qacc warnings raised so far in ``data``."""
-    return int(sum(data.warning[w].number for w in _BAD_WARNINGS))
+    return int(data.warning.number[_BAD_WARNINGS].sum())

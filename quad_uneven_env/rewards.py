@@ -30,11 +30,11 @@ def reward_terms(
     :param weight_force: m g (N), to make the power term a speed.
     :param fell: the step ended in a fall or a divergence.
     """
-    stab = np.clip(stability_index_normalized / weights.stability_scale, -1.0, 1.0)
+    stab = min(max(stability_index_normalized / weights.stability_scale, -1.0), 1.0)
     return {
         "forward_progress": weights.forward_progress * float(cog_vel_x),
         "stability": weights.stability * float(stab),
-        "torque": -weights.torque * float(np.mean(np.square(torque_fraction))),
+        "torque": -weights.torque * float(torque_fraction @ torque_fraction) / len(torque_fraction),
         "energy": -weights.energy * float(power_abs) / weight_force,
         "alive": 0.0 if fell else weights.alive,
         "fall": -weights.fall if fell else 0.0,

@@ -16,6 +16,8 @@ With fewer than three stance feet there is no support polygon: the index is ``-i
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 NO_SUPPORT = -np.inf
@@ -60,13 +62,17 @@ def stability_index(
     lead = cog.shape[:-1]
     if n < 3:
         return np.full(lead, NO_SUPPORT), np.full((*lead, n), NO_SUPPORT)
+    if cog.ndim == 1 and n <= 8:
+        return _stability_index_one(cog.tolist(), cog_acc.tolist(), feet.tolist(), float(mass), float(g))
     ordered = feet[order_clockwise(feet)]
-    edges = np.roll(ordered, -1, axis=0) - ordered
+    edges = ordered[np.r_[1:n, 0]] - ordered
     kappa = edges / np.linalg.norm(edges, axis=1, keepdims=True)
-    force = -mass * cog_acc
-    force[..., 2] -= mass * g
+    fx, fy = -mass * cog_acc[..., 0:1], -mass * cog_acc[..., 1:2]
+    fz = -mass * (g + cog_acc[..., 2:3])
     r = cog[..., None, :] - ordered  # (..., n, 3)
-    moments = np.einsum("nk,...nk->...n", kappa, np.cross(r, force[..., None, :]))
+    rx, ry, rz = r[..., 0], r[..., 1], r[..., 2]
+    # kappa . (r x F), written out: np.cross is slow on small arrays and this is a hot path.
+    moments = kappa[:, 0] * (ry * fz - rz * fy) + kappa[:, 1] * (rz * fx - rx * fz) + kappa[:, 2] * (rx * fy - ry * fx)
     return moments.min(axis=-1), moments
 
 
@@ -84,3 +90,23 @@ def normalized_stability_index(
     """
     index, moments = stability_index(cog, cog_acc, feet, mass, g)
     return index / (mass * g), moments / (mass * g)
+
+
+def _stability_index_one(
+    cog: list[float], acc: list[float], feet: list[list[float]], mass: float, g: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`stability_index` of one instant in plain Python: the env calls it every step,
+    where numpy's per-call overhead on 3-vectors would dominate. Same arithmetic."""
+    n = len(feet)
+    cx = sum(p[0] for p in feet) / n
+    cy = sum(p[1] for p in feet) / n
+    order = sorted(range(n), key=lambda i: -math.atan2(feet[i][1] - cy, feet[i][0] - cx))
+    fx, fy, fz = -mass * acc[0], -mass * acc[1], -mass * (g + acc[2])
+    moments = np.empty(n)
+    for k in range(n):
+        p, q = feet[order[k]], feet[order[(k + 1) % n]]
+        ex, ey, ez = q[0] - p[0], q[1] - p[1], q[2] - p[2]
+        norm = math.sqrt(ex * ex + ey * ey + ez * ez)
+        rx, ry, rz = cog[0] - p[0], cog[1] - p[1], cog[2] - p[2]
+        moments[k] = (ex * (ry * fz - rz * fy) + ey * (rz * fx - rx * fz) + ez * (rx * fy - ry * fx)) / norm
+    return np.float64(moments.min()), moments

@@ -264,3 +264,28 @@ def test_joint_order_matches_constants():
     for i, name in enumerate(C.JOINT_NAMES):
         assert m.joint(name).qposadr[0] == 7 + i
         assert m.actuator(C.ACTUATOR_NAMES[i]).trnid[0] == m.joint(name).id
+
+
+def test_contact_sensors_match_raw_contact_list():
+    """MuJoCo's contact sensors (the fast path) against the raw contact list (mj_contactForce)."""
+    from quad_uneven_env.physics import measure_contacts, measure_contacts_reference
+
+    env = make(terrain="rough", action_mode="joint_pd")
+    env.reset(seed=5)
+    u = env.unwrapped
+    rng = np.random.default_rng(1)
+    checked = 0
+    for _ in range(60):
+        _, _, terminated, _, _ = env.step(rng.uniform(-0.5, 0.5, 12))
+        if terminated:
+            break
+        # Re-evaluate forward so contacts and sensors describe the same (current) state.
+        mujoco.mj_forward(u.model, u.data)
+        fast = measure_contacts(u.model, u.data, u.idx, u.robot_cfg.foot_radius)
+        ref = measure_contacts_reference(u.model, u.data, u.idx, u.robot_cfg.foot_radius)
+        np.testing.assert_array_equal(fast.foot_contact, ref.foot_contact)
+        np.testing.assert_allclose(fast.foot_forces, ref.foot_forces, atol=1e-9)
+        np.testing.assert_allclose(fast.total_force, ref.total_force, atol=1e-9)
+        np.testing.assert_allclose(fast.foot_points[fast.foot_contact], ref.foot_points[ref.foot_contact], atol=1e-6)
+        checked += int(fast.foot_contact.sum())
+    assert checked > 100

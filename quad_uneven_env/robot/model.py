@@ -115,6 +115,20 @@ def actuators_xml(cfg: RobotConfig) -> str:
     return "\n".join(lines)
 
 
+def contact_sensors_xml() -> str:
+    """Contact sensors against the terrain: per foot (count, net force, force-weighted point),
+    the whole robot (count, net force) and the trunk (count). MuJoCo reports the force that
+    the robot geoms exert on the terrain, in the world frame."""
+    feet = "\n".join(
+        f'    <contact name="{C.foot_contact_sensor(leg)}" geom1="{C.foot_geom(leg)}" geom2="{C.TERRAIN_GEOM}" '
+        f'num="1" data="found force pos" reduce="netforce"/>'
+        for leg in C.LEG_NAMES
+    )
+    return f"""{feet}
+    <contact name="{C.ROBOT_CONTACT_SENSOR}" subtree1="{C.TRUNK_BODY}" geom2="{C.TERRAIN_GEOM}" num="1" data="found force" reduce="netforce"/>
+    <contact name="{C.TRUNK_CONTACT_SENSOR}" geom1="{C.TRUNK_GEOM}" geom2="{C.TERRAIN_GEOM}" num="1" data="found" reduce="netforce"/>"""
+
+
 def home_qpos(cfg: RobotConfig, ground_height: float = 0.0) -> np.ndarray:
     """Standing configuration (19,) with the feet touching flat ground at ``ground_height`` (m)."""
     q = np.zeros(C.NQ)
@@ -156,5 +170,8 @@ def scene_mjcf(
   <actuator>
 {actuators_xml(cfg)}
   </actuator>
+  <sensor>
+{contact_sensors_xml()}
+  </sensor>
 </mujoco>
 """
