@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
@@ -346,11 +347,10 @@ class QuadUnevenEnv(gym.Env):
         R = quat_to_rotation(d.qpos[3:7])
         base = d.qpos[:3]
         # One terrain query for the point under the base and the height scan grid.
-        yaw = np.arctan2(R[1, 0], R[0, 0])
-        c, s = np.cos(yaw), np.sin(yaw)
-        px = base[0] + c * self._scan_B[:, 0] - s * self._scan_B[:, 1]
-        py = base[1] + s * self._scan_B[:, 0] + c * self._scan_B[:, 1]
-        heights = self.terrain.height(px, py)
+        yaw = math.atan2(R[1, 0], R[0, 0])
+        c, s = math.cos(yaw), math.sin(yaw)
+        sx, sy = self._scan_B[:, 0], self._scan_B[:, 1]
+        heights = self.terrain.heightfield.height(base[0] + (c * sx - s * sy), base[1] + (s * sx + c * sy))
         ground = float(heights[0])
         return {
             "contacts": contacts,

@@ -33,6 +33,14 @@ class RobotIndex:
     robot_sensor_adr: int  # sensordata address of the whole-robot contact sensor
     trunk_sensor_adr: int  # sensordata address of the trunk contact sensor
 
+    @property
+    def foot_sensor_rows(self) -> np.ndarray:
+        """(4, 7) sensordata indices of the foot sensors (found, force, point)."""
+        return self._foot_sensor_rows
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_foot_sensor_rows", self.foot_sensor_adr[:, None] + np.arange(7))
+
     @classmethod
     def from_model(cls, model: mujoco.MjModel) -> RobotIndex:
         """Resolve all names of :mod:`quad_uneven_env.constants` in ``model``."""
@@ -93,7 +101,7 @@ def measure_contacts(
     same from the raw contact list (the test reference).
     """
     sd = data.sensordata
-    foot = sd[idx.foot_sensor_adr[:, None] + np.arange(7)]  # found, force (3), pos (3)
+    foot = sd[idx.foot_sensor_rows]  # (4, 7): found, force (3), pos (3)
     contact = foot[:, 0] > 0
     foot_forces = -foot[:, 1:4]
     points = data.site_xpos[idx.foot_sites].copy()
