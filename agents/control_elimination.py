@@ -22,18 +22,19 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 
 import numpy as np
 
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot.dynamics import DynamicsTerms
 
-SINGULARITY_RATIO = 1e-3
-"""Below this |det J_L| / (|col1| |col2| |col3|) (Hadamard ratio, 0 = singular, 1 = orthogonal
-columns) a leg Jacobian is treated as singular and inverted with damping."""
+SINGULAR_SIGMA = 2e-3
+"""m/rad: a leg Jacobian whose smallest singular value is about this small (the stretched knee,
+or the foot on the HAA axis) is treated as singular and inverted with damping."""
 
-DAMPING = 1e-3
-"""m: damping lambda of the damped least-squares inverse of a singular leg Jacobian."""
+DAMPING = 2e-3
+"""m/rad: damping lambda of the damped least-squares inverse of a singular leg Jacobian."""
 
 
 def check_stance(stance) -> tuple[bool, bool, bool, bool]:
@@ -63,6 +64,15 @@ class StanceLayout:
     """(n_beta,) qvel indices forming beta_dot: 0..5 then the swing legs' joint dofs."""
     stance_dofs: np.ndarray
     """(3p,) qvel indices of the stance legs' joints."""
+    S0: np.ndarray
+    """(18, n_beta) S without the stance rows: base identity and swing joints' unit entries."""
+    leg_block: tuple[np.ndarray, np.ndarray, np.ndarray]
+    """fancy index picking the (p, 3, 3) leg blocks J_L out of the stance feet's (p, 3, 18) Jacobians."""
+
+    @property
+    def n_stance(self) -> int:
+        """Number of stance feet p."""
+        return len(self.stance_legs)
 
     @property
     def n_beta(self) -> int:
@@ -77,31 +87,36 @@ def stance_layout(stance: tuple[bool, bool, bool, bool]) -> StanceLayout:
     sw = np.array([i for i in range(C.N_LEGS) if not stance[i]], dtype=int)
     dofs = lambda legs: (6 + 3 * legs[:, None] + np.arange(3)).reshape(-1)  # noqa: E731
     beta = np.concatenate([np.arange(6), dofs(sw)]).astype(int)
-    return StanceLayout(stance, st, sw, beta, dofs(st).astype(int))
+    p = len(st)
+    leg_block = (np.arange(p)[:, None, None], np.arange(3)[None, :, None], dofs(st).reshape(p, 1, 3))
+    S0 = np.zeros((C.NV, len(beta)))
+    S0[beta, np.arange(len(beta))] = 1.0
+    S0.flags.writeable = False
+    return StanceLayout(stance, st, sw, beta, dofs(st).astype(int), S0, leg_block)
+
+
+_LAYOUTS = frozenset(itertools.product((False, True), repeat=C.N_LEGS))
 
 
 def leg_jacobian_inverse(J_L: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Inverses (p, 3, 3) of leg Jacobians J_L (p, 3, 3), damped near a singularity.
+    """Inverses (p, 3, 3) of leg Jacobians J_L (p, 3, 3) (m/rad), damped near a singularity.
 
-    Closed form (adjugate over determinant); a leg whose Hadamard ratio is below
-    ``SINGULARITY_RATIO`` gets ``(J^T J + DAMPING^2 I)^-1 J^T`` instead.
+    A leg whose inverse has an entry above ``1 / SINGULAR_SIGMA`` (smallest singular value
+    below about ``SINGULAR_SIGMA``) gets the damped least-squares inverse
+    ``(J^T J + DAMPING^2 I)^-1 J^T`` instead of ``J^-1``: finite, never NaN.
 
     :return: the inverses and whether any leg was damped.
     """
-    a0, a1, a2 = J_L[..., :, 0], J_L[..., :, 1], J_L[..., :, 2]
-    c12, c20, c01 = np.cross(a1, a2), np.cross(a2, a0), np.cross(a0, a1)
-    det = np.einsum("pi,pi->p", a0, c12)
-    scale = np.linalg.norm(a0, axis=-1) * np.linalg.norm(a1, axis=-1) * np.linalg.norm(a2, axis=-1)
-    ok = np.abs(det) > SINGULARITY_RATIO * scale
-    if ok.all():
-        return np.stack([c12, c20, c01], axis=-2) / det[:, None, None], False
-    inv = np.empty_like(J_L)
-    good = np.nonzero(ok)[0]
-    inv[good] = np.stack([c12[good], c20[good], c01[good]], axis=-2) / det[good, None, None]
-    for k in np.nonzero(~ok)[0]:
-        J = J_L[k]
-        inv[k] = np.linalg.solve(J.T @ J + DAMPING**2 * np.eye(3), J.T)
-    return inv, True
+    try:
+        inv = np.linalg.inv(J_L)
+        bad = np.abs(inv).max(axis=(1, 2)) > 1.0 / SINGULAR_SIGMA
+    except np.linalg.LinAlgError:
+        inv, bad = None, np.ones(len(J_L), dtype=bool)
+    if not bad.any():
+        return inv, False
+    Jt = np.swapaxes(J_L, -1, -2)
+    damped = np.linalg.solve(Jt @ J_L + (DAMPING**2) * np.eye(3), Jt)
+    return (damped if inv is None else np.where(bad[:, None, None], damped, inv)), True
 
 
 @dataclasses.dataclass
@@ -113,12 +128,6 @@ class ProjectedDynamics:
     """(18, n_beta) qvel = S beta_dot (eq. 6-8)."""
     Sdot_betadot: np.ndarray
     """(18,) Sdot beta_dot (m/s^2, rad/s^2): qacc = S beta_ddot + Sdot beta_dot."""
-    M_beta: np.ndarray
-    """(n_beta, n_beta) S^T M S."""
-    V_beta: np.ndarray
-    """(n_beta,) S^T (V + M Sdot beta_dot)."""
-    G_beta: np.ndarray
-    """(n_beta,) S^T G."""
     J_L_inv: np.ndarray
     """(p, 3, 3) inverses (damped if singular) of the stance legs' 3 x 3 Jacobians."""
     J_b: np.ndarray
@@ -127,6 +136,21 @@ class ProjectedDynamics:
     """a stance leg Jacobian was singular and inverted with damping."""
     terms: DynamicsTerms
     """the full dynamics the projection was made from."""
+
+    @functools.cached_property
+    def M_beta(self) -> np.ndarray:
+        """(n_beta, n_beta) S^T M S (eq. 16), symmetric positive definite."""
+        return self.S.T @ self.terms.M @ self.S
+
+    @functools.cached_property
+    def V_beta(self) -> np.ndarray:
+        """(n_beta,) S^T (V + M Sdot beta_dot) (eq. 17)."""
+        return self.S.T @ (self.terms.h - self.terms.G + self.terms.M @ self.Sdot_betadot)
+
+    @functools.cached_property
+    def G_beta(self) -> np.ndarray:
+        """(n_beta,) S^T G (eq. 17)."""
+        return self.S.T @ self.terms.G
 
     @property
     def S_ua(self) -> np.ndarray:
@@ -154,24 +178,17 @@ def eliminate_constraints(terms: DynamicsTerms, stance) -> ProjectedDynamics:
     :param terms: dynamics terms at the current state (any backend).
     :param stance: 4 booleans, leg order LF, RF, LH, RH; any of the 16 sets.
     """
-    lay = stance_layout(check_stance(stance))
-    st = lay.stance_legs
-    nb = lay.n_beta
-    S = np.zeros((C.NV, nb))
-    S[:6, :6] = np.eye(6)
-    S[lay.beta_index[6:], np.arange(6, nb)] = 1.0
+    lay = stance_layout(stance if type(stance) is tuple and stance in _LAYOUTS else check_stance(stance))
+    S = lay.S0.copy()
     Sdot_bd = np.zeros(C.NV)
-    J_st = terms.J_feet[st]  # (p, 3, 18)
-    J_b = J_st[:, :, :6]
-    if len(st):
-        J_L = np.stack([J_st[k, :, 6 + 3 * leg : 9 + 3 * leg] for k, leg in enumerate(st)])
-        J_L_inv, damped = leg_jacobian_inverse(J_L)
-        S[lay.stance_dofs, :6] = -np.einsum("pij,pjk->pik", J_L_inv, J_b).reshape(-1, 6)
-        Sdot_bd[lay.stance_dofs] = -np.einsum("pij,pj->pi", J_L_inv, terms.Jdot_qdot_feet[st]).reshape(-1)
+    if lay.n_stance:
+        J_st = terms.J_feet if lay.n_stance == C.N_LEGS else terms.J_feet[lay.stance_legs]  # (p, 3, 18)
+        J_b = J_st[:, :, :6]
+        J_L_inv, damped = leg_jacobian_inverse(J_st[lay.leg_block])
+        S[lay.stance_dofs, :6] = (J_L_inv @ J_b).reshape(-1, 6)
+        S[lay.stance_dofs, :6] *= -1.0
+        Sdot_bd[lay.stance_dofs] = (J_L_inv @ terms.Jdot_qdot_feet[lay.stance_legs, :, None]).reshape(-1)
+        Sdot_bd[lay.stance_dofs] *= -1.0
     else:
-        J_L_inv, damped = np.zeros((0, 3, 3)), False
-    MS = terms.M @ S
-    M_beta = S.T @ MS
-    V_beta = S.T @ (terms.h - terms.G + terms.M @ Sdot_bd)
-    G_beta = S.T @ terms.G
-    return ProjectedDynamics(lay, S, Sdot_bd, M_beta, V_beta, G_beta, J_L_inv, J_b, damped, terms)
+        J_b, J_L_inv, damped = np.zeros((0, 3, 6)), np.zeros((0, 3, 3)), False
+    return ProjectedDynamics(lay, S, Sdot_bd, J_L_inv, J_b, damped, terms)

@@ -154,45 +154,47 @@ class InverseDynamics:
     # ---------------------------------------------------------------- internals
     def _solve(self, proj: ProjectedDynamics, beta_ddot: np.ndarray, normals_W: np.ndarray | None) -> IDResult:
         lay, terms = proj.layout, proj.terms
-        qacc = proj.S @ beta_ddot + proj.Sdot_betadot
-        r = terms.M @ qacc + terms.h  # (18,) = B tau + J^T F when consistent
-        rhs = proj.S.T @ r  # = M_beta beta_ddot + V_beta + G_beta
+        S = proj.S
+        qacc = S @ beta_ddot
+        qacc += proj.Sdot_betadot
+        r = terms.M @ qacc
+        r += terms.h  # (18,) = B tau + J^T F when consistent
+        rhs = S.T @ r  # = M_beta beta_ddot + V_beta + G_beta
         tau = np.zeros(C.N_JOINTS)
-        sw_dofs = lay.beta_index[6:] - 6
-        tau[sw_dofs] = rhs[6:]
-        st_dofs = lay.stance_dofs - 6
-        p = len(lay.stance_legs)
+        tau[lay.beta_index[6:] - 6] = rhs[6:]
         F = np.zeros((C.N_LEGS, 3))
         exact = True
-        if p:
-            # A = base rows of S_a^T restricted to the stance legs: -J_b^T J_L^-T, (6, 3p)
-            A = -np.einsum("pji,pkj->ipk", proj.J_b, proj.J_L_inv).reshape(6, 3 * p)
-            if p >= 3:
-                tau[st_dofs] = A.T @ np.linalg.solve(A @ A.T, rhs[:6])
+        if lay.n_stance:
+            # A = base rows of S_a^T on the stance legs = -J_b^T J_L^-T, (6, 3p)
+            A = S[lay.stance_dofs, :6].T
+            if lay.n_stance >= 3:
+                tau_st = A.T @ np.linalg.solve(A @ A.T, rhs[:6])
             else:
-                tau[st_dofs] = np.linalg.pinv(A) @ rhs[:6]
-                exact = bool(np.abs(A @ tau[st_dofs] - rhs[:6]).max() < 1e-9 * max(1.0, np.abs(rhs[:6]).max()))
-            F = self._forces(proj, r, tau, exact)
+                tau_st = np.linalg.pinv(A) @ rhs[:6]
+                exact = bool(np.abs(A @ tau_st - rhs[:6]).max() < 1e-9 * max(1.0, np.abs(rhs[:6]).max()))
+            tau[lay.stance_dofs - 6] = tau_st
+            F = self._forces(proj, r, tau, tau_st, exact)
         else:
             exact = bool(np.abs(rhs[:6]).max() < 1e-9 * max(1.0, np.abs(r).max()))
         result = IDResult(tau, F, qacc, lay.stance, "pinv", exact=exact, damped=proj.damped)
-        if self.distribution == "qp" and p >= 1:
+        if self.distribution == "qp" and lay.n_stance:
             if exact:
                 self._distribute_qp(proj, r, result, normals_W)
             else:
                 result.qp_fallback = True
         return result
 
-    def _forces(self, proj: ProjectedDynamics, r: np.ndarray, tau: np.ndarray, exact: bool) -> np.ndarray:
+    @staticmethod
+    def _forces(proj: ProjectedDynamics, r: np.ndarray, tau: np.ndarray, tau_st: np.ndarray, exact: bool) -> np.ndarray:
         """Contact forces from J^T F = r - B tau (18 rows): leg rows if consistent, else least squares."""
         lay = proj.layout
         F = np.zeros((C.N_LEGS, 3))
-        resid = r.copy()
-        resid[6:] -= tau
         if exact:
-            leg_rows = resid[lay.stance_dofs].reshape(-1, 3)
-            F[lay.stance_legs] = np.einsum("pji,pj->pi", proj.J_L_inv, leg_rows)  # J_L^-T (r - tau)_leg
+            leg_rows = (r[lay.stance_dofs] - tau_st).reshape(-1, 3, 1)
+            F[lay.stance_legs] = (np.swapaxes(proj.J_L_inv, -1, -2) @ leg_rows)[..., 0]  # J_L^-T (r - tau)_leg
         else:
+            resid = r.copy()
+            resid[6:] -= tau
             J_st = proj.terms.J_feet[lay.stance_legs].reshape(-1, C.NV)
             F[lay.stance_legs] = np.linalg.lstsq(J_st.T, resid, rcond=None)[0].reshape(-1, 3)
         return F
@@ -204,7 +206,7 @@ class InverseDynamics:
         st = lay.stance_legs
         p = len(st)
         normals = self._up if normals_W is None else np.asarray(normals_W, dtype=float)
-        J_L = np.stack([proj.terms.J_feet[leg, :, 6 + 3 * leg : 9 + 3 * leg] for leg in st])  # (p, 3, 3)
+        J_L = proj.terms.J_feet[st][lay.leg_block]  # (p, 3, 3)
         W = np.zeros((3 * p, 3 * p))
         Cmat = np.zeros((5 * p, 3 * p))
         lower = np.zeros(5 * p)

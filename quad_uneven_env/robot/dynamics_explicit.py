@@ -18,7 +18,12 @@ Each leg point (thigh COM, shank COM, foot) sits at ``hip + R_x(q1) [u, 0, s]`` 
 ``u = -a sin q2 - b sin(q2 + q3)``, ``s = -a cos q2 - b cos(q2 + q3)``; ``(a, b)`` is
 ``(lc1, 0)``, ``(l1, lc2)`` and ``(l1, l2)`` for the three points. Positions, Jacobians and
 their time derivatives are closed-form in (q1, q2, q3); no symbolic engine, no simulator call.
-Every function accepts a leading batch axis.
+
+Implementation: the 13 points (trunk COM, 4 x (thigh COM, shank COM, foot)) are processed in
+one stacked pass; their B-frame Jacobians form J (13 x 6 x 18, rows v then w) and, with
+D = blockdiag(m I, I_B) per point, ``M = J^T D J``, ``h = J^T [m (a0 - g_B); I alpha0 + w x I w]``
+and ``G = J^T [-m g_B; 0]`` are three matrix products. The feet (zero mass) reuse the same J.
+Every array carries a leading batch axis, so many states are evaluated in one call.
 """
 
 from __future__ import annotations
@@ -33,25 +38,57 @@ _TOL = 1e-12
 _AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0))  # HAA, HFE, KFE
 
 
-def _skew(r: np.ndarray) -> np.ndarray:
-    """[r]x for r (..., 3) -> (..., 3, 3)."""
-    z = np.zeros(r.shape[:-1])
-    x, y, w = r[..., 0], r[..., 1], r[..., 2]
-    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+_IDX1, _IDX2 = np.array([1, 2, 0]), np.array([2, 0, 1])
+_BD_ROWS = (6 + 3 * np.arange(4)[:, None, None] + np.arange(3)[None, :, None]) * np.ones((1, 1, 3), dtype=int)
+_BD_COLS = np.swapaxes(_BD_ROWS, 1, 2)
+_LEG = np.arange(4)[:, None]
+_LEG_COLS = 6 + 3 * np.arange(4)[:, None] + np.arange(3)[None, :]
+
+
+_SK_ROWS, _SK_COLS = np.array([0, 0, 1, 1, 2, 2]), np.array([1, 2, 0, 2, 0, 1])
+_SK_SRC, _SK_SIGN = np.array([2, 1, 2, 0, 1, 0]), np.array([1.0, -1.0, -1.0, 1.0, 1.0, -1.0])  # [w]x^T = -[w]x
+_RX_ROWS, _RX_COLS = np.array([1, 1, 2, 2]), np.array([1, 2, 1, 2])
+_RY_ROWS, _RY_COLS = np.array([0, 0, 2, 2]), np.array([0, 2, 0, 2])
+_TH = np.array([1, 2, 2])  # angle index of each point's link pitch: q2 (thigh), q2 + q3 (shank, foot)
+_PT = (1 + np.arange(12))[:, None, None]  # point index of leg point (leg, pt) = 1 + 3 leg + pt
+_ROW3 = np.arange(3)[None, :, None]
+_LEGCOL = (6 + 3 * (np.arange(12) // 3))[:, None, None] + np.arange(3)[None, None, :]
+_FEET = 1 + 3 * np.arange(4) + 2
+
+
+def _cross(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """x × y over the last axis (broadcasting); cheaper than np.cross for tiny arrays."""
+    return x[..., _IDX1] * y[..., _IDX2] - x[..., _IDX2] * y[..., _IDX1]
+
+
+def _quat_matrix_map() -> np.ndarray:
+    """K (16, 9): vec(R) = vec(q q^T) K / |q|^2 for a quaternion q = (w, x, y, z), R = R_WB."""
+    K = np.zeros((4, 4, 9))
+    w, x, y, z = range(4)
+    diag = {0: (1, 1, -1, -1), 4: (1, -1, 1, -1), 8: (1, -1, -1, 1)}
+    for e, signs in diag.items():
+        for i, sg in enumerate(signs):
+            K[i, i, e] = sg
+    for e, terms in {
+        1: ((x, y, 2), (w, z, -2)),
+        2: ((x, z, 2), (w, y, 2)),
+        3: ((x, y, 2), (w, z, 2)),
+        5: ((y, z, 2), (w, x, -2)),
+        6: ((x, z, 2), (w, y, -2)),
+        7: ((y, z, 2), (w, x, 2)),
+    }.items():
+        for i, j, c in terms:
+            K[i, j, e] = c
+    return K.reshape(16, 9)
+
+
+_QK = _quat_matrix_map()
 
 
 def _quat_to_R(quat: np.ndarray) -> np.ndarray:
-    """R_WB (..., 3, 3) of quaternions (..., 4) (w, x, y, z), normalised here."""
-    q = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
+    """R_WB (N, 3, 3) of quaternions (N, 4) (w, x, y, z), normalised here."""
+    Q = quat[:, :, None] * quat[:, None, :]
+    return ((Q.reshape(-1, 16) @ _QK) / np.einsum("ni,ni->n", quat, quat)[:, None]).reshape(-1, 3, 3)
 
 
 def _check_axis(model: mujoco.MjModel, name: str, axis: tuple[float, float, float]) -> int:
@@ -115,7 +152,13 @@ class ExplicitDynamics:
         self.I_links = np.array(inertias)  # (4, 2, 3, 3) about the COM, link frame
         self.total_mass = self.m_trunk + float(self.m_links.sum())
         # link -> which of q2+q3 rotates it: thigh only q2, shank q2 + q3.
-        self._knee_in_link = np.array([0.0, 1.0])
+        self._AB = np.stack([a_pts, b_pts])  # (2, 3): coefficients of sin/cos(q2) and of q2 + q3
+        self.I_pts = np.concatenate([self.I_links, np.zeros((4, 1, 3, 3))], 1)  # feet: no inertia
+        self._m_all = np.concatenate([[self.m_trunk], np.concatenate([self.m_links, np.zeros((4, 1))], 1).ravel()])
+        D0 = np.zeros((1, 13, 6, 6))
+        D0[0, :, 0:3, 0:3] = self._m_all[:, None, None] * np.eye(3)
+        D0[0, 0, 3:6, 3:6] = self.I_trunk_B
+        self._D0 = D0
 
     @staticmethod
     def _inertia(model: mujoco.MjModel, body: int) -> np.ndarray:
@@ -135,110 +178,83 @@ class ExplicitDynamics:
         return DynamicsTerms(*(x.reshape(batch + x.shape[1:]) for x in out))
 
     def _terms(self, qpos: np.ndarray, qvel: np.ndarray) -> tuple[np.ndarray, ...]:
+        """All 13 points (trunk COM, per leg thigh COM, shank COM, foot) in one stacked pass."""
         N = qpos.shape[0]
         R = _quat_to_R(qpos[:, 3:7])  # (N, 3, 3) R_WB
-        w = qvel[:, 3:6]  # (N, 3) base angular velocity, B frame
-        q = qpos[:, 7:].reshape(N, 4, 3)
-        qd = qvel[:, 6:].reshape(N, 4, 3)
-        q1, q2, q23 = q[..., 0:1], q[..., 1:2], q[..., 1:2] + q[..., 2:3]  # (N, 4, 1)
-        d1, d2, d23 = qd[..., 0:1], qd[..., 1:2], qd[..., 1:2] + qd[..., 2:3]
-        s1, c1, s2, c2, s23, c23 = np.sin(q1), np.cos(q1), np.sin(q2), np.cos(q2), np.sin(q23), np.cos(q23)
-        a, b = self.a_pts, self.b_pts  # (3,) broadcast over the three leg points
-        u = -a * s2 - b * s23  # (N, 4, 3)
-        s = -a * c2 - b * c23
-        ub, sb = -b * s23, -b * c23
-        zero = np.zeros_like(u)
-        c1b, s1b = np.broadcast_to(c1, u.shape), np.broadcast_to(s1, u.shape)
-        # positions of the points relative to the base origin, B frame: (N, 4, 3pts, 3)
-        r = self.hips_B[None, :, None, :] + np.stack([u, -s1 * s, c1 * s], -1)
-        # dr/dq_leg: (N, 4, 3pts, 3xyz, 3joints)
-        Jr = np.stack(
-            [
-                np.stack([zero, -c1 * s, -s1 * s], -1),
-                np.stack([s, s1 * u, -c1 * u], -1),
-                np.stack([sb, s1b * ub, -c1b * ub], -1),
-            ],
-            -1,
-        )
-        rdot = np.einsum("nlpij,nlj->nlpi", Jr, qd)
-        # r_ddot at q_ddot = 0: R_x(q1) [w_ddx, -2 q1d w_dz, w_ddz - q1d^2 s]
-        wdz = a * d2 * s2 + b * d23 * s23
-        wddx = a * d2 * d2 * s2 + b * d23 * d23 * s23
-        wddz = a * d2 * d2 * c2 + b * d23 * d23 * c23
-        y_, z_ = -2.0 * d1 * wdz, wddz - d1 * d1 * s
-        rddot0 = np.stack([wddx, c1 * y_ - s1 * z_, s1 * y_ + c1 * z_], -1)
-        wB = w[:, None, None, :]
-        acc_B = np.cross(wB, np.cross(wB, r)) + 2.0 * np.cross(wB, rdot) + rddot0  # (N, 4, 3, 3)
-
-        # ---- link angular quantities (thigh, shank), B frame
-        kin = self._knee_in_link  # (2,)
-        ex = np.broadcast_to(np.array([1.0, 0.0, 0.0]), (N, 4, 3))
-        ay = np.concatenate([np.zeros_like(c1), c1, s1], -1)  # (N, 4, 3) HFE/KFE axis in B
-        # Jw_rel: (N, 4, 2links, 3, 3joints)
-        Jw_rel = np.stack(
-            [
-                np.broadcast_to(ex[:, :, None, :], (N, 4, 2, 3)),
-                np.broadcast_to(ay[:, :, None, :], (N, 4, 2, 3)),
-                ay[:, :, None, :] * kin[None, None, :, None],
-            ],
-            -1,
-        )
-        w_rel = np.einsum("nlkij,nlj->nlki", Jw_rel, qd)
-        ex_x_ay = np.concatenate([np.zeros_like(c1), -s1, c1], -1)  # (N, 4, 3)
-        wdot_rel0 = (d1 * (d2 + kin * qd[..., 2:3]))[..., None] * ex_x_ay[:, :, None, :]  # (N, 4, 2, 3)
-        w_link = wB[:, :, :, :] + w_rel  # (N, 4, 2, 3)
-        alpha = np.cross(wB, w_rel) + wdot_rel0
-        # link rotations R_Bl = R_x(q1) R_y(theta), theta = q2 (thigh) or q2 + q3 (shank)
-        th = q2 + kin * q[..., 2:3]  # (N, 4, 2)
-        st, ct = np.sin(th), np.cos(th)
-        s1l, c1l = np.broadcast_to(s1, th.shape), np.broadcast_to(c1, th.shape)
-        zl = np.zeros_like(th)
-        R_Bl = np.stack(
-            [
-                np.stack([ct, zl, st], -1),
-                np.stack([s1l * st, c1l, -s1l * ct], -1),
-                np.stack([-c1l * st, s1l, c1l * ct], -1),
-            ],
-            -2,
-        )
-        I_B = np.einsum("nlkij,lkjm,nlkpm->nlkip", R_Bl, self.I_links, R_Bl)  # (N, 4, 2, 3, 3)
-
-        # ---- full Jacobians of the 9 links (trunk + 8), B frame, 18 columns
         Rt = np.swapaxes(R, -1, -2)
-        Jv = np.zeros((N, 9, 3, C.NV))
-        Jw = np.zeros((N, 9, 3, C.NV))
-        Jv[:, :, :, 0:3] = Rt[:, None]
-        Jv[:, 0, :, 3:6] = -_skew(np.broadcast_to(self.r_trunk_B, (N, 3)))
-        r_links = r[:, :, :2]  # (N, 4, 2, 3)
-        Jv[:, 1:, :, 3:6] = -_skew(r_links).reshape(N, 8, 3, 3)
-        Jw[:, :, :, 3:6] = np.eye(3)
-        for i in range(4):
-            cols = slice(6 + 3 * i, 9 + 3 * i)
-            Jv[:, 1 + 2 * i : 3 + 2 * i, :, cols] = Jr[:, i, :2]
-            Jw[:, 1 + 2 * i : 3 + 2 * i, :, cols] = Jw_rel[:, i]
-        m = np.concatenate([[self.m_trunk], self.m_links.reshape(-1)])  # (9,)
-        I_all = np.concatenate([np.broadcast_to(self.I_trunk_B, (N, 1, 3, 3)), I_B.reshape(N, 8, 3, 3)], 1)
-        M = np.einsum("l,nlip,nliq->npq", m, Jv, Jv) + np.einsum("nlip,nlij,nljq->npq", Jw, I_all, Jw)
+        w = qvel[:, 3:6]  # (N, 3) base angular velocity, B frame
+        WxT = np.zeros((N, 1, 3, 3))  # [w]x^T: v @ WxT = w x v
+        WxT[:, 0, _SK_ROWS, _SK_COLS] = w[:, _SK_SRC] * _SK_SIGN
+        ang = qpos[:, 7:].reshape(N, 4, 3).copy()
+        ang[..., 2] += ang[..., 1]  # q1, q2, q2 + q3
+        dang = qvel[:, 6:].reshape(N, 4, 3).copy()
+        dang[..., 2] += dang[..., 1]
+        sn, cs = np.sin(ang), np.cos(ang)
+        s1, c1 = sn[..., 0:1], cs[..., 0:1]
+        d1 = dang[..., 0:1]
+        dsq = dang[..., 1:] * dang[..., 1:]
+        # point kinematics in the HAA-rotated frame H, per leg and point (thigh COM, shank COM, foot)
+        u = -(sn[..., 1:] @ self._AB)  # (N, 4, 3pts)
+        s = -(cs[..., 1:] @ self._AB)
+        ub, sb = -self.b_pts * sn[..., 2:3], -self.b_pts * cs[..., 2:3]
+        H = np.zeros((N, 4, 3, 3, 5))  # columns: position, dp/dq1, dp/dq2, dp/dq3, acceleration at qacc = 0
+        H[..., 0, 0], H[..., 2, 0], H[..., 1, 1] = u, s, -s
+        H[..., 0, 2], H[..., 2, 2], H[..., 0, 3], H[..., 2, 3] = s, -u, sb, -ub
+        H[..., 0, 4] = (sn[..., 1:] * dsq) @ self._AB
+        H[..., 1, 4] = (-2.0 * d1) * ((sn[..., 1:] * dang[..., 1:]) @ self._AB)
+        H[..., 2, 4] = (cs[..., 1:] * dsq) @ self._AB - (d1 * d1) * s
+        Rx = np.zeros((N, 4, 3, 3))
+        Rx[..., 0, 0] = 1.0
+        Rx[..., _RX_ROWS, _RX_COLS] = np.concatenate([c1, -s1, s1, c1], -1)
+        Bp = Rx[:, :, None] @ H  # (N, 4, 3pts, 3, 5), B frame
+        r = Bp[..., 0] + self.hips_B[None, :, None, :]
+        Jr = Bp[..., 1:4]
+        rdot = (Jr @ qvel[:, 6:].reshape(N, 4, 1, 3, 1))[..., 0]
+        acc = Bp[..., 4] + (r @ WxT + 2.0 * rdot) @ WxT  # classical acceleration, B frame
+        # angular velocity Jacobians: columns e_x, a_y, k a_y (k = 0 thigh, 1 shank/foot)
+        ay, eperp = Rx[..., 1], Rx[..., 2]  # (N, 4, 3) HFE/KFE axis and e_x x a_y
+        Jw = np.zeros((N, 4, 3, 3, 3))
+        Jw[..., 0, 0] = 1.0
+        Jw[..., 1] = ay[:, :, None, :]
+        Jw[:, :, 1:, :, 2] = ay[:, :, None, :]
+        thd = dang[..., _TH]  # (N, 4, 3pts) link pitch rate
+        w_rel = thd[..., None] * ay[:, :, None, :]
+        w_rel[..., 0] += d1
+        w_link = w_rel + w[:, None, None, :]
+        alpha = w_rel @ WxT + (d1 * thd)[..., None] * eperp[:, :, None, :]
+        Ry = np.zeros((N, 4, 3, 3, 3))
+        Ry[..., 1, 1] = 1.0
+        st, ct = sn[..., _TH], cs[..., _TH]
+        Ry[..., _RY_ROWS, _RY_COLS] = np.stack([ct, st, -st, ct], -1)
+        R_Bl = Rx[:, :, None] @ Ry
+        I_B = R_Bl @ self.I_pts @ np.swapaxes(R_Bl, -1, -2)  # (N, 4, 3pts, 3, 3)
+        tau = (I_B @ alpha[..., None])[..., 0] + _cross(w_link, (I_B @ w_link[..., None])[..., 0])
 
-        # ---- bias: linear accelerations at qacc = 0 and Euler torques
-        acc_t = np.cross(w, np.cross(w, self.r_trunk_B))  # (N, 3)
-        acc_all = np.concatenate([acc_t[:, None], acc_B[:, :, :2].reshape(N, 8, 3)], 1)  # (N, 9, 3)
-        w_all = np.concatenate([w[:, None], w_link.reshape(N, 8, 3)], 1)
-        alpha_all = np.concatenate([np.zeros((N, 1, 3)), alpha.reshape(N, 8, 3)], 1)
-        Iw = np.einsum("nlij,nlj->nli", I_all, w_all)
-        torque = np.einsum("nlij,nlj->nli", I_all, alpha_all) + np.cross(w_all, Iw)
-        g_B = np.einsum("nji,j->ni", R, self.gravity_W)  # R^T g
-        force = m[None, :, None] * (acc_all - g_B[:, None, :])
-        h = np.einsum("nlip,nli->np", Jv, force) + np.einsum("nlip,nli->np", Jw, torque)
-        G = -np.einsum("nlip,nli->np", Jv, m[None, :, None] * np.broadcast_to(g_B[:, None, :], (N, 9, 3)))
+        # ---- stacked Jacobians of the 13 points, B frame: rows (v, w), 18 columns
+        r_all = np.concatenate([np.broadcast_to(self.r_trunk_B, (N, 1, 3)), r.reshape(N, 12, 3)], 1)
+        J = np.zeros((N, 13, 6, C.NV))
+        J[:, :, 0:3, 0:3] = Rt[:, None]
+        J[:, :, _SK_ROWS, 3 + _SK_COLS] = r_all[..., _SK_SRC] * _SK_SIGN  # -[r]x = [r]x^T
+        J[:, :, 3:6, 3:6] = np.eye(3)
+        J[:, _PT, _ROW3, _LEGCOL] = Jr.reshape(N, 12, 3, 3)
+        J[:, _PT, 3 + _ROW3, _LEGCOL] = Jw.reshape(N, 12, 3, 3)
+        D = self._D0.repeat(N, 0)
+        D[:, 1:, 3:6, 3:6] = I_B.reshape(N, 12, 3, 3)
+        Jf = J.reshape(N, 78, C.NV)
+        M = np.swapaxes(Jf, -1, -2) @ (D @ J).reshape(N, 78, C.NV)
 
-        # ---- feet: world-frame Jacobians and classical accelerations at qacc = 0
-        r_f = r[:, :, 2]  # (N, 4, 3)
-        Jf_B = np.zeros((N, 4, 3, C.NV))
-        Jf_B[:, :, :, 3:6] = -_skew(r_f)
-        for i in range(4):
-            Jf_B[:, i, :, 6 + 3 * i : 9 + 3 * i] = Jr[:, i, 2]
-        J_feet = np.einsum("nij,nljq->nliq", R, Jf_B)
-        J_feet[:, :, :, 0:3] = np.eye(3)
-        Jdot_qdot = np.einsum("nij,nlj->nli", R, acc_B[:, :, 2])
-        return M, h, G, J_feet, Jdot_qdot
+        g_B = self.gravity_W @ R  # (N, 3) = R^T g
+        acc_t = ((self.r_trunk_B @ WxT[:, 0])[:, None, :] @ WxT[:, 0])[:, 0]
+        tau_t = ((w @ self.I_trunk_B.T)[:, None, :] @ WxT[:, 0])[:, 0]
+        Wr = np.zeros((N, 2, 13, 6))
+        Wr[:, 0, 0, 0:3] = acc_t
+        Wr[:, 0, 1:, 0:3] = acc.reshape(N, 12, 3)
+        Wr[:, 0, :, 0:3] -= g_B[:, None, :]
+        Wr[:, 1, :, 0:3] = -g_B[:, None, :]
+        Wr[..., 0:3] *= self._m_all[:, None]
+        Wr[:, 0, 0, 3:6] = tau_t
+        Wr[:, 0, 1:, 3:6] = tau.reshape(N, 12, 3)
+        hG = Wr.reshape(N, 2, 78) @ Jf  # (N, 2, 18): h and G
+        J_feet = R[:, None] @ J[:, _FEET, 0:3, :]
+        Jdot_qdot = acc[:, :, 2] @ Rt
+        return M, hG[:, 0], hG[:, 1], J_feet, Jdot_qdot
