@@ -33,6 +33,7 @@ unsolved QP falls back to "pinv" and sets ``result.qp_fallback``.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import mujoco
 import numpy as np
@@ -69,19 +70,27 @@ class IDResult:
 
 
 def friction_pyramid(normal_W: np.ndarray, mu: float) -> np.ndarray:
-    """(5, 3) rows c with ``c . F >= 0`` for F inside the 4-sided pyramid inscribed in the cone of ``mu``.
+    """Rows c with ``c . F >= 0`` for F inside the 4-sided pyramid inscribed in the cone of ``mu``.
 
-    Rows: ``mu' n - t1``, ``mu' n + t1``, ``mu' n - t2``, ``mu' n + t2`` with ``mu' = mu / sqrt(2)``,
-    then ``n`` itself (normal force, for the minimum).
+    :param normal_W: (3,) or (p, 3) contact normals (world frame, any length).
+    :return: (5, 3) or (p, 5, 3): ``mu' n - t1``, ``mu' n + t1``, ``mu' n - t2``, ``mu' n + t2`` with
+        ``mu' = mu / sqrt(2)`` (so the pyramid lies inside the true cone), then ``n`` (normal force).
     """
     n = np.asarray(normal_W, dtype=float)
-    n = n / np.linalg.norm(n)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    n = n / np.linalg.norm(n, axis=-1, keepdims=True)
+    helper = np.where((np.abs(n[..., 0]) < 0.9)[..., None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     t1 = np.cross(n, helper)
-    t1 /= np.linalg.norm(t1)
+    t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
     t2 = np.cross(n, t1)
-    mu_in = mu / np.sqrt(2.0)
-    return np.stack([mu_in * n - t1, mu_in * n + t1, mu_in * n - t2, mu_in * n + t2, n])
+    mn = (mu / np.sqrt(2.0)) * n
+    return np.stack([mn - t1, mn + t1, mn - t2, mn + t2, n], axis=-2)
+
+
+@functools.lru_cache(maxsize=8)
+def _block_index(p: int, rows: int, cols: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fancy index placing p blocks (rows x cols) on the diagonal of a (p rows, p cols) matrix."""
+    k = np.arange(p)[:, None, None]
+    return rows * k + np.arange(rows)[None, :, None], cols * k + np.arange(cols)[None, None, :]
 
 
 class InverseDynamics:
@@ -118,7 +127,8 @@ class InverseDynamics:
             raise ValueError(f"mu must be > 0, got {mu}")
         self.mu = float(mu)
         self.min_normal_force = float(min_normal_force)
-        self._up = np.tile(np.array([0.0, 0.0, 1.0]), (C.N_LEGS, 1))
+        self._cone_up = np.broadcast_to(friction_pyramid(np.array([0.0, 0.0, 1.0]), self.mu), (C.N_LEGS, 5, 3))
+        self._cone_lower = np.array([0.0, 0.0, 0.0, 0.0, self.min_normal_force])
 
     # ---------------------------------------------------------------- public API
     def solve(
@@ -205,35 +215,41 @@ class InverseDynamics:
         lay = proj.layout
         st = lay.stance_legs
         p = len(st)
-        normals = self._up if normals_W is None else np.asarray(normals_W, dtype=float)
-        J_L = proj.terms.J_feet[st][lay.leg_block]  # (p, 3, 3)
+        cones = self._cone_up[:p] if normals_W is None else friction_pyramid(np.asarray(normals_W)[st], self.mu)
+        J_st = proj.terms.J_feet if p == C.N_LEGS else proj.terms.J_feet[st]
+        J_L = J_st[lay.leg_block]  # (p, 3, 3)
         W = np.zeros((3 * p, 3 * p))
+        W[_block_index(p, 3, 3)] = J_L @ np.swapaxes(J_L, -1, -2)  # |tau - tau_pinv|^2 in terms of F
         Cmat = np.zeros((5 * p, 3 * p))
-        lower = np.zeros(5 * p)
-        for k, leg in enumerate(st):
-            W[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = J_L[k] @ J_L[k].T
-            Cmat[5 * k : 5 * k + 5, 3 * k : 3 * k + 3] = friction_pyramid(normals[leg], self.mu)
-            lower[5 * k + 4] = self.min_normal_force
+        Cmat[_block_index(p, 5, 3)] = cones
+        lower = np.tile(self._cone_lower, p)
         F0 = result.contact_forces[st].reshape(-1)
-        A_eq = proj.J_b.transpose(0, 2, 1).transpose(1, 0, 2).reshape(6, 3 * p)  # [J_b,i^T]_i
-        H = W + 1e-9 * np.eye(3 * p)
-        g = -W @ F0
-        upper = np.full(5 * p, 1e20)
+        A_eq = proj.J_b.transpose(2, 0, 1).reshape(6, 3 * p)  # [J_b,i^T]_i
         res = proxsuite.proxqp.dense.solve(
-            H, g, A_eq, r[:6], Cmat, lower, upper, eps_abs=1e-9, max_iter=200, verbose=False
+            W + 1e-9 * np.eye(3 * p),
+            -W @ F0,
+            A_eq,
+            r[:6],
+            Cmat,
+            lower,
+            np.full(5 * p, 1e20),
+            eps_abs=1e-9,
+            max_iter=200,
+            verbose=False,
+            compute_preconditioner=False,
         )
         x = res.x
-        ok = res.info.status == proxsuite.proxqp.PROXQP_SOLVED and np.all(np.isfinite(x))
+        ok = res.info.status == proxsuite.proxqp.PROXQP_SOLVED and bool(np.isfinite(x).all())
         if ok:
-            ok = bool(
-                np.all(Cmat @ x >= lower - 1e-6) and np.abs(A_eq @ x - r[:6]).max() < 1e-6 * max(1.0, abs(r[:6]).max())
+            ok = bool((Cmat @ x >= lower - 1e-6).all()) and bool(
+                np.abs(A_eq @ x - r[:6]).max() < 1e-6 * max(1.0, np.abs(r[:6]).max())
             )
         if not ok:
             result.qp_fallback = True
             return
         F_st = x.reshape(p, 3)
         tau = result.tau.copy()
-        tau[lay.stance_dofs - 6] = r[lay.stance_dofs] - np.einsum("pji,pj->pi", J_L, F_st).reshape(-1)
+        tau[lay.stance_dofs - 6] = r[lay.stance_dofs] - (np.swapaxes(J_L, -1, -2) @ F_st[..., None]).reshape(-1)
         result.tau = tau
         result.contact_forces = np.zeros((C.N_LEGS, 3))
         result.contact_forces[st] = F_st
