@@ -1,0 +1,230 @@
+"""Terrain suites: named lists of terrains x seeds with a goal distance and a time limit (configs/suites/).
+
+File format (every field required except ``params``; no other fields)::
+
+    name: rough-mild
+    goal_distance: 5.0      # m along +x from the spawn point
+    time_limit: 120.0       # s of simulated time per episode
+    terrains:
+      - kind: rough         # any terrain kind of the environment (docs/terrain.md)
+        params: {amplitude: 0.04, wavelength: 0.6}
+        seeds: [0, 1, 2, 3, 4]
+
+Terrain parameters are validated by :func:`quad_uneven_env.terrain.parse_terrain_spec`. Errors are
+``SuiteError`` (a ``ValueError``) whose message starts with the offending field, e.g.
+``terrains[2].params.amplitude must be a number in [0, 0.3] (m), got 5``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from quad_uneven_env.config import CONFIG_DIR, read_yaml, resolve_config_path
+from quad_uneven_env.terrain import TERRAIN_KINDS, parse_terrain_spec
+from quad_uneven_env.terrain.kinds import KINDS
+
+SUITE_DIR = CONFIG_DIR / "suites"
+"""Directory of the shipped suites (``configs/suites/NAME.yaml``)."""
+
+SUITE_FIELDS = ("name", "goal_distance", "time_limit", "terrains")
+"""Top-level fields of a suite file (all required)."""
+
+ENTRY_FIELDS = ("kind", "params", "seeds")
+"""Fields of one ``terrains`` entry (``params`` optional, default ``{}``)."""
+
+EXIT_MARGIN = 0.3
+"""m: the environment ends an episode whose base comes this close to the grid's edge ("left the terrain")."""
+
+
+class SuiteError(ValueError):
+    """An invalid suite; the message names the field (``terrains[1].seeds: ...``)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TerrainEntry:
+    """One ``terrains`` entry: a terrain kind, its parameters and the seeds to run it with."""
+
+    kind: str
+    """terrain kind (one of ``TERRAIN_KINDS``)."""
+    params: dict[str, Any]
+    """parameters as written in the file (defaults not filled; JSON-friendly)."""
+    seeds: tuple[int, ...]
+    """episode seeds (>= 0, distinct): each seeds the env's reset and hence the terrain."""
+
+    @property
+    def spec(self) -> dict[str, Any]:
+        """The environment's ``terrain=`` argument: ``{"kind": ..., **params}``."""
+        return {"kind": self.kind, **self.params}
+
+    @property
+    def label(self) -> str:
+        """Short human-readable name, e.g. ``stairs(direction=up)``."""
+        inner = ", ".join(f"{k}={v}" for k, v in self.params.items())
+        return f"{self.kind}({inner})" if inner else self.kind
+
+
+@dataclasses.dataclass(frozen=True)
+class Suite:
+    """A validated suite."""
+
+    name: str
+    """suite name."""
+    goal_distance: float
+    """m: COG travel along +x from the spawn point that counts as success."""
+    time_limit: float
+    """s of simulated time per episode."""
+    terrains: tuple[TerrainEntry, ...]
+    """the terrain entries, in file order."""
+    source: str = ""
+    """file the suite was read from ("" if built from a mapping)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class EpisodeTask:
+    """One episode to run: the entry it comes from, its terrain and its seed."""
+
+    index: int
+    """position in the suite's episode list (results are ordered by it)."""
+    entry: int
+    """index of the ``terrains`` entry."""
+    kind: str
+    """terrain kind."""
+    params: dict[str, Any]
+    """terrain parameters as written in the suite."""
+    seed: int
+    """env reset seed (the entry's seed plus the seed offset)."""
+    first_of_entry: bool
+    """True for the entry's first episode (plotted, and filmed with --video)."""
+
+
+def suite_names() -> list[str]:
+    """Names of the shipped suites in ``configs/suites/``."""
+    return sorted(p.stem for p in SUITE_DIR.glob("*.yaml"))
+
+
+def load_suite(name_or_path: str | os.PathLike[str]) -> Suite:
+    """Read and validate a suite by name (``configs/suites/NAME.yaml``) or YAML path.
+
+    :raises SuiteError: on an unknown name, an unreadable file or an invalid field (named in the message).
+    """
+    try:
+        path = resolve_config_path(name_or_path, "suites")
+        raw = read_yaml(path)
+    except ValueError as e:
+        raise SuiteError(str(e)) from None
+    return suite_from_dict(raw, source=str(path))
+
+
+def _number(value: Any, field: str, lo: float = 0.0) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= lo:
+        raise SuiteError(f"{field} must be a finite number > {lo:g}, got {value!r}")
+    return float(value)
+
+
+def _rename_terrain_error(msg: str, i: int) -> str:
+    """Turn parse_terrain_spec's ``terrain[rough].amplitude ...`` into ``terrains[i].params.amplitude ...``."""
+    msg = re.sub(r"^terrain\[[^\]]*\]\.", f"terrains[{i}].params.", msg)
+    msg = re.sub(r"^terrain\[[^\]]*\]:", f"terrains[{i}].params:", msg)
+    msg = re.sub(r"^terrain\.kind", f"terrains[{i}].kind", msg)
+    msg = re.sub(r"^terrain\.params", f"terrains[{i}].params", msg)
+    msg = re.sub(r"^terrain:", f"terrains[{i}].params:", msg)
+    return msg if msg.startswith(f"terrains[{i}]") else f"terrains[{i}]: {msg}"
+
+
+def _seeds(value: Any, field: str) -> tuple[int, ...]:
+    if not isinstance(value, list) or not value:
+        raise SuiteError(f"{field} must be a non-empty list of integers >= 0, got {value!r}")
+    for k, s in enumerate(value):
+        if isinstance(s, bool) or not isinstance(s, int) or s < 0:
+            raise SuiteError(f"{field}[{k}] must be an integer >= 0, got {s!r}")
+    if len(set(value)) != len(value):
+        raise SuiteError(f"{field} must not repeat a seed, got {value!r}")
+    return tuple(int(s) for s in value)
+
+
+def _entry(raw: Any, i: int, goal_distance: float) -> TerrainEntry:
+    where = f"terrains[{i}]"
+    if not isinstance(raw, Mapping):
+        raise SuiteError(f"{where} must be a mapping with fields {list(ENTRY_FIELDS)}, got {raw!r}")
+    unknown = sorted(set(raw) - set(ENTRY_FIELDS))
+    if unknown:
+        raise SuiteError(f"{where}: unknown field(s) {unknown}; allowed: {list(ENTRY_FIELDS)}")
+    for key in ("kind", "seeds"):
+        if key not in raw:
+            raise SuiteError(f"{where}.{key} is required")
+    kind = raw["kind"]
+    if not isinstance(kind, str) or kind not in TERRAIN_KINDS:
+        raise SuiteError(f"{where}.kind must be one of {list(TERRAIN_KINDS)}, got {kind!r}")
+    params = raw.get("params")
+    params = {} if params is None else params
+    if not isinstance(params, Mapping):
+        raise SuiteError(f"{where}.params must be a mapping of parameter names to values, got {params!r}")
+    if "kind" in params or "params" in params:
+        raise SuiteError(f"{where}.params must not contain 'kind' or 'params'")
+    try:
+        spec = parse_terrain_spec({"kind": kind, **params})
+    except ValueError as e:
+        raise SuiteError(_rename_terrain_error(str(e), i)) from None
+    seeds = _seeds(raw["seeds"], f"{where}.seeds")
+    grid = KINDS[kind].grid(spec.params)
+    x_exit = grid.origin[0] + grid.size[0] - EXIT_MARGIN
+    if goal_distance >= x_exit:
+        raise SuiteError(
+            f"goal_distance {goal_distance} m cannot be reached on {where}: its grid ends at x = "
+            f"{grid.origin[0] + grid.size[0]:.2f} m and an episode ends once the base passes x = {x_exit:.2f} m "
+            f"(lengthen {where}.params.length or shorten goal_distance)"
+        )
+    return TerrainEntry(kind, dict(params), seeds)
+
+
+def suite_from_dict(raw: Mapping[str, Any], source: str = "") -> Suite:
+    """Validate a suite mapping (the parsed YAML file).
+
+    :raises SuiteError: naming the offending field and its allowed values.
+    """
+    if not isinstance(raw, Mapping):
+        raise SuiteError(f"a suite must be a mapping with fields {list(SUITE_FIELDS)}, got {type(raw).__name__}")
+    unknown = sorted(set(raw) - set(SUITE_FIELDS))
+    if unknown:
+        raise SuiteError(f"unknown field(s) {unknown}; allowed: {list(SUITE_FIELDS)}")
+    missing = [k for k in SUITE_FIELDS if k not in raw]
+    if missing:
+        raise SuiteError(f"missing field(s) {missing}; a suite needs {list(SUITE_FIELDS)}")
+    name = raw["name"]
+    if not isinstance(name, str) or not name.strip():
+        raise SuiteError(f"name must be a non-empty string, got {name!r}")
+    goal = _number(raw["goal_distance"], "goal_distance")
+    limit = _number(raw["time_limit"], "time_limit")
+    terrains = raw["terrains"]
+    if not isinstance(terrains, list) or not terrains:
+        raise SuiteError(f"terrains must be a non-empty list of {{kind, params, seeds}} entries, got {terrains!r}")
+    entries = tuple(_entry(t, i, goal) for i, t in enumerate(terrains))
+    return Suite(name, goal, limit, entries, source)
+
+
+def episode_tasks(suite: Suite, episodes: int | None = None, seed_offset: int = 0) -> list[EpisodeTask]:
+    """The suite's episodes in order: per entry, its first ``episodes`` seeds (all if None), plus ``seed_offset``.
+
+    :raises ValueError: if ``episodes`` < 1 or an offset seed is negative.
+    """
+    if episodes is not None and episodes < 1:
+        raise ValueError(f"episodes must be an integer >= 1 (episodes per terrain entry), got {episodes}")
+    tasks: list[EpisodeTask] = []
+    for e, entry in enumerate(suite.terrains):
+        for k, s in enumerate(entry.seeds[:episodes]):
+            seed = s + seed_offset
+            if seed < 0:
+                raise ValueError(f"seed: offset {seed_offset} makes terrains[{e}] seed {s} negative")
+            tasks.append(EpisodeTask(len(tasks), e, entry.kind, dict(entry.params), seed, k == 0))
+    return tasks
+
+
+def suite_path(name: str) -> Path:
+    """Path of the shipped suite ``name``."""
+    return SUITE_DIR / f"{name}.yaml"
