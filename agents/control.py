@@ -82,15 +82,23 @@ class Gains:
                 raise ValueError(f"Gains.{f.name} must be a finite number >= 0, got {v!r}")
 
 
-def measured_foot_contacts(data: mujoco.MjData, foot_geoms: np.ndarray, terrain_geom: int) -> np.ndarray:
-    """(4,) bool: foot geom ``i`` has a contact with the terrain geom in ``data.contact``."""
-    ncon = data.ncon
-    if ncon == 0:
-        return np.zeros(C.N_LEGS, dtype=bool)
-    g = data.contact.geom[:ncon]
-    g1, g2 = g[:, 0], g[:, 1]
-    other = np.where(g1 == terrain_geom, g2, np.where(g2 == terrain_geom, g1, -1))
-    return (other[:, None] == foot_geoms[None, :]).any(axis=0)
+def foot_lookup(model: mujoco.MjModel) -> np.ndarray:
+    """(ngeom,) leg index of each foot geom, ``N_LEGS`` for every other geom (a dummy slot)."""
+    lut = np.full(model.ngeom, C.N_LEGS, dtype=int)
+    lut[[model.geom(g).id for g in C.FOOT_GEOMS]] = np.arange(C.N_LEGS)
+    return lut
+
+
+def measured_foot_contacts(data: mujoco.MjData, foot_of_geom: np.ndarray, terrain_geom: int) -> np.ndarray:
+    """(4,) bool: foot ``i`` has a contact with the terrain geom in ``data.contact``.
+
+    :param foot_of_geom: from :func:`foot_lookup`.
+    """
+    out = np.zeros(C.N_LEGS + 1, dtype=bool)
+    if data.ncon:
+        g = data.contact.geom
+        out[foot_of_geom[g[:, ::-1][g == terrain_geom]]] = True
+    return out[: C.N_LEGS]
 
 
 class ComputedTorqueController:
@@ -129,6 +137,7 @@ class ComputedTorqueController:
         self.last: IDResult | None = None
         """the last inverse-dynamics result (diagnostics)."""
         self.last_reference: ReferenceSample | None = None
+        self._e_rot, self._q_inv, self._q_rel, self._R_rel = np.empty(3), np.empty(4), np.empty(4), np.empty(9)
 
     # ------------------------------------------------------------------ setup
     def _bind(self, model: mujoco.MjModel) -> None:
@@ -139,7 +148,7 @@ class ComputedTorqueController:
         if [int(model.actuator_trnid[a, 0]) for a in act] != [model.joint(j).id for j in C.JOINT_NAMES]:
             raise ValueError("actuators must drive the joints in JOINT_NAMES order")
         self.torque_limit = model.actuator_ctrlrange[act, 1].copy()
-        self.foot_geoms = np.array([model.geom(g).id for g in C.FOOT_GEOMS])
+        self.foot_of_geom = foot_lookup(model)
         self.terrain_geom = model.geom(C.TERRAIN_GEOM).id
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any = None) -> None:
@@ -155,7 +164,7 @@ class ComputedTorqueController:
         if model is not self._model:
             self._bind(model)
         ref = self.reference(float(data.time) - self.t0)
-        stance = self.select_stance(ref.stance, measured_foot_contacts(data, self.foot_geoms, self.terrain_geom))
+        stance = self.select_stance(ref.stance, measured_foot_contacts(data, self.foot_of_geom, self.terrain_geom))
         beta_ddot = self.beta_ddot_command(data.qpos, data.qvel, ref, stance)
         if self.backend == "mujoco":
             terms = self.dynamics.terms_from_data(data)
@@ -168,16 +177,15 @@ class ComputedTorqueController:
 
     def select_stance(self, planned, measured: np.ndarray) -> tuple[bool, bool, bool, bool]:
         """Stance set from the plan and the measured contacts (rule in the module docstring)."""
-        planned = np.asarray(planned, dtype=bool)
         if self.stance_mode == "planned":
-            chosen = planned
-        elif self.stance_mode == "measured":
-            chosen = np.asarray(measured, dtype=bool)
-        else:
-            chosen = planned & measured
-            if chosen.sum() < min(3, int(planned.sum())):
-                chosen = planned
-        return tuple(bool(s) for s in chosen)  # type: ignore[return-value]
+            return tuple(bool(s) for s in planned)  # type: ignore[return-value]
+        if self.stance_mode == "measured":
+            return tuple(bool(s) for s in measured)  # type: ignore[return-value]
+        chosen = tuple(bool(p) and bool(m) for p, m in zip(planned, measured, strict=True))
+        n_planned = sum(bool(p) for p in planned)
+        if sum(chosen) < min(3, n_planned):
+            return tuple(bool(p) for p in planned)  # type: ignore[return-value]
+        return chosen  # type: ignore[return-value]
 
     def beta_ddot_command(
         self, qpos: np.ndarray, qvel: np.ndarray, ref: ReferenceSample, stance: tuple[bool, bool, bool, bool]
@@ -185,18 +193,21 @@ class ComputedTorqueController:
         """beta_ddot_cmd (n_beta,): reference acceleration plus PD on position, SO(3) orientation and swing joints."""
         g = self.gains
         lay = stance_layout(stance)
-        R = np.empty(9)
-        mujoco.mju_quat2Mat(R, qpos[3:7])
-        R_ref = np.empty(9)
-        mujoco.mju_quat2Mat(R_ref, ref.quat_WB)
-        R_rel = R.reshape(3, 3).T @ R_ref.reshape(3, 3)  # R^T R_ref: reference base frame -> current base frame
-        e_rot = np.empty(3)
-        mujoco.mju_subQuat(e_rot, ref.quat_WB, qpos[3:7])  # log(R^T R_ref), current base frame
+        q, q_ref = qpos[3:7], ref.quat_WB
+        e_rot, q_inv, q_rel, R_rel = self._e_rot, self._q_inv, self._q_rel, self._R_rel
+        mujoco.mju_subQuat(e_rot, q_ref, q)  # log(R^T R_ref), current base frame
+        mujoco.mju_negQuat(q_inv, q)
+        mujoco.mju_mulQuat(q_rel, q_inv, q_ref)
+        mujoco.mju_quat2Mat(R_rel, q_rel)  # R^T R_ref: reference base frame -> current base frame
         out = np.empty(lay.n_beta)
         out[0:3] = ref.a_base_W + g.kd_pos * (ref.v_base_W - qvel[0:3]) + g.kp_pos * (ref.p_base_W - qpos[0:3])
-        out[3:6] = R_rel @ ref.domega_base_B + g.kd_rot * (R_rel @ ref.omega_base_B - qvel[3:6]) + g.kp_rot * e_rot
-        j = lay.beta_index[6:] - 6
-        if len(j):
+        out[3:6] = (
+            R_rel.reshape(3, 3) @ (ref.domega_base_B + g.kd_rot * ref.omega_base_B)
+            - g.kd_rot * qvel[3:6]
+            + g.kp_rot * e_rot
+        )
+        if lay.n_beta > 6:
+            j = lay.beta_index[6:] - 6
             out[6:] = (
                 ref.qdd_joints[j]
                 + g.kd_joint * (ref.qd_joints[j] - qvel[6 + j])

@@ -18,10 +18,10 @@ from agents.control import (
     friction_pyramid,
     verify_inverse_dynamics,
 )
+from agents.control_references import BaseWaveReference
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot.dynamics import BACKENDS, make_dynamics
-from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 from quad_uneven_env.robot.model import home_qpos, robot_mjcf
 
 ALL_STANCES = list(itertools.product((True, False), repeat=4))
@@ -199,59 +199,18 @@ def test_orientation_error_is_on_so3(robot_cfg):
 
 
 # ----------------------------------------------------------------------------- acceptance in the env
-def _rx(a):
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _ry(a):
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-class BaseWaveReference:
-    """Feet fixed in the world; base z +/- dz at fz Hz, roll = pitch = ang sin(2 pi fa t); joints by IK.
-
-    Exact base derivatives (R = R_y(pitch) R_x(roll): omega_B = (roll', pitch' cos roll, -pitch' sin roll)).
-    """
-
-    def __init__(self, p0, feet_W, cfg, dz=0.03, fz=0.5, ang=0.0872664626, fa=0.3):
-        self.p0, self.feet, self.cfg = np.asarray(p0), np.asarray(feet_W), cfg
-        self.dz, self.wz, self.ang, self.wa = dz, 2 * np.pi * fz, ang, 2 * np.pi * fa
-        self.hips = hip_positions_B(cfg)
-
-    def _base(self, t):
-        s, c = np.sin(self.wz * t), np.cos(self.wz * t)
-        p = self.p0 + np.array([0.0, 0.0, self.dz * s])
-        v = np.array([0.0, 0.0, self.dz * self.wz * c])
-        a = np.array([0.0, 0.0, -self.dz * self.wz**2 * s])
-        sa, ca = np.sin(self.wa * t), np.cos(self.wa * t)
-        phi, phid, phidd = self.ang * sa, self.ang * self.wa * ca, -self.ang * self.wa**2 * sa
-        th, thd, thdd = phi, phid, phidd
-        R = _ry(th) @ _rx(phi)
-        w = np.array([phid, thd * np.cos(phi), -thd * np.sin(phi)])
-        wd = np.array(
-            [phidd, thdd * np.cos(phi) - thd * phid * np.sin(phi), -thdd * np.sin(phi) - thd * phid * np.cos(phi)]
-        )
-        return p, R, v, w, a, wd
-
-    def joints(self, t):
-        p, R, *_ = self._base(t)
-        p_H = (self.feet - p) @ R - self.hips
-        return np.concatenate(
-            [
-                leg_ik_hip(p_H[i], self.cfg.thigh.length, self.cfg.shank.length, C.KNEE_SIGN[leg])
-                for i, leg in enumerate(C.LEG_NAMES)
-            ]
-        )
-
-    def __call__(self, t: float) -> ReferenceSample:
-        p, R, v, w, a, wd = self._base(t)
-        quat = np.empty(4)
-        mujoco.mju_mat2Quat(quat, R.reshape(-1))
-        h = 1e-4  # joint derivatives (unused by the controller in four-foot stance) by central differences
-        q, qp, qm = self.joints(t), self.joints(t + h), self.joints(t - h)
-        return ReferenceSample(t, p, quat, v, w, a, wd, q, (qp - qm) / (2 * h), (qp - 2 * q + qm) / h**2, (True,) * 4)
+def test_base_wave_reference_derivatives_are_consistent(robot_cfg):
+    feet = np.array([[0.25, 0.185, 0.0], [0.25, -0.185, 0.0], [-0.25, 0.185, 0.0], [-0.25, -0.185, 0.0]])
+    ref = BaseWaveReference(np.array([0.0, 0.0, 0.36]), feet, robot_cfg)
+    t, h = 0.7, 1e-5
+    a, b, c = ref(t - h), ref(t), ref(t + h)
+    omega_fd = np.empty(3)
+    mujoco.mju_subQuat(omega_fd, c.quat_WB, a.quat_WB)
+    np.testing.assert_allclose(omega_fd / (2 * h), b.omega_base_B, atol=1e-8)
+    np.testing.assert_allclose((c.omega_base_B - a.omega_base_B) / (2 * h), b.domega_base_B, atol=1e-6)
+    np.testing.assert_allclose((c.p_base_W - a.p_base_W) / (2 * h), b.v_base_W, atol=1e-8)
+    np.testing.assert_allclose((c.v_base_W - a.v_base_W) / (2 * h), b.a_base_W, atol=1e-6)
+    assert np.abs(b.omega_base_B).max() > 0.02  # not a trivial (static) case
 
 
 def run_in_env(seconds: float, distribution: str, wave: float, seed: int = 3) -> dict:
