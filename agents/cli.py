@@ -11,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.evaluate import add_evaluate_parser
 from agents.report import plot_forces_and_torques, plot_paths, plot_stability, write_frames
 from agents.rollout import ZeroActionPolicy, run_episode
 
@@ -61,7 +62,10 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--terrain", default="rough", help="terrain kind (default: rough)")
     p_demo.add_argument("--seed", type=int, default=0)
     p_demo.add_argument("--seconds", type=float, default=4.0, help="simulated time (s)")
+    add_evaluate_parser(sub)
     args = parser.parse_args(argv)
+    if getattr(args, "func", None) is not None:
+        return args.func(args)
     if args.command == "demo":
         summary = demo(args.out, args.terrain, args.seed, args.seconds)
         for k, v in summary.items():

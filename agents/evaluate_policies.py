@@ -1,0 +1,89 @@
+"""Policies the evaluation can run, by name, and the environment arguments each one needs."""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+
+from agents.rollout import Policy, ZeroActionPolicy
+
+POLICY_ENV_KWARGS: dict[str, dict[str, Any]] = {
+    # The zero action in joint_pd mode holds the standing pose.
+    "zero": {"action_mode": "joint_pd"},
+    # The expert installs its computed-torque controller as the env's physics-rate hook.
+    "expert": {"action_mode": "torque"},
+    # A learned agent: the env defaults unless the user passes --env-kwargs (as it was trained).
+    "sb3": {},
+}
+"""Environment keyword arguments per policy kind (the one table; user env kwargs override it)."""
+
+NAMED_POLICIES = ("zero", "expert")
+"""Policy names; anything else must be the path of an SB3 model ``.zip``."""
+
+SB3_ALGOS = ("ppo", "sac")
+"""Algorithms an SB3 model file may be loaded with (``--algo``)."""
+
+
+class PolicyError(ValueError):
+    """A policy name, model file or algorithm that cannot be used."""
+
+
+def policy_kind(name: str) -> str:
+    """``"zero"``, ``"expert"`` or ``"sb3"`` (a path to a ``.zip`` model).
+
+    :raises PolicyError: for anything else.
+    """
+    if name in NAMED_POLICIES:
+        return name
+    if str(name).endswith(".zip"):
+        return "sb3"
+    raise PolicyError(f"policy must be one of {list(NAMED_POLICIES)} or the path of an SB3 model .zip, got {name!r}")
+
+
+def policy_env_kwargs(name: str) -> dict[str, Any]:
+    """Environment keyword arguments the policy ``name`` needs (a copy of its ``POLICY_ENV_KWARGS`` row)."""
+    return dict(POLICY_ENV_KWARGS[policy_kind(name)])
+
+
+def _expert(env: gym.Env) -> Policy:
+    try:
+        module = importlib.import_module("agents.expert")
+    except ModuleNotFoundError as e:
+        if e.name != "agents.expert":
+            raise
+        raise PolicyError(
+            "policy 'expert' needs agents.expert.ExpertPolicy, which is not in this checkout yet"
+        ) from None
+    if not hasattr(module, "ExpertPolicy"):
+        raise PolicyError("policy 'expert': agents.expert has no ExpertPolicy")
+    return module.ExpertPolicy(env)
+
+
+def _sb3(path: str, algo: str) -> Policy:
+    if algo not in SB3_ALGOS:
+        raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {algo!r}")
+    if not Path(path).is_file():
+        raise PolicyError(f"policy: SB3 model file {path!r} does not exist")
+    import stable_baselines3
+
+    cls = getattr(stable_baselines3, algo.upper())
+    return cls.load(path, device="cpu")
+
+
+def make_policy(name: str, env: gym.Env, algo: str = "ppo") -> Policy:
+    """A policy with SB3's ``predict`` for ``env`` (built with :func:`policy_env_kwargs` of ``name``).
+
+    :param name: ``"zero"`` (the zero action), ``"expert"`` (``agents.expert.ExpertPolicy(env)``, which installs
+        its physics-rate controller into ``env.unwrapped``), or the path of an SB3 model ``.zip``.
+    :param algo: ``"ppo"`` or ``"sac"``: the class an SB3 model file is loaded with.
+    :raises PolicyError: on an unknown name, a missing model file or expert module, or an unknown algo.
+    """
+    kind = policy_kind(name)
+    if kind == "zero":
+        return ZeroActionPolicy(env.action_space)
+    if kind == "expert":
+        return _expert(env)
+    return _sb3(name, algo)
