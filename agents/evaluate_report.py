@@ -94,7 +94,9 @@ def _failures(records: Sequence[Mapping[str, Any]], labels: Sequence[str]) -> li
         return [*lines, "Every episode reached the goal.", ""]
     for r in failed:
         x, y, z = r["end_position"]
-        how = r["fall_reason"] or ("time limit: " if r["end_reason"] == "time_limit" else "") + r["end_reason"]
+        how = r["fall_reason"] or {"time_limit": "time limit reached short of the goal"}.get(
+            r["end_reason"], r["end_reason"]
+        )
         lines.append(
             f"- episode {r['index']} ([{r['entry']}] {labels[r['entry']]}, seed {r['seed']}): **{how}** at "
             f"t = {r['sim_time']:.2f} s, COG at x = {x:.2f} m (distance {r['distance']:.2f} m), y = {y:.2f} m, "

@@ -108,12 +108,18 @@ def plot_distance_per_episode(records: list[dict], goal: float, labels: list[str
     ax.set_xlim(-0.6, n - 0.4)
     top = max(goal, *(r["distance"] for r in records)) * 1.18
     ax.set_ylim(min(0.0, *(r["distance"] for r in records)), top)
-    entries = sorted({r["entry"] for r in records})
-    for e in entries:
+    ax.scatter(x, [r["distance"] for r in records], c=colours, s=14, zorder=3)
+    for e in sorted({r["entry"] for r in records}):
         idx = [i for i, r in enumerate(records) if r["entry"] == e]
         if idx[0] > 0:
             ax.axvline(idx[0] - 0.5, color="0.6", lw=0.8)
-        ax.text((idx[0] + idx[-1]) / 2, top * 0.97, f"[{e}] {labels[e]}", ha="center", va="top", fontsize=7, wrap=True)
+        text = (
+            f"[{e}] {labels[e]}"
+            if len(idx) >= 8
+            else (f"[{e}] {labels[e].split('(')[0]}" if len(idx) >= 3 else f"[{e}]")
+        )
+        ax.text((idx[0] + idx[-1]) / 2, top * 0.985, text, ha="center", va="top", fontsize=7)
+    ax.set_title("distance per episode ([entry] as in the report's 'By terrain entry' table)", fontsize=9)
     handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in ("tab:green", "tab:orange", "tab:red")]
     ax.legend(handles, ["goal reached", "time limit", "fall / error"], fontsize=8, loc="lower right")
     fig.tight_layout()
@@ -162,6 +168,8 @@ def plot_terrain_paths(
     ys = origin[1] + cell_size * np.arange(nrow)
     lo = min(float(cog[:, 0].min()), float(feet[..., 0].min())) - 0.4
     hi = max(float(cog[:, 0].max()), float(feet[..., 0].max())) + 0.4
+    if hi - lo < 2.5:  # a short walk still gets a readable window
+        lo, hi = (lo + hi) / 2 - 1.25, (lo + hi) / 2 + 1.25
     cols = (xs >= lo) & (xs <= hi)
     rows = (ys >= -0.6) & (ys <= 0.6)
     fig, ax = plt.subplots(2, 1, figsize=(10, 6.4), height_ratios=[1.1, 1])
@@ -174,7 +182,6 @@ def plot_terrain_paths(
     for i, leg in enumerate(LEG_NAMES):
         ax[0].plot(feet[:, i, 0], feet[:, i, 1], "-", color=colours[i], lw=1, label=leg)
     ax[0].set(xlabel="x (m)", ylabel="y (m)", title=f"{title}: top view")
-    ax[0].legend(fontsize=7, ncol=5, loc="upper right")
     for sign, style in ((1, "-"), (-1, "--")):
         r = int(np.argmin(np.abs(ys - sign * 0.185)))
         side = "left" if sign > 0 else "right"
@@ -185,8 +192,8 @@ def plot_terrain_paths(
         ax[1].plot(feet[:, i, 0], feet[:, i, 2], "-", color=colours[i], lw=1, label=leg)
     ax[1].set(xlabel="x (m)", ylabel="z (m)", title="side view (foot sites are 0.02 m above the surface)")
     ax[1].set_xlim(ext[0], ext[1])
-    ax[1].legend(fontsize=7, ncol=4, loc="best")
+    ax[1].legend(fontsize=7, ncol=4, loc="upper left", bbox_to_anchor=(0.0, -0.18))
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return path
