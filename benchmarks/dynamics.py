@@ -22,6 +22,7 @@ import pinocchio as pin
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.control import ComputedTorqueController, InverseDynamics
+from agents.control_references import track_in_env
 from planners.types import ReferenceSample
 from quad_uneven_env.robot.conventions import qpos_mj_to_pin, qvel_mj_to_pin
 from quad_uneven_env.robot.dynamics import BACKENDS, make_dynamics
@@ -44,7 +45,12 @@ def median_us(fn: Callable[[], object], repeats: int, inner: int = 20) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=300, help="timed blocks per figure (each of 20 calls)")
+    parser.add_argument(
+        "--acceptance", action="store_true", help="also print the controller's acceptance figures (about 2 min)"
+    )
     args = parser.parse_args()
+    if args.acceptance:
+        acceptance_figures()
 
     env = gym.make("QuadUneven-v0", terrain={"kind": "rough", "amplitude": 0.04, "spawn_radius": 0.0})
     env.reset(seed=0)
@@ -129,6 +135,21 @@ def main() -> None:
         f"explicit terms / Pinocchio reference = {dict(rows)['terms() backend=explicit'] / t_pin:.1f}  (target <= 20)"
     )
     env.close()
+
+
+def acceptance_figures(seconds: float = 10.0) -> None:
+    """Standing and base-wave tracking on rough terrain (4 cm), 10 s each, "pinv" and "qp"."""
+    print(f"# acceptance, {seconds:g} s each, rough terrain 4 cm, seed 3, frame_skip 1")
+    print("scenario       dist  rms_pos_mm  rms_rot_mrad  max_site_drift_mm  min_Fn_N  cone_excess_N  fallbacks")
+    for wave, name in ((0.0, "stand"), (1.0, "z+roll+pitch")):
+        for dist in ("pinv", "qp"):
+            o = track_in_env(seconds, dist, wave)
+            print(
+                f"{name:<14} {dist:<5} {o['rms_pos'] * 1e3:10.3f} {o['rms_rot'] * 1e3:13.3f} "
+                f"{o['slip'].max() * 1e3:18.2f} {o['min_fn']:9.1f} {o['cone_violation']:14.1f} {o['fallbacks']:10d}"
+                + (f"  ENDED: {o['termination_reason']}" if o["termination_reason"] else "")
+            )
+    print()
 
 
 def closed_loop_split(u, env, steps: int = 3000) -> tuple[float, float]:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import itertools
 
-import gymnasium as gym
 import mujoco
 import numpy as np
 import pytest
@@ -18,7 +17,7 @@ from agents.control import (
     friction_pyramid,
     verify_inverse_dynamics,
 )
-from agents.control_references import BaseWaveReference
+from agents.control_references import BaseWaveReference, track_in_env
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot.dynamics import BACKENDS, make_dynamics
@@ -214,62 +213,10 @@ def test_base_wave_reference_derivatives_are_consistent(robot_cfg):
 
 
 def run_in_env(seconds: float, distribution: str, wave: float, seed: int = 3) -> dict:
-    """Stand (wave=0) or track the base wave (wave=1) on rough terrain (4 cm) with the env hook.
-
-    frame_skip=1 so that every physics step is observed.
-    """
-    env = gym.make(
-        "QuadUneven-v0",
-        terrain={"kind": "rough", "amplitude": 0.04, "spawn_radius": 0.0},
-        frame_skip=1,
-        reset_noise_scale=0.0,
-        max_episode_steps=None,
-    )
-    env.reset(seed=seed)
-    u = env.unwrapped
-    m, d = u.model, u.data
-    sites = [m.site(s).id for s in C.FOOT_SITES]
-    feet0 = d.site_xpos[sites].copy()
-    ground = u.terrain.height(feet0[:, 0], feet0[:, 1])
-    ref = BaseWaveReference(d.qpos[:3].copy(), feet0, u.robot_cfg, dz=0.03 * wave, ang=np.deg2rad(5.0) * wave)
-    ctrl = ComputedTorqueController(ref, backend="mujoco", distribution=distribution)
-    ctrl.reset(m, d, u.terrain)
-    u.set_controller(ctrl)
-    n = round(seconds / u.dt)
-    e_pos, e_rot = np.empty(n), np.empty(n)
-    slip = np.zeros(4)
-    min_fn_measured = np.inf
-    cone_violation = 0.0
-    fallbacks = 0
-    e = np.empty(3)
-    for k in range(n):
-        _, _, term, _, info = env.step(np.zeros(C.N_JOINTS))
-        assert not term, info["termination_reason"]
-        r = ref(d.time)
-        e_pos[k] = np.linalg.norm(d.qpos[:3] - r.p_base_W)
-        mujoco.mju_subQuat(e, r.quat_WB, d.qpos[3:7])
-        e_rot[k] = np.linalg.norm(e)
-        slip = np.maximum(slip, np.linalg.norm(d.site_xpos[sites, :2] - feet0[:, :2], axis=1))
-        assert info["foot_contact"].all(), f"a foot lost contact at t={d.time:.3f}"
-        normals = u.terrain.heightfield.normal(d.site_xpos[sites, 0], d.site_xpos[sites, 1])
-        min_fn_measured = min(min_fn_measured, float(np.einsum("ij,ij->i", info["contact_forces"], normals).min()))
-        res = ctrl.last
-        fallbacks += res.qp_fallback
-        for i in range(4):
-            f = res.contact_forces[i]
-            fn = f @ normals[i]
-            ft = np.linalg.norm(f - fn * normals[i])
-            cone_violation = max(cone_violation, ft - u.robot_cfg.friction * fn)
-    env.close()
-    return {
-        "rms_pos": float(np.sqrt(np.mean(e_pos**2))),
-        "rms_rot": float(np.sqrt(np.mean(e_rot**2))),
-        "slip": slip,
-        "min_fn": min_fn_measured,
-        "cone_violation": cone_violation,
-        "fallbacks": fallbacks,
-        "ground_ptp": float(np.ptp(ground)),
-    }
+    out = track_in_env(seconds, distribution, wave, seed)
+    assert out["termination_reason"] is None, out["termination_reason"]
+    assert out["steps_without_all_contacts"] == 0
+    return out
 
 
 def test_stands_on_rough_terrain_short():
