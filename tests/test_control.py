@@ -219,20 +219,14 @@ def run_in_env(seconds: float, distribution: str, wave: float, seed: int = 3) ->
     return out
 
 
-def test_stands_on_rough_terrain_short():
-    out = run_in_env(2.0, "pinv", wave=0.0)
+@pytest.mark.parametrize("distribution", ["pinv", pytest.param("qp", marks=pytest.mark.slow)])
+def test_stands_10s_on_rough_terrain(distribution):
+    """Four feet at different heights (rough, 4 cm): 10 s standing, no foot site drifts 1 cm, F_n > 0."""
+    out = run_in_env(10.0, distribution, wave=0.0)
     assert out["ground_ptp"] > 0.005  # the feet really stand at different heights
     assert out["slip"].max() < 0.01
     assert out["min_fn"] > 0.0
     assert out["rms_pos"] < 0.005 and out["rms_rot"] < 0.01
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("distribution", ["pinv", "qp"])
-def test_stands_10s_on_rough_terrain(distribution):
-    out = run_in_env(10.0, distribution, wave=0.0)
-    assert out["slip"].max() < 0.01
-    assert out["min_fn"] > 0.0
     if distribution == "qp":
         assert out["fallbacks"] == 0 and out["cone_violation"] <= 1e-6
 
