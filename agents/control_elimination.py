@@ -121,21 +121,39 @@ def leg_jacobian_inverse(J_L: np.ndarray) -> tuple[np.ndarray, bool]:
 
 @dataclasses.dataclass
 class ProjectedDynamics:
-    """Constraint-eliminated dynamics at one state for one stance set (canonical coordinates, SI)."""
+    """Constraint-eliminated dynamics at one state for one stance set (canonical coordinates, SI).
+
+    Holds the stance legs' blocks of S (``-J_L^-1 J_b``) and of Sdot beta_dot (``-J_L^-1 Jdot qdot``);
+    S, Sdot beta_dot, M_beta, V_beta and G_beta are assembled from them on first access.
+    """
 
     layout: StanceLayout
-    S: np.ndarray
-    """(18, n_beta) qvel = S beta_dot (eq. 6-8)."""
-    Sdot_betadot: np.ndarray
-    """(18,) Sdot beta_dot (m/s^2, rad/s^2): qacc = S beta_ddot + Sdot beta_dot."""
     J_L_inv: np.ndarray
     """(p, 3, 3) inverses (damped if singular) of the stance legs' 3 x 3 Jacobians."""
     J_b: np.ndarray
     """(p, 3, 6) base columns of the stance feet's Jacobians."""
+    S_stance: np.ndarray
+    """(p, 3, 6) the stance legs' rows of S (base columns): -J_L^-1 J_b."""
+    Sdot_stance: np.ndarray
+    """(p, 3) the stance legs' entries of Sdot beta_dot: -J_L^-1 Jdot qdot (rad/s^2)."""
     damped: bool
     """a stance leg Jacobian was singular and inverted with damping."""
     terms: DynamicsTerms
     """the full dynamics the projection was made from."""
+
+    @functools.cached_property
+    def S(self) -> np.ndarray:
+        """(18, n_beta) qvel = S beta_dot (eq. 6-8)."""
+        S = self.layout.S0.copy()
+        S[self.layout.stance_dofs, :6] = self.S_stance.reshape(-1, 6)
+        return S
+
+    @functools.cached_property
+    def Sdot_betadot(self) -> np.ndarray:
+        """(18,) Sdot beta_dot (m/s^2, rad/s^2): qacc = S beta_ddot + Sdot beta_dot."""
+        out = np.zeros(C.NV)
+        out[self.layout.stance_dofs] = self.Sdot_stance.reshape(-1)
+        return out
 
     @functools.cached_property
     def M_beta(self) -> np.ndarray:
@@ -167,6 +185,15 @@ class ProjectedDynamics:
         """(n_beta,) qvel indices forming beta_dot."""
         return self.layout.beta_index
 
+    def qacc(self, beta_ddot: np.ndarray) -> np.ndarray:
+        """(18,) full acceleration S beta_ddot + Sdot beta_dot."""
+        lay = self.layout
+        out = np.zeros(C.NV)
+        out[lay.beta_index] = beta_ddot
+        if lay.n_stance:
+            out[lay.stance_dofs] = (self.S_stance @ beta_ddot[:6] + self.Sdot_stance).reshape(-1)
+        return out
+
 
 def eliminate_constraints(terms: DynamicsTerms, stance) -> ProjectedDynamics:
     """Project the full dynamics ``terms`` onto the stance set's independent coordinates (§2.3).
@@ -179,16 +206,16 @@ def eliminate_constraints(terms: DynamicsTerms, stance) -> ProjectedDynamics:
     :param stance: 4 booleans, leg order LF, RF, LH, RH; any of the 16 sets.
     """
     lay = stance_layout(stance if type(stance) is tuple and stance in _LAYOUTS else check_stance(stance))
-    S = lay.S0.copy()
-    Sdot_bd = np.zeros(C.NV)
-    if lay.n_stance:
-        J_st = terms.J_feet if lay.n_stance == C.N_LEGS else terms.J_feet[lay.stance_legs]  # (p, 3, 18)
-        J_b = J_st[:, :, :6]
-        J_L_inv, damped = leg_jacobian_inverse(J_st[lay.leg_block])
-        S[lay.stance_dofs, :6] = (J_L_inv @ J_b).reshape(-1, 6)
-        S[lay.stance_dofs, :6] *= -1.0
-        Sdot_bd[lay.stance_dofs] = (J_L_inv @ terms.Jdot_qdot_feet[lay.stance_legs, :, None]).reshape(-1)
-        Sdot_bd[lay.stance_dofs] *= -1.0
-    else:
-        J_b, J_L_inv, damped = np.zeros((0, 3, 6)), np.zeros((0, 3, 3)), False
-    return ProjectedDynamics(lay, S, Sdot_bd, J_L_inv, J_b, damped, terms)
+    if not lay.n_stance:
+        z = np.zeros((0, 3, 6))
+        return ProjectedDynamics(lay, np.zeros((0, 3, 3)), z, z, np.zeros((0, 3)), False, terms)
+    full = lay.n_stance == C.N_LEGS
+    J_st = terms.J_feet if full else terms.J_feet[lay.stance_legs]  # (p, 3, 18)
+    J_b = J_st[:, :, :6]
+    J_L_inv, damped = leg_jacobian_inverse(J_st[lay.leg_block])
+    Jdq = terms.Jdot_qdot_feet if full else terms.Jdot_qdot_feet[lay.stance_legs]
+    S_st = J_L_inv @ J_b
+    S_st *= -1.0
+    Sd_st = (J_L_inv @ Jdq[..., None])[..., 0]
+    Sd_st *= -1.0
+    return ProjectedDynamics(lay, J_L_inv, J_b, S_st, Sd_st, damped, terms)

@@ -164,28 +164,29 @@ class InverseDynamics:
     # ---------------------------------------------------------------- internals
     def _solve(self, proj: ProjectedDynamics, beta_ddot: np.ndarray, normals_W: np.ndarray | None) -> IDResult:
         lay, terms = proj.layout, proj.terms
-        S = proj.S
-        qacc = S @ beta_ddot
-        qacc += proj.Sdot_betadot
+        qacc = proj.qacc(beta_ddot)
         r = terms.M @ qacc
         r += terms.h  # (18,) = B tau + J^T F when consistent
-        rhs = S.T @ r  # = M_beta beta_ddot + V_beta + G_beta
+        # rhs = S^T r = M_beta beta_ddot + V_beta + G_beta: swing rows of S are unit rows, so
+        # rhs_swing = r_swing; rhs_base = r_base + A r_stance with A = S_stance^T (6 x 3p).
         tau = np.zeros(C.N_JOINTS)
-        tau[lay.beta_index[6:] - 6] = rhs[6:]
+        sw = lay.beta_index[6:]
+        tau[sw - 6] = r[sw]
         F = np.zeros((C.N_LEGS, 3))
         exact = True
         if lay.n_stance:
-            # A = base rows of S_a^T on the stance legs = -J_b^T J_L^-T, (6, 3p)
-            A = S[lay.stance_dofs, :6].T
+            A = proj.S_stance.transpose(2, 0, 1).reshape(6, -1)  # base rows of S_a^T: -J_b^T J_L^-T
+            r_st = r[lay.stance_dofs]
+            rhs_b = r[:6] + A @ r_st
             if lay.n_stance >= 3:
-                tau_st = A.T @ np.linalg.solve(A @ A.T, rhs[:6])
+                tau_st = A.T @ np.linalg.solve(A @ A.T, rhs_b)
             else:
-                tau_st = np.linalg.pinv(A) @ rhs[:6]
-                exact = bool(np.abs(A @ tau_st - rhs[:6]).max() < 1e-9 * max(1.0, np.abs(rhs[:6]).max()))
+                tau_st = np.linalg.pinv(A) @ rhs_b
+                exact = bool(np.abs(A @ tau_st - rhs_b).max() < 1e-9 * max(1.0, np.abs(rhs_b).max()))
             tau[lay.stance_dofs - 6] = tau_st
-            F = self._forces(proj, r, tau, tau_st, exact)
+            F = self._forces(proj, r, tau, r_st - tau_st, exact)
         else:
-            exact = bool(np.abs(rhs[:6]).max() < 1e-9 * max(1.0, np.abs(r).max()))
+            exact = bool(np.abs(r[:6]).max() < 1e-9 * max(1.0, np.abs(r).max()))
         result = IDResult(tau, F, qacc, lay.stance, "pinv", exact=exact, damped=proj.damped)
         if self.distribution == "qp" and lay.n_stance:
             if exact:
@@ -195,13 +196,14 @@ class InverseDynamics:
         return result
 
     @staticmethod
-    def _forces(proj: ProjectedDynamics, r: np.ndarray, tau: np.ndarray, tau_st: np.ndarray, exact: bool) -> np.ndarray:
+    def _forces(
+        proj: ProjectedDynamics, r: np.ndarray, tau: np.ndarray, leg_rows: np.ndarray, exact: bool
+    ) -> np.ndarray:
         """Contact forces from J^T F = r - B tau (18 rows): leg rows if consistent, else least squares."""
         lay = proj.layout
         F = np.zeros((C.N_LEGS, 3))
         if exact:
-            leg_rows = (r[lay.stance_dofs] - tau_st).reshape(-1, 3, 1)
-            F[lay.stance_legs] = (np.swapaxes(proj.J_L_inv, -1, -2) @ leg_rows)[..., 0]  # J_L^-T (r - tau)_leg
+            F[lay.stance_legs] = (np.swapaxes(proj.J_L_inv, -1, -2) @ leg_rows.reshape(-1, 3, 1))[..., 0]  # J_L^-T
         else:
             resid = r.copy()
             resid[6:] -= tau
