@@ -90,7 +90,9 @@ class BaseWaveReference:
         return ReferenceSample(t, p, quat, v, w, a, wd, q, (qp - qm) / (2 * h), (qp - 2 * q + qm) / h**2, (True,) * 4)
 
 
-def track_in_env(seconds: float, distribution: str = "pinv", wave: float = 1.0, seed: int = 3) -> dict:
+def track_in_env(
+    seconds: float, distribution: str = "pinv", wave: float = 1.0, seed: int = 3, backend: str = "mujoco"
+) -> dict:
     """Stand (``wave=0``) or track the base wave (``wave=1``: z +/- 3 cm at 0.5 Hz, roll = pitch +/- 5 deg
     at 0.3 Hz) with the feet where they spawned on rough terrain (4 cm, no flat spawn disc).
 
@@ -115,7 +117,7 @@ def track_in_env(seconds: float, distribution: str = "pinv", wave: float = 1.0, 
     feet0 = d.site_xpos[sites].copy()
     ground = u.terrain.height(feet0[:, 0], feet0[:, 1])
     ref = BaseWaveReference(d.qpos[:3].copy(), feet0, u.robot_cfg, dz=0.03 * wave, ang=np.deg2rad(5.0) * wave)
-    ctrl = ComputedTorqueController(ref, backend="mujoco", distribution=distribution)
+    ctrl = ComputedTorqueController(ref, backend=backend, distribution=distribution)
     ctrl.reset(m, d, u.terrain)
     u.set_controller(ctrl)
     n = round(seconds / u.dt)

@@ -212,8 +212,8 @@ def test_base_wave_reference_derivatives_are_consistent(robot_cfg):
     assert np.abs(b.omega_base_B).max() > 0.02  # not a trivial (static) case
 
 
-def run_in_env(seconds: float, distribution: str, wave: float, seed: int = 3) -> dict:
-    out = track_in_env(seconds, distribution, wave, seed)
+def run_in_env(seconds: float, distribution: str, wave: float, seed: int = 3, backend: str = "mujoco") -> dict:
+    out = track_in_env(seconds, distribution, wave, seed, backend)
     assert out["termination_reason"] is None, out["termination_reason"]
     assert out["steps_without_all_contacts"] == 0
     return out
@@ -245,4 +245,11 @@ def test_tracks_base_wave_on_rough_terrain(distribution):
 @pytest.mark.slow
 def test_tracks_base_wave_10s():
     out = run_in_env(10.0, "pinv", wave=1.0, seed=11)
+    assert out["rms_pos"] <= 0.005 and out["rms_rot"] <= 0.01 and out["min_fn"] > 0.0
+
+
+@pytest.mark.parametrize("backend", ["explicit", "pinocchio"])
+def test_controller_runs_on_every_backend(backend):
+    """The same control law with the numpy and Pinocchio dynamics inside the env (1 s of the base wave)."""
+    out = run_in_env(1.0, "pinv", wave=1.0, backend=backend)
     assert out["rms_pos"] <= 0.005 and out["rms_rot"] <= 0.01 and out["min_fn"] > 0.0
