@@ -26,6 +26,7 @@ from agents.evaluate_episode import EpisodeResult, EvalConfig, run_task
 from agents.evaluate_metrics import json_safe, summarize
 from agents.evaluate_policies import SB3_ALGOS, PolicyError, make_policy, policy_kind
 from agents.evaluate_report import write_report
+from agents.evaluate_targets import check_targets
 from agents.suites import EpisodeTask, Suite, SuiteError, episode_tasks, load_suite, suite_names
 
 __all__ = ["add_evaluate_parser", "evaluate", "make_policy", "run_evaluate_command"]
@@ -102,11 +103,13 @@ def evaluate(
     runs = _run_all(tasks, cfg, min(workers, len(tasks)), progress)
     records = [json_safe(r.record) for r in runs]
     labels = [e.label for e in suite.terrains]
+    summary = json_safe(summarize(records, labels))
     results = {
         "suite": suite.name,
         "policy": str(policy),
         "episodes": records,
-        "summary": json_safe(summarize(records, labels)),
+        "summary": summary,
+        "targets": json_safe(check_targets(suite.terrains, summary["by_entry"], suite.goal_distance)),
         "meta": json_safe(
             {
                 "suite_file": suite.source,

@@ -87,6 +87,29 @@ def _episode_table(records: Sequence[Mapping[str, Any]]) -> list[str]:
     return [*lines, ""]
 
 
+def _targets(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    if not rows:
+        return []
+    head = (
+        "| target | entry | episodes | success rate (required) | mean speed of successes, m/s (required) | "
+        "successes with index >= 0 for >= 99% of the time | passed | why not |"
+    )
+    lines = ["## Targets (issue 5, section 6)", "", head, "|" + "---|" * (head.count("|") - 1)]
+    for r in rows:
+        cells = [
+            r["target"],
+            str(r["entry"]),
+            str(r["episodes"]),
+            f"{r['success_rate']:.0%} ({r['required_success_rate']:.0%})",
+            f"{_f(r['mean_speed_success'])} ({_f(r['required_speed'])})",
+            f"{r['successes_index_ok']} / {r['successes']}",
+            "**yes**" if r["passed"] else "**no**",
+            _f(r["why_not"]),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
+
 def _failures(records: Sequence[Mapping[str, Any]], labels: Sequence[str]) -> list[str]:
     failed = [r for r in records if not r["success"]]
     lines = ["## Failures", ""]
@@ -146,6 +169,7 @@ def write_report(
         "least 3 feet in contact, while *time index < 0* also counts steps with fewer than 3 feet (index -inf). "
         "CoT = sum |tau . qd| dt / (m g distance), sampled every control step.",
         "",
+        *_targets(results.get("targets", [])),
         *_tables(results["summary"]),
         *_failures(records, labels),
         *_episode_table(records),

@@ -315,3 +315,29 @@ def test_video_of_the_first_episode_per_entry(tmp_path):
     frames = list(iio.imiter(videos[0]))
     assert len(frames) == pytest.approx(26, abs=1)  # 1 s at 25 fps, plus the reset frame
     assert frames[0].shape == (360, 480, 3)
+
+
+def test_targets_apply_to_matching_entries_only():
+    from agents.evaluate_targets import check_targets
+    from agents.suites import TerrainEntry
+
+    entries = [
+        TerrainEntry("rough", {"amplitude": 0.04}, tuple(range(10))),
+        TerrainEntry("rough", {"amplitude": 0.08}, tuple(range(10))),
+        TerrainEntry("stairs", {"direction": "down"}, tuple(range(10))),  # default riser 0.08
+    ]
+    group = {"episodes": 10, "successes": 10, "success_rate": 1.0, "mean_speed_success": 0.12, "successes_index_ok": 10}
+    by_entry = [
+        {"entry": 0, **group},
+        {"entry": 1, **group},
+        {"entry": 2, **group, "successes": 8, "success_rate": 0.8, "successes_index_ok": 7},
+    ]
+    rows = check_targets(entries, by_entry, goal_distance=5.0)
+    assert [(r["target"], r["entry"]) for r in rows] == [("rough 4 cm", 0), ("stairs 8 cm down", 2)]
+    assert rows[0]["passed"] is True and rows[0]["why_not"] is None
+    assert rows[1]["passed"] is False
+    assert "success rate 80% < 90%" in rows[1]["why_not"] and "1 success(es)" in rows[1]["why_not"]
+    slow = check_targets(entries[:1], [{**by_entry[0], "mean_speed_success": 0.05}], goal_distance=5.0)
+    assert slow[0]["passed"] is False and "mean speed" in slow[0]["why_not"]
+    short = check_targets(entries[:1], by_entry[:1], goal_distance=1.0)
+    assert short[0]["passed"] is False and "goal" in short[0]["why_not"]
