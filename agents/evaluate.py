@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from agents.evaluate_episode import EpisodeResult, EvalConfig, run_task
+from agents.evaluate_episode import EpisodeResult, EvalConfig, make_env, run_task
 from agents.evaluate_metrics import json_safe, summarize
 from agents.evaluate_policies import SB3_ALGOS, PolicyError, make_policy, policy_kind
 from agents.evaluate_report import write_report
@@ -42,13 +42,28 @@ def _run_all(tasks: list[EpisodeTask], cfg: EvalConfig, workers: int, progress: 
             bar.update(1)
     else:
         ctx = multiprocessing.get_context("spawn")  # MuJoCo (and its GL contexts) + fork is fragile
-        with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+        try:
             futures = {pool.submit(run_task, t, cfg): t.index for t in tasks}
             for fut in cf.as_completed(futures):
                 results[futures[fut]] = fut.result()
                 bar.update(1)
+        except BaseException:  # an error or Ctrl-C: do not wait for the queued episodes
+            pool.shutdown(wait=False, cancel_futures=True)
+            bar.close()
+            raise
+        pool.shutdown()
     bar.close()
     return results  # type: ignore[return-value]
+
+
+def _preflight(task: EpisodeTask, cfg: EvalConfig) -> None:
+    """Build the first episode's env and policy here, so bad env kwargs or policies fail before any worker starts."""
+    env = make_env(task, cfg)
+    try:
+        make_policy(cfg.policy, env, cfg.algo)
+    finally:
+        env.close()
 
 
 def _save_traces(episodes: list[EpisodeResult], out: Path) -> None:
@@ -100,6 +115,7 @@ def evaluate(
         env_kwargs=dict(env_kwargs or {}),
         video_dir=str(out / "videos") if video else None,
     )
+    _preflight(tasks[0], cfg)
     runs = _run_all(tasks, cfg, min(workers, len(tasks)), progress)
     records = [json_safe(r.record) for r in runs]
     labels = [e.label for e in suite.terrains]

@@ -63,8 +63,11 @@ class EpisodeResult:
 def make_env(task: EpisodeTask, cfg: EvalConfig, render: bool = False) -> gym.Env:
     """The QuadUneven-v0 env of ``task`` with the policy's arguments and a time limit of ``cfg.time_limit``."""
     kwargs = {**policy_env_kwargs(cfg.policy), **cfg.env_kwargs}
-    dt = float(kwargs.get("timestep", 0.002)) * int(kwargs.get("frame_skip", 10))
-    steps = max(1, round(cfg.time_limit / dt))
+    try:
+        dt = float(kwargs.get("timestep", 0.002)) * int(kwargs.get("frame_skip", 10))
+        steps = max(1, round(cfg.time_limit / dt))
+    except (TypeError, ValueError, ZeroDivisionError, OverflowError):
+        steps = 1  # invalid timestep or frame_skip: the env's own check below names the field
     if render:
         kwargs.update(render_mode="rgb_array", width=VIDEO_SIZE[0], height=VIDEO_SIZE[1])
     return gym.make("QuadUneven-v0", terrain={"kind": task.kind, **task.params}, max_episode_steps=steps, **kwargs)

@@ -152,14 +152,12 @@ def test_make_policy_errors_and_env_kwargs(tmp_path):
         make_policy(str(tmp_path / "missing.zip"), env=None, algo="dqn")
 
 
-def test_expert_policy_missing_module_is_a_clear_error():
-    try:
-        import agents.expert  # noqa: F401
-    except ModuleNotFoundError:
-        with pytest.raises(PolicyError, match=r"agents\.expert"):
-            make_policy("expert", env=None)
-    else:
-        pytest.skip("agents.expert exists: covered by the expert's own tests")
+def test_expert_policy_missing_module_is_a_clear_error(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "agents.expert", None)  # as if agents/expert.py did not exist
+    with pytest.raises(PolicyError, match=r"agents\.expert"):
+        make_policy("expert", env=None)
 
 
 # ------------------------------------------------------------------ end to end
@@ -341,3 +339,39 @@ def test_targets_apply_to_matching_entries_only():
     assert slow[0]["passed"] is False and "mean speed" in slow[0]["why_not"]
     short = check_targets(entries[:1], by_entry[:1], goal_distance=1.0)
     assert short[0]["passed"] is False and "goal" in short[0]["why_not"]
+
+
+class InstrumentedPolicy:
+    """Stands still and exposes what the expert exposes: planner times, a failure log and a phase."""
+
+    def __init__(self, env):
+        self.action = np.zeros(env.action_space.shape, dtype=np.float32)
+        self.planner_times_ms = [1.0, 2.0, 3.0, 10.0]
+        self.failure_log = [f"t={k}: PlanningError: edge {k}" for k in range(3)]
+        self.phase = "swing RF"
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        return self.action, state
+
+
+def test_policy_timings_failure_log_and_phase_are_recorded(monkeypatch):
+    monkeypatch.setattr(evaluate_episode, "make_policy", lambda name, env, algo: InstrumentedPolicy(env))
+    r = run_task(EpisodeTask(0, 0, "flat", {}, 0, False), EvalConfig("zero", 1.0, 0.1)).record
+    assert r["planner_ms_median"] == pytest.approx(2.5)
+    assert r["planner_ms_p95"] == pytest.approx(np.percentile([1.0, 2.0, 3.0, 10.0], 95))
+    assert r["planner_calls"] == 4
+    assert r["failure_log"] == [
+        "t=0: PlanningError: edge 0",
+        "t=1: PlanningError: edge 1",
+        "t=2: PlanningError: edge 2",
+    ]
+    assert r["failure_count"] == 3 and r["end_phase"] == "swing RF"
+
+
+def test_bad_env_kwargs_fail_before_any_episode(tmp_path, capsys):
+    suite = write_suite(tmp_path / "s.yaml")
+    argv = ["evaluate", "--policy", "zero", "--suite", str(suite), "--out", str(tmp_path / "o"), "--no-progress"]
+    assert main([*argv, "--workers", "2", "--env-kwargs", '{"frame_skip": 0}']) == 2
+    assert "frame_skip" in capsys.readouterr().err
+    assert main([*argv, "--env-kwargs", "[1]"]) == 2
+    assert "JSON object" in capsys.readouterr().err
