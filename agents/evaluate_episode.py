@@ -55,7 +55,8 @@ class EpisodeResult:
     record: dict[str, Any]
     """the results.json episode record (JSON-safe)."""
     trace: dict[str, np.ndarray]
-    """per control step: ``time`` (s), ``cog`` (N, 3, m, world), ``feet`` (N, 4, 3, m, world), ``index`` (N m)."""
+    """per control step: ``time`` (s), ``cog`` (N, 3, m, world), ``feet`` (N, 4, 3, m, world), ``index`` (N m),
+    ``contact`` (N, 4) foot contact flags."""
     terrain: dict[str, Any] | None
     """for an entry's first episode: ``heights`` (m), ``origin`` (m), ``cell_size`` (m) of its surface."""
 
@@ -117,6 +118,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
         hf = u.terrain.heightfield
         terrain = {"heights": hf.heights.astype(np.float32), "origin": tuple(hf.origin), "cell_size": hf.cell_size}
     times, cogs, feet, index = [0.0], [info["cog"]], [info["feet_pos"]], []
+    contact = [info["foot_contact"]]
     index0 = float(info["stability_index"])
     state, start = None, np.ones(1, dtype=bool)
     work, success, end_reason, fall_reason, error = 0.0, False, "time_limit", None, None
@@ -132,6 +134,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
             times.append(float(u.data.time))
             cogs.append(info["cog"])
             feet.append(info["feet_pos"])
+            contact.append(info["foot_contact"])
             index.append(info["stability_index"])
             if not info["diverged"]:
                 work += float(np.abs(u.data.actuator_force * u.data.qvel[6:]).sum()) * dt
@@ -187,5 +190,6 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
         "cog": np.asarray(cogs, dtype=np.float32).reshape(-1, 3),
         "feet": np.asarray(feet, dtype=np.float32).reshape(-1, 4, 3),
         "index": np.asarray([index0, *index], dtype=np.float64),
+        "contact": np.asarray(contact, dtype=bool).reshape(-1, 4),
     }
     return EpisodeResult(record, trace, terrain)

@@ -154,7 +154,10 @@ def write_report(
         r, t = e.record, e.terrain
         title = f"[{r['entry']}] {labels[r['entry']]}, seed {r['seed']}"
         png = out / f"paths_entry{r['entry']}.png"
-        plot_terrain_paths(e.trace["cog"], e.trace["feet"], t["heights"], t["origin"], t["cell_size"], title, png)
+        tr = e.trace
+        plot_terrain_paths(
+            tr["cog"], tr["feet"], t["heights"], t["origin"], t["cell_size"], title, png, contact=tr["contact"]
+        )
         plots.append((f"COG and foot paths over the terrain: {title}", png))
 
     lines = [

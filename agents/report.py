@@ -156,12 +156,20 @@ def plot_stability_over_time(traces: list[tuple[str, np.ndarray, np.ndarray]], p
 
 
 def plot_terrain_paths(
-    cog: np.ndarray, feet: np.ndarray, heights: np.ndarray, origin: tuple, cell_size: float, title: str, path: Path
+    cog: np.ndarray,
+    feet: np.ndarray,
+    heights: np.ndarray,
+    origin: tuple,
+    cell_size: float,
+    title: str,
+    path: Path,
+    contact: np.ndarray | None = None,
 ) -> Path:
     """COG and foot paths (world, m) over the terrain: top view on the height map, side view on its profile.
 
     :param cog: (N, 3) COG positions. :param feet: (N, 4, 3) foot sites (LF, RF, LH, RH).
     :param heights: (nrow, ncol) terrain heights (m), rows along +y, columns along +x from ``origin``.
+    :param contact: optional (N, 4) foot contact flags: touchdowns are marked on both views.
     """
     nrow, ncol = heights.shape
     xs = origin[0] + cell_size * np.arange(ncol)
@@ -181,6 +189,14 @@ def plot_terrain_paths(
     ax[0].plot(cog[:, 0], cog[:, 1], "k-", lw=2, label="COG")
     for i, leg in enumerate(LEG_NAMES):
         ax[0].plot(feet[:, i, 0], feet[:, i, 1], "-", color=colours[i], lw=1, label=leg)
+    if contact is not None and len(contact) > 1:
+        c = np.asarray(contact, dtype=bool)
+        down = c[1:] & ~c[:-1]
+        for i in range(4):
+            pts = feet[1:, i][down[:, i]]
+            for k in (0, 1):
+                ax[k].plot(pts[:, 0], pts[:, 1 if k == 0 else 2], "o", mfc="none", color=colours[i], ms=5)
+        ax[0].plot([], [], "o", mfc="none", color="k", ms=5, label="touchdown")
     ax[0].set(xlabel="x (m)", ylabel="y (m)", title=f"{title}: top view")
     for sign, style in ((1, "-"), (-1, "--")):
         r = int(np.argmin(np.abs(ys - sign * 0.185)))
@@ -192,7 +208,9 @@ def plot_terrain_paths(
         ax[1].plot(feet[:, i, 0], feet[:, i, 2], "-", color=colours[i], lw=1, label=leg)
     ax[1].set(xlabel="x (m)", ylabel="z (m)", title="side view (foot sites are 0.02 m above the surface)")
     ax[1].set_xlim(ext[0], ext[1])
-    ax[1].legend(fontsize=7, ncol=4, loc="upper left", bbox_to_anchor=(0.0, -0.18))
+    if contact is not None:
+        ax[1].plot([], [], "o", mfc="none", color="k", ms=5, label="touchdown")
+    ax[1].legend(fontsize=7, ncol=5, loc="upper left", bbox_to_anchor=(0.0, -0.18))
     fig.tight_layout()
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
