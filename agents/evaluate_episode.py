@@ -19,6 +19,7 @@ import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.evaluate_metrics import cost_of_transport, stability_metrics, timing_metrics
 from agents.evaluate_policies import make_policy, policy_env_kwargs
 from agents.suites import EpisodeTask
+from quad_uneven_env.constants import LEG_NAMES
 
 VIDEO_FPS = 25
 """Frames per second of the MP4s (one frame every 1 / VIDEO_FPS s of simulated time: real-time playback)."""
@@ -177,6 +178,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
         "end_reason": end_reason,
         "end_position": [float(v) for v in info["cog"]],
         "end_phase": _policy_phase(policy),
+        "end_stance": [leg for leg, c in zip(LEG_NAMES, info["foot_contact"], strict=True) if c],
         **timing_metrics(getattr(policy, "planner_times_ms", None)),
         "failure_log": [str(s) for s in failure_log[:MAX_FAILURE_LOG]] if failure_log is not None else None,
         "failure_count": len(failure_log) if failure_log is not None else None,

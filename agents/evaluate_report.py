@@ -123,7 +123,8 @@ def _failures(records: Sequence[Mapping[str, Any]], labels: Sequence[str]) -> li
         lines.append(
             f"- episode {r['index']} ([{r['entry']}] {labels[r['entry']]}, seed {r['seed']}): **{how}** at "
             f"t = {r['sim_time']:.2f} s, COG at x = {x:.2f} m (distance {r['distance']:.2f} m), y = {y:.2f} m, "
-            f"z = {z:.2f} m; phase: {_f(r['end_phase'])}"
+            f"z = {z:.2f} m; feet in contact: {', '.join(r['end_stance']) or 'none'}; "
+            f"policy phase: {_f(r['end_phase'])}"
         )
         log = r.get("failure_log") or []
         if log:

@@ -180,6 +180,7 @@ def test_cli_end_to_end_zero_policy(tmp_path, capsys):
         assert e["mean_speed"] == pytest.approx(e["distance"] / e["sim_time"])
         assert e["min_stability_index"] > 0 and e["mean_stability_index"] >= e["min_stability_index"]
         assert e["planner_ms_median"] is None and e["failure_log"] is None
+        assert e["end_stance"] == ["LF", "RF", "LH", "RH"]  # standing: all four feet down
         # The recorded traces agree with the record (distance = COG x travelled since reset).
         tr = np.load(out / "traces" / f"ep{e['index']:03d}.npz")
         assert tr["time"][-1] == pytest.approx(e["sim_time"])
@@ -227,6 +228,7 @@ def test_a_fall_is_recorded_with_its_reason():
     assert r["fall_reason"].startswith("fall:")
     assert r["sim_time"] < 3.0
     assert r["end_position"][2] < 0.3
+    assert set(r["end_stance"]) <= {"LF", "RF", "LH", "RH"}
 
 
 def test_policy_exception_does_not_crash_the_evaluation(monkeypatch):
