@@ -251,6 +251,18 @@ def _infeasible(red: _Reduced, z: np.ndarray, bound: float, what: str) -> Planni
     )
 
 
+def _least_violating(C: np.ndarray, lo: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The z maximising the smallest slack of C z >= lo (an LP, HiGHS): where an infeasible problem fails least."""
+    n = C.shape[1]
+    cost = np.zeros(n + 1)
+    cost[-1] = -1.0
+    A = np.hstack([-C, np.ones((C.shape[0], 1))])  # t - C z <= -lo
+    res = scipy.optimize.linprog(
+        cost, A_ub=A, b_ub=-lo, bounds=[(-10.0, 10.0)] * n + [(None, 1e3)], method="highs"
+    )  # fmt: skip
+    return res.x[:n] if res.status == 0 else z
+
+
 def _sqp(red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, max_iter: int = 30) -> np.ndarray:
     h, J = red.constraints(z)
     if h.min() >= bound:  # the best unconstrained path is already stable
@@ -260,12 +272,7 @@ def _sqp(red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, max_iter: 
         z_new = _solve_qp(red.H, red.g, J, lo)
         stats.iterations += 1
         if z_new is None:
-            # The least-violating point of the linearised problem names the culprit.
-            res = proxsuite.proxqp.dense.solve(
-                red.H, red.g, None, None, J, lo, np.full(lo.shape, 1e20), primal_infeasibility_solving=True,
-                eps_abs=1e-9, max_iter=5000,
-            )  # fmt: skip
-            raise _infeasible(red, res.x, bound, "no stable path in the linearised problem")
+            raise _infeasible(red, _least_violating(J, lo, z), bound, "no stable path in the linearised problem")
         step = np.abs(z_new - z).max()
         z = z_new
         h, J = red.constraints(z)

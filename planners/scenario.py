@@ -1,0 +1,146 @@
+"""The input of one gait-cycle plan (:class:`Scenario`) and the paper's §6 scenario."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from planners.gait import PAPER_DURATIONS, validate_durations
+from planners.terrain_query import HeightMap
+from quad_uneven_env.config import RobotConfig, load_robot_config
+
+
+def _vec3(value: Any, field: str) -> np.ndarray:
+    v = np.asarray(value, dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{field} must be 3 finite numbers, got {value!r}")
+    return v
+
+
+def _boundary(value: Mapping[str, Any] | None, field: str) -> np.ndarray | None:
+    """{'pos', 'vel', 'acc'} -> (3, 3) rows position (m), velocity (m/s), acceleration (m/s^2)."""
+    if value is None:
+        return None
+    if not isinstance(value, Mapping) or "pos" not in value:
+        raise ValueError(f"{field} must be a dict with 'pos' (and optional 'vel', 'acc') 3-vectors, got {value!r}")
+    unknown = set(value) - {"pos", "vel", "acc"}
+    if unknown:
+        raise ValueError(f"{field}: unknown key(s) {sorted(unknown)}; allowed: pos, vel, acc")
+    return np.stack([_vec3(value.get(k, np.zeros(3)), f"{field}.{k}") for k in ("pos", "vel", "acc")])
+
+
+def _feet(value: Any, field: str) -> np.ndarray:
+    a = np.asarray(value, dtype=float)
+    if a.shape != (4, 3) or not np.all(np.isfinite(a)):
+        raise ValueError(
+            f"{field} must be a finite 4 x 3 array (legs LF, RF, LH, RH; x, y, z in m), got shape {a.shape}"
+        )
+    return a
+
+
+@dataclasses.dataclass(frozen=True)
+class Scenario:
+    """One gait cycle to plan (SI units, world frame = MuJoCo's, legs LF, RF, LH, RH).
+
+    Footholds are points ON the terrain surface; the foot site (sphere centre) of a foot resting
+    there is ``foothold + foot_radius * normal``.
+    """
+
+    terrain: str | Mapping[str, Any] | HeightMap
+    """terrain spec (str or dict, as the environment accepts) or a height map (e.g. a ``HeightField``)."""
+    feet_start: np.ndarray
+    """(4, 3) current footholds (m), points on the terrain surface."""
+    cog_start: Mapping[str, Any]
+    """COG at the start: {'pos', 'vel', 'acc'} 3-vectors (m, m/s, m/s^2); whole-robot COG."""
+    footholds: np.ndarray | None = None
+    """(4, 3) target footholds on the surface (m), or None to choose them on the terrain."""
+    cog_goal: Mapping[str, Any] | None = None
+    """COG at the end of the cycle, or None: above the target footholds' centroid, at rest."""
+    durations: tuple[float, ...] = PAPER_DURATIONS
+    """7 phase durations (s)."""
+    mass: float | None = None
+    """robot mass (kg) in the stability index; None: the robot's total mass."""
+    epsilon: float = 0.1
+    """stability margin (N m)."""
+    clearance: float = 0.05
+    """swing clearance (m) of the foot sphere above the terrain."""
+    terrain_seed: int = 0
+    """seed of the generator used when ``terrain`` is a spec."""
+    cog_height: float = 0.36
+    """desired COG height (m) above the mean height of the footholds at each junction."""
+    stride: tuple[float, float] = (0.2, 0.0)
+    """nominal (dx, dy) (m, world) of the body per cycle when footholds are chosen automatically."""
+    weights: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    """COG cost weights W (x, y, z) (1/m^2)."""
+    smoothing: float = 1e-2
+    """weight of the integrated squared COG acceleration (s^3/m^2)."""
+    robot: RobotConfig | None = None
+    """robot parameters; None: the paper's Table 1 (configs/robot/paper.yaml)."""
+    method: str = "sqp"
+    """COG solver: 'sqp', 'slsqp' or 'slsqp-fd'."""
+
+    def __post_init__(self) -> None:
+        _feet(self.feet_start, "feet_start")
+        if self.footholds is not None:
+            _feet(self.footholds, "footholds")
+        _boundary(self.cog_start, "cog_start")
+        _boundary(self.cog_goal, "cog_goal")
+        validate_durations(self.durations)
+        if self.mass is not None and not self.mass > 0.0:
+            raise ValueError(f"mass must be > 0 kg or None, got {self.mass}")
+        if not (np.isfinite(self.epsilon) and self.epsilon >= 0.0):
+            raise ValueError(f"epsilon must be a finite number >= 0 (N m), got {self.epsilon}")
+        if not (np.isfinite(self.clearance) and self.clearance >= 0.0):
+            raise ValueError(f"clearance must be a finite number >= 0 (m), got {self.clearance}")
+        if not 0.0 < self.cog_height < 1.0:
+            raise ValueError(f"cog_height must be in (0, 1) m, got {self.cog_height}")
+
+    def robot_config(self) -> RobotConfig:
+        """The robot parameters (Table 1 unless given)."""
+        return self.robot or load_robot_config("paper")
+
+    def height_map(self) -> HeightMap:
+        """The terrain as a height map (generated from the spec with ``terrain_seed``)."""
+        if hasattr(self.terrain, "height") and hasattr(self.terrain, "normal"):
+            return self.terrain  # type: ignore[return-value]
+        from quad_uneven_env.terrain import Terrain, parse_terrain_spec
+
+        return Terrain(parse_terrain_spec(self.terrain)).generate(np.random.default_rng(self.terrain_seed))
+
+    def start_boundary(self) -> np.ndarray:
+        """(3, 3) start position, velocity, acceleration of the COG."""
+        return _boundary(self.cog_start, "cog_start")  # type: ignore[return-value]
+
+    def goal_boundary(self) -> np.ndarray | None:
+        """(3, 3) goal position, velocity, acceleration, or None (automatic)."""
+        return _boundary(self.cog_goal, "cog_goal")
+
+
+def paper_scenario() -> Scenario:
+    """The paper's §6 scenario: Table 1 robot, COG (0.01, 0, 0.544) -> (0.21, 0, 0.5743), 6.1 s cycle.
+
+    The terrain is the ``paper`` kind, our reconstruction of the (missing) Fig. 3: raised ground
+    at 0.12 m and non-coplanar blocks under the start and target footholds (``PAPER_BLOCKS``,
+    tops 0.16-0.23 m, each leg moves 0.2 m forward; y equal at start and target as in the
+    paper). Footholds are given, as by the paper's expert user. Zero velocity and acceleration
+    at both ends, epsilon = 0.1 N m, 5 cm swing clearance. ``cog_height`` 0.368 m matches the
+    paper's start/end COG heights over the mean foothold height (0.369 and 0.367 m).
+    """
+    from quad_uneven_env.terrain import PAPER_BLOCKS
+
+    zero = (0.0, 0.0, 0.0)
+    return Scenario(
+        terrain="paper",
+        feet_start=np.array(PAPER_BLOCKS["start"]),
+        footholds=np.array(PAPER_BLOCKS["target"]),
+        cog_start={"pos": (0.01, 0.0, 0.544), "vel": zero, "acc": zero},
+        cog_goal={"pos": (0.21, 0.0, 0.5743), "vel": zero, "acc": zero},
+        durations=PAPER_DURATIONS,
+        mass=None,
+        epsilon=0.1,
+        clearance=0.05,
+        cog_height=0.368,
+    )

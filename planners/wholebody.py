@@ -1,0 +1,138 @@
+"""Whole-body COM placement: the base pose that puts the robot's COG on the planned path (exact derivatives).
+
+With the base orientation fixed (identity, the paper), foot ``i`` relative to its hip is
+``e_i = x_i - p_base - hip_i`` (world = base frame axes), the leg angles are ``q_i = IK(e_i)`` and
+the whole-body COM is
+
+    c = p_base + (1/M) sum_i [ m_leg hip_i + f(q_i) ],  f(q) = m1 P(q; lc1, 0) + m2 P(q; l1, lc2)
+
+where ``P(q; a, b)`` is the point ``a`` along the thigh and ``b`` along the shank (linear in
+``a, b``, so ``f = P(q; m1 lc1 + m2 l1, m2 lc2)``). Given the planned ``c(t)`` and the feet
+``x_i(t)`` (stance: fixed; swing: the swing path) the base position solves ``c = p + off(p)`` by
+Newton's method; velocities and accelerations follow from the analytic Jacobians
+``J = dP/dq`` and the velocity-product terms ``(dJ/dt) q_dot``:
+
+    K p_dot  = c_dot  - (1/M) sum A_i x_dot_i,                          A_i = F_i J_i^-1, K = I - (1/M) sum A_i
+    K p_ddot = c_ddot - (1/M) sum [A_i x_ddot_i - A_i Jd_i qd_i + Fd_i qd_i]
+    qd_i = J_i^-1 (x_dot_i - p_dot),  qdd_i = J_i^-1 (x_ddot_i - p_ddot - Jd_i qd_i)
+
+All functions are vectorised over leading axes (time, leg).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from quad_uneven_env.config import RobotConfig
+from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
+from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
+
+
+def leg_point(q: np.ndarray, a: float, b: float, qd: np.ndarray | None = None):
+    """Point ``a`` (m) along the thigh and ``b`` (m) along the shank in the hip frame, with derivatives.
+
+    :param q: (..., 3) leg angles (HAA, HFE, KFE) (rad).
+    :param qd: optional (..., 3) joint velocities (rad/s).
+    :return: ``(p, J)`` with p (..., 3) (m) and the Jacobian J = dp/dq (..., 3, 3) (m/rad); with
+        ``qd`` also ``Jd_qd = (dJ/dt) qd`` (..., 3) (m/s^2), the velocity-product acceleration.
+    """
+    q = np.asarray(q, dtype=float)
+    s1, c1 = np.sin(q[..., 0]), np.cos(q[..., 0])
+    s2, c2 = np.sin(q[..., 1]), np.cos(q[..., 1])
+    s23, c23 = np.sin(q[..., 1] + q[..., 2]), np.cos(q[..., 1] + q[..., 2])
+    u = -a * s2 - b * s23
+    w = -a * c2 - b * c23
+    u2, u3 = -a * c2 - b * c23, -b * c23
+    w2, w3 = a * s2 + b * s23, b * s23
+    p = np.stack([u, -s1 * w, c1 * w], axis=-1)
+    zero = np.zeros_like(u)
+    J = np.stack(
+        [
+            np.stack([zero, u2, u3], axis=-1),
+            np.stack([-c1 * w, -s1 * w2, -s1 * w3], axis=-1),
+            np.stack([-s1 * w, c1 * w2, c1 * w3], axis=-1),
+        ],
+        axis=-2,
+    )
+    if qd is None:
+        return p, J
+    qd = np.asarray(qd, dtype=float)
+    d1, d2, d23 = qd[..., 0], qd[..., 1], qd[..., 1] + qd[..., 2]
+    u_vv = a * s2 * d2**2 + b * s23 * d23**2
+    w_dot = w2 * qd[..., 1] + w3 * qd[..., 2]
+    w_vv = a * c2 * d2**2 + b * c23 * d23**2
+    jd = np.stack(
+        [u_vv, s1 * d1**2 * w - 2 * c1 * d1 * w_dot - s1 * w_vv, -c1 * d1**2 * w - 2 * s1 * d1 * w_dot + c1 * w_vv],
+        axis=-1,
+    )
+    return p, J, jd
+
+
+class WholeBody:
+    """Mass distribution of the Table-1 robot for COM placement (fixed base orientation)."""
+
+    def __init__(self, cfg: RobotConfig) -> None:
+        self.cfg = cfg
+        self.mass = cfg.total_mass
+        self.hips = hip_positions_B(cfg)  # (4, 3)
+        t, s = cfg.thigh, cfg.shank
+        self.l1, self.l2 = t.length, s.length
+        self.moment_ab = (t.mass * t.com + s.mass * t.length, s.mass * s.com)
+        self.leg_mass = t.mass + s.mass
+        self.knee_sign = np.array([KNEE_SIGN[leg] for leg in LEG_NAMES])
+        # Constant part of M (c - p_base): the leg masses placed at the hips.
+        self._hip_moment = self.leg_mass * self.hips.sum(axis=0)
+
+    def ik(self, e: np.ndarray) -> np.ndarray:
+        """Leg angles (..., 4, 3) (rad) for foot points ``e`` (..., 4, 3) relative to the hips (m)."""
+        return leg_ik_hip(e, self.l1, self.l2, self.knee_sign)
+
+    def com_offset(self, q_legs: np.ndarray) -> np.ndarray:
+        """Whole-body COM minus base position (..., 3) (m, base-frame axes) for leg angles (..., 4, 3)."""
+        f, _ = leg_point(q_legs, *self.moment_ab)
+        return (self._hip_moment + f.sum(axis=-2)) / self.mass
+
+    def place_base(
+        self,
+        c: np.ndarray,
+        c_d: np.ndarray,
+        c_dd: np.ndarray,
+        x: np.ndarray,
+        x_d: np.ndarray,
+        x_dd: np.ndarray,
+        p_guess: np.ndarray | None = None,
+        newton_steps: int = 4,
+    ) -> tuple[np.ndarray, ...]:
+        """Base position/velocity/acceleration and leg joint motion putting the whole-body COM on ``c``.
+
+        :param c, c_d, c_dd: (..., 3) planned COG position (m), velocity (m/s), acceleration (m/s^2).
+        :param x, x_d, x_dd: (..., 4, 3) foot-site positions, velocities, accelerations (world).
+        :param p_guess: optional (..., 3) initial base position (m).
+        :return: ``(p, p_d, p_dd, q, qd, qdd)``: base (..., 3) and leg joints (..., 4, 3) in rad, rad/s, rad/s^2.
+        """
+        M = self.mass
+        p = c - self.com_offset(self.ik(x - (c[..., None, :] - 0.0) - self.hips)) if p_guess is None else p_guess
+        eye = np.eye(3)
+        for _ in range(newton_steps):
+            q = self.ik(x - p[..., None, :] - self.hips)
+            f, F = leg_point(q, *self.moment_ab)
+            _, J = leg_point(q, self.l1, self.l2)
+            A = F @ np.linalg.inv(J)
+            res = p + (self._hip_moment + f.sum(axis=-2)) / M - c
+            K = eye - A.sum(axis=-3) / M
+            p = p - np.linalg.solve(K, res[..., None])[..., 0]
+        q = self.ik(x - p[..., None, :] - self.hips)
+        _, J = leg_point(q, self.l1, self.l2)
+        _, F = leg_point(q, *self.moment_ab)
+        Jinv = np.linalg.inv(J)
+        A = F @ Jinv
+        K = eye - A.sum(axis=-3) / M
+        rhs = c_d - np.einsum("...lij,...lj->...i", A, x_d) / M
+        p_d = np.linalg.solve(K, rhs[..., None])[..., 0]
+        qd = np.einsum("...lij,...lj->...li", Jinv, x_d - p_d[..., None, :])
+        _, _, jd = leg_point(q, self.l1, self.l2, qd)
+        _, _, fd = leg_point(q, *self.moment_ab, qd)
+        inner = np.einsum("...lij,...lj->...li", A, x_dd - jd) + fd
+        p_dd = np.linalg.solve(K, (c_dd - inner.sum(axis=-2) / M)[..., None])[..., 0]
+        qdd = np.einsum("...lij,...lj->...li", Jinv, x_dd - p_dd[..., None, :] - jd)
+        return p, p_d, p_dd, q, qd, qdd
