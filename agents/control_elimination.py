@@ -68,6 +68,8 @@ class StanceLayout:
     """(18, n_beta) S without the stance rows: base identity and swing joints' unit entries."""
     leg_block: tuple[np.ndarray, np.ndarray, np.ndarray]
     """fancy index picking the (p, 3, 3) leg blocks J_L out of the stance feet's (p, 3, 18) Jacobians."""
+    mask: int
+    """stance bitmask: bit i set when leg i is in stance (the compiled kernels' encoding)."""
 
     @property
     def n_stance(self) -> int:
@@ -92,10 +94,16 @@ def stance_layout(stance: tuple[bool, bool, bool, bool]) -> StanceLayout:
     S0 = np.zeros((C.NV, len(beta)))
     S0[beta, np.arange(len(beta))] = 1.0
     S0.flags.writeable = False
-    return StanceLayout(stance, st, sw, beta, dofs(st).astype(int), S0, leg_block)
+    mask = sum(1 << int(i) for i in st)
+    return StanceLayout(stance, st, sw, beta, dofs(st).astype(int), S0, leg_block, mask)
 
 
 _LAYOUTS = frozenset(itertools.product((False, True), repeat=C.N_LEGS))
+
+
+def layout_of(stance) -> StanceLayout:
+    """:class:`StanceLayout` of any stance given as 4 booleans (validated by :func:`check_stance`)."""
+    return stance_layout(stance if type(stance) is tuple and stance in _LAYOUTS else check_stance(stance))
 
 
 def leg_jacobian_inverse(J_L: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -205,7 +213,7 @@ def eliminate_constraints(terms: DynamicsTerms, stance) -> ProjectedDynamics:
     :param terms: dynamics terms at the current state (any backend).
     :param stance: 4 booleans, leg order LF, RF, LH, RH; any of the 16 sets.
     """
-    lay = stance_layout(stance if type(stance) is tuple and stance in _LAYOUTS else check_stance(stance))
+    lay = layout_of(stance)
     if not lay.n_stance:
         z = np.zeros((0, 3, 6))
         return ProjectedDynamics(lay, np.zeros((0, 3, 3)), z, z, np.zeros((0, 3)), False, terms)

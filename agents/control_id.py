@@ -39,7 +39,15 @@ import mujoco
 import numpy as np
 import proxsuite
 
-from agents.control_elimination import ProjectedDynamics, check_stance, eliminate_constraints
+from agents import control_kernels as K
+from agents.control_elimination import (
+    DAMPING,
+    SINGULAR_SIGMA,
+    ProjectedDynamics,
+    StanceLayout,
+    eliminate_constraints,
+    layout_of,
+)
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot.dynamics import Dynamics, DynamicsTerms
 
@@ -129,6 +137,11 @@ class InverseDynamics:
         self.min_normal_force = float(min_normal_force)
         self._cone_up = np.broadcast_to(friction_pyramid(np.array([0.0, 0.0, 1.0]), self.mu), (C.N_LEGS, 5, 3))
         self._cone_lower = np.array([0.0, 0.0, 0.0, 0.0, self.min_normal_force])
+        # kernel work buffers: tau, F, qacc, r = M qacc + h, J_L^-1, S stance blocks
+        self._ws = (
+            np.zeros(C.N_JOINTS), np.zeros((C.N_LEGS, 3)), np.zeros(C.NV), np.zeros(C.NV),
+            np.zeros((C.N_LEGS, 3, 3)), np.zeros((C.N_LEGS, 3, 6)),
+        )  # fmt: skip
 
     # ---------------------------------------------------------------- public API
     def solve(
@@ -152,16 +165,41 @@ class InverseDynamics:
         self, terms: DynamicsTerms, beta_ddot: np.ndarray, stance, normals_W: np.ndarray | None = None
     ) -> IDResult:
         """As :meth:`solve`, from dynamics terms already computed (e.g. ``terms_from_data``)."""
-        proj = eliminate_constraints(terms, check_stance(stance))
-        beta_ddot = np.asarray(beta_ddot, dtype=float)
-        if beta_ddot.shape != (proj.layout.n_beta,):
+        lay = layout_of(stance)
+        if type(beta_ddot) is not np.ndarray or beta_ddot.dtype != np.float64:
+            beta_ddot = np.asarray(beta_ddot, dtype=float)
+        if beta_ddot.shape != (lay.n_beta,):
             raise ValueError(
-                f"beta_ddot must have shape ({proj.layout.n_beta},) for stance {proj.layout.stance}, "
-                f"got {beta_ddot.shape}"
+                f"beta_ddot must have shape ({lay.n_beta},) for stance {lay.stance}, got {beta_ddot.shape}"
             )
-        return self._solve(proj, beta_ddot, normals_W)
+        result = self._solve_compiled(terms, beta_ddot, lay, normals_W)
+        if result is None:  # 1 or 2 stance feet (SVD pseudo-inverse), or inputs the kernel does not take
+            result = self._solve(eliminate_constraints(terms, lay.stance), beta_ddot, normals_W)
+        return result
 
     # ---------------------------------------------------------------- internals
+    def _solve_compiled(
+        self, terms: DynamicsTerms, beta_ddot: np.ndarray, lay: StanceLayout, normals_W: np.ndarray | None
+    ) -> IDResult | None:
+        """The "pinv" solution by the compiled kernel (:mod:`agents.control_kernels`); None if not handled."""
+        ws = self._ws
+        try:
+            status = K.id_pinv(
+                terms.M, terms.h, terms.J_feet, terms.Jdot_qdot_feet, lay.mask, beta_ddot,
+                1.0 / SINGULAR_SIGMA, DAMPING, *ws,
+            )  # fmt: skip
+        except TypeError:  # not float64 arrays of the kernel's ranks (numba dispatch)
+            return None
+        if status <= 0:
+            return None
+        result = IDResult(
+            ws[0].copy(), ws[1].copy(), ws[2].copy(), lay.stance, "pinv",
+            exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
+        )  # fmt: skip
+        if self.distribution == "qp" and lay.n_stance:
+            self._distribute_qp(lay, terms.J_feet, ws[3], result, normals_W)
+        return result
+
     def _solve(self, proj: ProjectedDynamics, beta_ddot: np.ndarray, normals_W: np.ndarray | None) -> IDResult:
         lay, terms = proj.layout, proj.terms
         qacc = proj.qacc(beta_ddot)
@@ -190,7 +228,7 @@ class InverseDynamics:
         result = IDResult(tau, F, qacc, lay.stance, "pinv", exact=exact, damped=proj.damped)
         if self.distribution == "qp" and lay.n_stance:
             if exact:
-                self._distribute_qp(proj, r, result, normals_W)
+                self._distribute_qp(lay, terms.J_feet, r, result, normals_W)
             else:
                 result.qp_fallback = True
         return result
@@ -212,13 +250,12 @@ class InverseDynamics:
         return F
 
     def _distribute_qp(
-        self, proj: ProjectedDynamics, r: np.ndarray, result: IDResult, normals_W: np.ndarray | None
+        self, lay: StanceLayout, J_feet: np.ndarray, r: np.ndarray, result: IDResult, normals_W: np.ndarray | None
     ) -> None:
-        lay = proj.layout
         st = lay.stance_legs
         p = len(st)
         cones = self._cone_up[:p] if normals_W is None else friction_pyramid(np.asarray(normals_W)[st], self.mu)
-        J_st = proj.terms.J_feet if p == C.N_LEGS else proj.terms.J_feet[st]
+        J_st = J_feet if p == C.N_LEGS else J_feet[st]
         J_L = J_st[lay.leg_block]  # (p, 3, 3)
         W = np.zeros((3 * p, 3 * p))
         W[_block_index(p, 3, 3)] = J_L @ np.swapaxes(J_L, -1, -2)  # |tau - tau_pinv|^2 in terms of F
@@ -226,7 +263,7 @@ class InverseDynamics:
         Cmat[_block_index(p, 5, 3)] = cones
         lower = np.tile(self._cone_lower, p)
         F0 = result.contact_forces[st].reshape(-1)
-        A_eq = proj.J_b.transpose(2, 0, 1).reshape(6, 3 * p)  # [J_b,i^T]_i
+        A_eq = J_st[:, :, :6].transpose(2, 0, 1).reshape(6, 3 * p)  # [J_b,i^T]_i
         res = proxsuite.proxqp.dense.solve(
             W + 1e-9 * np.eye(3 * p),
             -W @ F0,
