@@ -69,6 +69,12 @@ class CogProblem:
     """lambda (s^3/m^2): weight of the integrated squared acceleration."""
     phase_names: Sequence[str] | None = None
     """optional names of the phases for error messages."""
+    reach_sites: Sequence[np.ndarray] | None = None
+    """optional, per phase: stance foot sites (n_k x 3, m, same order as ``supports``) that must stay in reach."""
+    reach_offsets: Sequence[np.ndarray] | None = None
+    """per phase: hip position minus COG (n_k x 3, m) of those legs (nominal whole-body COM offset)."""
+    max_reach: float = np.inf
+    """largest hip-to-foot-site distance (m) of a stance leg (keeps the knees off the stretched singularity)."""
 
 
 @dataclasses.dataclass
@@ -164,6 +170,8 @@ class _Reduced:
             labels = [f"{names[i]}->{names[j]}" for i, j in zip(order, np.roll(order, -1), strict=True)]
             self.edges.append((p, kappa, labels))
         self.samples: list[np.ndarray] = []
+        self.reach = prob.reach_sites is not None and np.isfinite(prob.max_reach)
+        self.reach_scale = prob.mass * GRAVITY  # N m per m: reach rows share the moments' scale
 
     def coef(self, z: np.ndarray) -> np.ndarray:
         """(K, 9, 3) Bernstein coefficients for the reduced variables z."""
@@ -200,15 +208,29 @@ class _Reduced:
             J = gP[..., None] * Bv[:, None, None, :] + ga[..., None] * Ba[:, None, None, :]
             hs.append(h.ravel())
             Js.append(J.reshape(-1, N_AXES * self.m))
+            if self.reach:
+                d = P[:, None, :] + self.prob.reach_offsets[k][None] - self.prob.reach_sites[k][None]  # (S, L, 3)
+                dist = np.linalg.norm(d, axis=-1)
+                n = d / dist[..., None]
+                # bound + scale (max_reach - |d|) >= bound  <=>  |d| <= max_reach
+                hs.append((self.bound + self.reach_scale * (self.prob.max_reach - dist)).ravel())
+                Js.append((-self.reach_scale * n[..., None] * Bv[:, None, None, :]).reshape(-1, N_AXES * self.m))
         return np.concatenate(hs), np.concatenate(Js)
 
     def locate(self, index: int) -> tuple[int, str]:
-        """Phase and edge label of stacked constraint ``index``."""
+        """Phase and constraint label (support edge "LF->RF" or "reach LF") of stacked constraint ``index``."""
         for k in range(self.K):
-            n = len(self.samples[k]) * len(self.edges[k][2])
+            labels = list(self.edges[k][2])
+            n = len(self.samples[k]) * len(labels)
             if index < n:
-                return k, self.edges[k][2][index % len(self.edges[k][2])]
+                return k, labels[index % len(labels)]
             index -= n
+            if self.reach:
+                legs = self.prob.support_names[k]
+                n = len(self.samples[k]) * len(legs)
+                if index < n:
+                    return k, f"reach {legs[index % len(legs)]}"
+                index -= n
         raise IndexError(index)
 
 
@@ -243,10 +265,16 @@ def _solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lo: np.ndarray) -> np
 def _infeasible(red: _Reduced, z: np.ndarray, bound: float, what: str) -> PlanningError:
     h, _ = red.constraints(z)
     i = int(np.argmin(h))
-    k, edge = red.locate(i)
+    k, label = red.locate(i)
     name = red.prob.phase_names[k] if red.prob.phase_names else f"phase {k}"
+    if label.startswith("reach"):
+        dist = red.prob.max_reach - (h[i] - bound) / red.reach_scale
+        return PlanningError(
+            f"COG path infeasible ({what}): {name}, {label}: hip-to-foot distance {dist:.4f} m "
+            f"> max reach {red.prob.max_reach:.4f} m (violation {dist - red.prob.max_reach:.4f} m)"
+        )
     return PlanningError(
-        f"COG path infeasible ({what}): {name}, support edge {edge}: stability moment {h[i]:.4f} N m "
+        f"COG path infeasible ({what}): {name}, support edge {label}: stability moment {h[i]:.4f} N m "
         f"< required {bound:.4f} N m (violation {bound - h[i]:.4f} N m)"
     )
 
@@ -326,6 +354,7 @@ def plan_cog(
     red = _Reduced(prob)
     margin = 1e-3 * prob.mass * GRAVITY if margin is None else margin
     bound = prob.epsilon + margin
+    red.bound = bound
     samples = [np.linspace(0.0, 1.0, samples_per_phase) for _ in range(red.K)]
     red.set_samples(samples)
     z = np.linalg.solve(red.H, -red.g)  # best unconstrained path: the first linearisation point

@@ -23,6 +23,8 @@ from quad_uneven_env.stability import stability_index
 
 MIN_REACH = 0.12
 """m: hip-to-foot-site distance below which a swing knot is too close to the hip (knee fully bent ~0.114 m)."""
+STANCE_REACH = 0.96
+"""fraction of the stretched leg length a stance leg may reach (knee bent >= ~0.55 rad)."""
 REACH_MARGIN = 0.99
 """fraction of the stretched leg length allowed for swing knots."""
 
@@ -81,8 +83,8 @@ class GaitCyclePlan:
                 out[sel] = stability_index(p[sel], a[sel], feet, self.mass)[0]
         return out
 
-    def reference(self, cfg=None, pitch_to_terrain: bool = False):
-        """The joint reference for the controller (:class:`planners.reference.Reference`)."""
+    def reference(self, cfg=None):
+        """The joint reference for the controller (:class:`planners.reference.Reference`); cfg: robot (Table 1)."""
         from planners.reference import Reference
 
         return Reference(self, cfg)
@@ -142,14 +144,17 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
     names = [[leg for leg, s in zip(LEG_NAMES, p.stance, strict=True) if s] for p in phases]
     targets = _junction_targets(phases, feet_phase, scenario.cog_height)
     t_knots = np.array([phases[0].t_start] + [p.t_end for p in phases])
+    r = cfg.foot_radius
+    sites = [foot_site_on(terrain, s, r) for s in supports]
+    offsets = [(wb.hips + com_to_base)[np.asarray(p.stance)] for p in phases]
     problem = CogProblem(
         t_knots, supports, names, targets, cog0, goal, mass, scenario.epsilon,
         tuple(scenario.weights), scenario.smoothing, [p.name() for p in phases],
+        sites, offsets, STANCE_REACH * cfg.leg_length,
     )  # fmt: skip
     cog, cstats = plan_cog(problem, method=scenario.method)
     t_sw = time.perf_counter()
     swings: dict[str, SwingPath] = {}
-    r = cfg.foot_radius
     for ph in phases:
         if ph.swing_leg is None:
             continue

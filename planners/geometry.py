@@ -5,6 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 
+def _cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """z component of the cross product of 2-D vectors (broadcast)."""
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
 def convex_hull_ccw(points: np.ndarray) -> np.ndarray:
     """Vertices (n, 2) of the convex hull of ``points`` (m, 2), counter-clockwise (monotone chain)."""
     pts = np.unique(np.asarray(points, dtype=float)[:, :2], axis=0)
@@ -14,7 +19,7 @@ def convex_hull_ccw(points: np.ndarray) -> np.ndarray:
     def half(seq):
         out: list[np.ndarray] = []
         for p in seq:
-            while len(out) >= 2 and np.cross(out[-1] - out[-2], p - out[-2]) <= 0:
+            while len(out) >= 2 and _cross2(out[-1] - out[-2], p - out[-2]) <= 0:
                 out.pop()
             out.append(p)
         return out
@@ -32,7 +37,7 @@ def clip_convex(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
             break
         a, b = clip[i], clip[(i + 1) % len(clip)]
         edge = b - a
-        side = np.cross(edge, out - a)  # >= 0: inside (left of a CCW edge)
+        side = _cross2(edge, out - a)  # >= 0: inside (left of a CCW edge)
         new = []
         for j in range(len(out)):
             p, q = out[j], out[(j + 1) % len(out)]

@@ -1,0 +1,105 @@
+"""Joint references for the controller (paper §5 -> §2.3): beta_ref(t) and its exact derivatives.
+
+From a :class:`~planners.cycle.GaitCyclePlan`: the base is placed so the whole-robot COG (legs
+included) follows the planned COG path, with the base orientation fixed at identity (the
+paper); swing-leg joints follow the swing paths by closed-form IK; stance-leg joints hold the
+feet on their footholds (IK against the planned base), so the controller can use them as a
+fallback. Velocities and accelerations come from the analytic leg Jacobians and their time
+derivatives (:mod:`planners.wholebody`), not from finite differences.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planners.gait import phase_index
+from planners.terrain_query import foot_site_on
+from planners.types import ReferenceSample
+from planners.wholebody import WholeBody
+from quad_uneven_env.config import RobotConfig, load_robot_config
+from quad_uneven_env.constants import LEG_NAMES
+
+_IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
+_ZERO3 = np.zeros(3)
+
+
+class Reference:
+    """Whole-robot reference of a planned gait cycle; ``sample(t)`` for the controller.
+
+    :param plan: the gait-cycle plan.
+    :param cfg: robot parameters (default Table 1); must be the robot the plan was made for.
+    :param grid_dt: spacing (s) of the exact samples precomputed (vectorised) at construction;
+        ``sample(t)`` at a grid time (the controller's 2 ms ticks from the cycle start) is a
+        lookup, other times are computed exactly on the spot (Newton warm-started from the grid).
+    """
+
+    def __init__(self, plan, cfg: RobotConfig | None = None, grid_dt: float = 0.002) -> None:
+        self.plan = plan
+        self.cfg = cfg or load_robot_config("paper")
+        self.wb = WholeBody(self.cfg)
+        r = self.cfg.foot_radius
+        self.sites_start = foot_site_on(plan.terrain, plan.feet_start, r)
+        self.sites_target = foot_site_on(plan.terrain, plan.footholds, r)
+        self.t_end = plan.duration
+        self._swing_end = np.array([plan.swing[leg].t_end if leg in plan.swing else -np.inf for leg in LEG_NAMES])
+        self._stance = np.array([p.stance for p in plan.phases])
+        self._grid_dt = float(grid_dt)
+        self._grid_t = np.arange(0.0, self.t_end + 0.5 * grid_dt, grid_dt)
+        self._grid = self.evaluate(self._grid_t, newton_steps=6)
+        self._grid_p = self._grid[0]
+
+    def feet(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Planned foot-site positions, velocities, accelerations (T, 4, 3) (m, m/s, m/s^2) at times ``t`` (s)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        moved = t[:, None] >= self._swing_end[None, :]
+        x = np.where(moved[..., None], self.sites_target, self.sites_start)
+        xd = np.zeros_like(x)
+        xdd = np.zeros_like(x)
+        for i, leg in enumerate(LEG_NAMES):
+            sw = self.plan.swing.get(leg)
+            if sw is None:
+                continue
+            sel = (t > sw.t_start) & (t < sw.t_end)
+            if np.any(sel):
+                ts = t[sel]
+                x[sel, i], xd[sel, i], xdd[sel, i] = sw.position(ts), sw.velocity(ts), sw.acceleration(ts)
+        return x, xd, xdd
+
+    def evaluate(self, t: np.ndarray, newton_steps: int = 4, p_guess: np.ndarray | None = None):
+        """Vectorised reference at times ``t`` (T,) (s), clipped to the cycle.
+
+        :return: ``(p, p_d, p_dd, q, qd, qdd, stance)``: base position/velocity/acceleration (T, 3)
+            in m, m/s, m/s^2 (world); joints (T, 12) in rad, rad/s, rad/s^2 (JOINT_NAMES order);
+            stance flags (T, 4).
+        """
+        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.t_end)
+        cog = self.plan.cog
+        c, cd, cdd = cog.position(t), cog.velocity(t), cog.acceleration(t)
+        x, xd, xdd = self.feet(t)
+        p, pd, pdd, q, qd, qdd = self.wb.place_base(c, cd, cdd, x, xd, xdd, p_guess, newton_steps)
+        stance = self._stance[phase_index(self.plan.phases, t)]
+        n = len(t)
+        return p, pd, pdd, q.reshape(n, 12), qd.reshape(n, 12), qdd.reshape(n, 12), stance
+
+    def sample(self, t: float) -> ReferenceSample:
+        """The planned whole-robot state at time ``t`` (s from the cycle start; clipped to the cycle)."""
+        tc = min(max(float(t), 0.0), self.t_end)
+        k = int(round(tc / self._grid_dt))
+        if k < len(self._grid_t) and abs(self._grid_t[k] - tc) < 1e-9:
+            p, pd, pdd, q, qd, qdd, stance = (a[k] for a in self._grid)
+        else:
+            guess = np.array([np.interp(tc, self._grid_t, self._grid_p[:, j]) for j in range(3)])[None]
+            p, pd, pdd, q, qd, qdd, stance = (a[0] for a in self.evaluate(np.array([tc]), 2, guess))
+        return ReferenceSample(
+            t=float(t),
+            p_base_W=p.copy(),
+            quat_WB=_IDENTITY.copy(),
+            v_base_W=pd.copy(),
+            omega_base_B=_ZERO3.copy(),
+            a_base_W=pdd.copy(),
+            domega_base_B=_ZERO3.copy(),
+            q_joints=q.copy(),
+            qd_joints=qd.copy(),
+            qdd_joints=qdd.copy(),
+            stance=tuple(bool(s) for s in stance),  # type: ignore[arg-type]
+        )

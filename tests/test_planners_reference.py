@@ -1,0 +1,93 @@
+"""Whole-body COM placement and joint references: exact derivatives, MuJoCo agreement, IK."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+import planners
+from planners.wholebody import WholeBody, leg_point
+from quad_uneven_env import constants as C
+from quad_uneven_env.robot import robot_mjcf
+from quad_uneven_env.robot.kinematics import leg_fk_hip
+
+
+@pytest.fixture(scope="module")
+def ref():
+    return planners.plan_gait_cycle(planners.paper_scenario()).reference()
+
+
+@pytest.fixture(scope="module")
+def mj(robot_cfg):
+    m = mujoco.MjModel.from_xml_string(robot_mjcf(robot_cfg))
+    return m, mujoco.MjData(m)
+
+
+def test_leg_point_jacobian_and_velocity_product(rng, robot_cfg):
+    q = rng.uniform(-1, 1, (5, 3))
+    qd = rng.normal(size=(5, 3))
+    p, J, jd = leg_point(q, 0.2, 0.22, qd)
+    np.testing.assert_allclose(p, leg_fk_hip(q, 0.2, 0.22), atol=1e-15)
+    h = 1e-6
+    fd = np.stack(
+        [(leg_point(q + h * e, 0.2, 0.22)[0] - leg_point(q - h * e, 0.2, 0.22)[0]) / (2 * h) for e in np.eye(3)], -1
+    )
+    np.testing.assert_allclose(J, fd, atol=1e-8)
+    # (dJ/dt) qd along q(t) = q + t qd.
+    Jp, Jm = leg_point(q + h * qd, 0.2, 0.22)[1], leg_point(q - h * qd, 0.2, 0.22)[1]
+    np.testing.assert_allclose(jd, np.einsum("tij,tj->ti", (Jp - Jm) / (2 * h), qd), atol=1e-7)
+
+
+def test_reference_com_matches_mujoco_and_feet_on_sites(ref, mj):
+    m, d = mj
+    plan = ref.plan
+    t = np.linspace(0.0, plan.duration, 23)
+    p, _, _, q, _, _, stance = ref.evaluate(t)
+    x, _, _ = ref.feet(t)
+    trunk = m.body(C.TRUNK_BODY).id
+    sites = [m.site(C.foot_site(leg)).id for leg in C.LEG_NAMES]
+    for k in range(t.size):
+        d.qpos[:] = 0.0
+        d.qpos[:3], d.qpos[3], d.qpos[7:] = p[k], 1.0, q[k]
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        np.testing.assert_allclose(d.subtree_com[trunk], plan.cog.position(t[k : k + 1])[0], atol=1e-9)
+        np.testing.assert_allclose(d.site_xpos[sites], x[k], atol=1e-9)
+        lo, hi = m.jnt_range[1:, 0], m.jnt_range[1:, 1]
+        assert np.all(q[k] >= lo - 1e-9) and np.all(q[k] <= hi + 1e-9), f"joint range at t={t[k]}"
+
+
+def test_reference_derivatives_match_finite_differences(ref):
+    # Away from the phase switches (where accelerations may jump): times inside phases.
+    t = np.array([0.37, 1.41, 1.77, 2.63, 3.05, 4.52, 5.33, 5.91])
+    h = 1e-5
+    out, plus, minus = ref.evaluate(t, 8), ref.evaluate(t + h, 8), ref.evaluate(t - h, 8)
+    for i in (0, 3):  # base position and joints
+        np.testing.assert_allclose((plus[i] - minus[i]) / (2 * h), out[i + 1], atol=1e-6)
+        np.testing.assert_allclose((plus[i + 1] - minus[i + 1]) / (2 * h), out[i + 2], atol=1e-4)
+
+
+def test_sample_is_a_reference_sample(ref):
+    s = ref.sample(1.5)
+    assert isinstance(s, planners.ReferenceSample)
+    assert s.stance == (True, True, True, False)
+    np.testing.assert_allclose(s.quat_WB, [1, 0, 0, 0])
+    assert s.qpos.shape == (19,) and s.qvel.shape == (18,) and s.qacc.shape == (18,)
+    off = ref.sample(1.5013)  # off the precomputed grid: computed on the spot
+    e = ref.evaluate(np.array([1.5013]), 8)
+    np.testing.assert_allclose(off.q_joints, e[3][0], atol=1e-10)
+    np.testing.assert_allclose(off.qdd_joints, e[5][0], atol=1e-8)
+
+
+def test_com_offset_matches_mujoco_random_pose(rng, robot_cfg, mj):
+    m, d = mj
+    wb = WholeBody(robot_cfg)
+    q = rng.uniform(m.jnt_range[1:, 0], m.jnt_range[1:, 1])
+    d.qpos[:] = 0.0
+    d.qpos[:3], d.qpos[3], d.qpos[7:] = (0.1, -0.2, 0.5), 1.0, q
+    mujoco.mj_kinematics(m, d)
+    mujoco.mj_comPos(m, d)
+    np.testing.assert_allclose(
+        wb.com_offset(q.reshape(4, 3)) + [0.1, -0.2, 0.5], d.subtree_com[m.body("trunk").id], atol=1e-12
+    )
