@@ -84,7 +84,7 @@ class Reference:
     def sample(self, t: float) -> ReferenceSample:
         """The planned whole-robot state at time ``t`` (s from the cycle start; clipped to the cycle)."""
         tc = min(max(float(t), 0.0), self.t_end)
-        k = int(round(tc / self._grid_dt))
+        k = round(tc / self._grid_dt)
         if k < len(self._grid_t) and abs(self._grid_t[k] - tc) < 1e-9:
             p, pd, pdd, q, qd, qdd, stance = (a[k] for a in self._grid)
         else:

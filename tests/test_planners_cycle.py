@@ -82,7 +82,7 @@ def test_unreachable_goal_raises_planning_error():
     flat = BlockTerrain(0.0)
     feet = np.array([[0.25, 0.185, 0], [0.25, -0.185, 0], [-0.25, 0.185, 0], [-0.25, -0.185, 0]])
     sc = planners.Scenario(
-        terrain=flat, feet_start=feet, footholds=feet + [0.2, 0, 0],
+        terrain=flat, feet_start=feet, footholds=feet + np.array([0.2, 0, 0]),
         cog_start={"pos": (0, 0, 0.36)}, cog_goal={"pos": (0.2, 0.0, 0.36)}, epsilon=150.0,
     )  # fmt: skip
     with pytest.raises(planners.PlanningError, match=r"phase \d"):

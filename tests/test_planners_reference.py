@@ -43,7 +43,7 @@ def test_reference_com_matches_mujoco_and_feet_on_sites(ref, mj):
     m, d = mj
     plan = ref.plan
     t = np.linspace(0.0, plan.duration, 23)
-    p, _, _, q, _, _, stance = ref.evaluate(t)
+    p, _, _, q, _, _, _ = ref.evaluate(t)
     x, _, _ = ref.feet(t)
     trunk = m.body(C.TRUNK_BODY).id
     sites = [m.site(C.foot_site(leg)).id for leg in C.LEG_NAMES]
@@ -89,5 +89,5 @@ def test_com_offset_matches_mujoco_random_pose(rng, robot_cfg, mj):
     mujoco.mj_kinematics(m, d)
     mujoco.mj_comPos(m, d)
     np.testing.assert_allclose(
-        wb.com_offset(q.reshape(4, 3)) + [0.1, -0.2, 0.5], d.subtree_com[m.body("trunk").id], atol=1e-12
+        wb.com_offset(q.reshape(4, 3)) + np.array([0.1, -0.2, 0.5]), d.subtree_com[m.body("trunk").id], atol=1e-12
     )
