@@ -87,3 +87,18 @@ def test_unreachable_goal_raises_planning_error():
     )  # fmt: skip
     with pytest.raises(planners.PlanningError, match=r"phase \d"):
         planners.plan_gait_cycle(sc)
+
+
+def test_paper_figures_script_writes_pngs_and_json(tmp_path):
+    import json
+
+    from planners import paper_figures
+
+    assert paper_figures.main(["--out", str(tmp_path / "figs")]) == 0
+    for name in ("fig4_swing_paths.png", "fig5_cog.png", "fig6_stability.png"):
+        data = (tmp_path / "figs" / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+    info = json.loads((tmp_path / "figs" / "plan.json").read_text())
+    assert info["min_stability_index_Nm"] >= info["epsilon_Nm"]
+    assert max(info["junction_jump_max"].values()) <= 1e-9
+    assert min(info["swing_min_clearance_m"].values()) >= 0.05 - 1e-3
