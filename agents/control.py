@@ -35,12 +35,14 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from agents import control_kernels as K
 from agents.control_elimination import ProjectedDynamics, eliminate_constraints, stance_layout
 from agents.control_id import DISTRIBUTIONS, IDResult, InverseDynamics, friction_pyramid
 from agents.control_verify import IDCheck, verify_inverse_dynamics
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
-from quad_uneven_env.robot.dynamics import make_dynamics
+from quad_uneven_env.robot import dynamics_kernels as DK
+from quad_uneven_env.robot.dynamics import DynamicsTerms, make_dynamics
 
 __all__ = [
     "ComputedTorqueController",
@@ -94,11 +96,17 @@ def measured_foot_contacts(data: mujoco.MjData, foot_of_geom: np.ndarray, terrai
 
     :param foot_of_geom: from :func:`foot_lookup`.
     """
-    out = np.zeros(C.N_LEGS + 1, dtype=bool)
-    if data.ncon:
-        g = data.contact.geom
-        out[foot_of_geom[g[:, ::-1][g == terrain_geom]]] = True
-    return out[: C.N_LEGS]
+    lut = np.asarray(foot_of_geom, dtype=np.int64)
+    mask = K.foot_contact_mask(data.contact.geom, lut, int(terrain_geom)) if data.ncon else 0
+    return np.array([bool(mask >> i & 1) for i in range(C.N_LEGS)])
+
+
+_CMD_INPUTS: tuple[str, ...] = (
+    "p_base_W", "quat_WB", "v_base_W", "omega_base_B", "a_base_W", "domega_base_B",
+    "q_joints", "qd_joints", "qdd_joints", "qpos", "qvel",
+)  # fmt: skip
+"""ReferenceSample fields the PD command reads, then the state, in the order of ``control_kernels.beta_command``."""
+_CMD_SIZES = (3, 4, 3, 3, 3, 3, 12, 12, 12, C.NQ, C.NV)
 
 
 class ComputedTorqueController:
@@ -137,7 +145,19 @@ class ComputedTorqueController:
         self.last: IDResult | None = None
         """the last inverse-dynamics result (diagnostics)."""
         self.last_reference: ReferenceSample | None = None
-        self._e_rot, self._q_inv, self._q_rel, self._R_rel = np.empty(3), np.empty(4), np.empty(4), np.empty(9)
+        self._bdd = np.empty(C.NV)
+        self._stance_memo: dict = {}
+
+    @property
+    def gains(self) -> Gains:
+        """PD gains of the control law."""
+        return self._gains_obj
+
+    @gains.setter
+    def gains(self, gains: Gains) -> None:
+        self._gains_obj = gains
+        g = gains
+        self._gains = np.array([g.kp_pos, g.kd_pos, g.kp_rot, g.kd_rot, g.kp_joint, g.kd_joint], dtype=float)
 
     # ------------------------------------------------------------------ setup
     def _bind(self, model: mujoco.MjModel) -> None:
@@ -148,8 +168,16 @@ class ComputedTorqueController:
         if [int(model.actuator_trnid[a, 0]) for a in act] != [model.joint(j).id for j in C.JOINT_NAMES]:
             raise ValueError("actuators must drive the joints in JOINT_NAMES order")
         self.torque_limit = model.actuator_ctrlrange[act, 1].copy()
-        self.foot_of_geom = foot_lookup(model)
+        self.foot_of_geom = foot_lookup(model).astype(np.int64)
         self.terrain_geom = model.geom(C.TERRAIN_GEOM).id
+        # buffers of the compiled mujoco-backend path: M, J_feet, Jdot qdot, G
+        self._terms_buf = (
+            np.empty((C.NV, C.NV)),
+            np.empty((C.N_LEGS, 3, C.NV)),
+            np.empty((C.N_LEGS, 3)),
+            np.empty(C.NV),
+        )
+        self._stance_memo.clear()
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any = None) -> None:
         """Bind to ``model``, restart the reference clock at ``data.time``, keep ``terrain`` for normals."""
@@ -164,16 +192,32 @@ class ComputedTorqueController:
         if model is not self._model:
             self._bind(model)
         ref = self.reference(float(data.time) - self.t0)
-        stance = self.select_stance(ref.stance, measured_foot_contacts(data, self.foot_of_geom, self.terrain_geom))
-        beta_ddot = self.beta_ddot_command(data.qpos, data.qvel, ref, stance)
-        if self.backend == "mujoco":
-            terms = self.dynamics.terms_from_data(data)
-        else:
-            terms = self.dynamics.terms(data.qpos, data.qvel)
+        meas = K.foot_contact_mask(data.contact.geom, self.foot_of_geom, self.terrain_geom) if data.ncon else 0
+        try:
+            stance = self._stance_memo[(ref.stance, meas, self.stance_mode)]
+        except (KeyError, TypeError):
+            stance = self.select_stance(ref.stance, np.array([bool(meas >> i & 1) for i in range(C.N_LEGS)]))
+            if isinstance(ref.stance, tuple):
+                self._stance_memo[(ref.stance, meas, self.stance_mode)] = stance
+        lay = stance_layout(stance)
+        qpos, qvel = data.qpos, data.qvel
+        beta_ddot = self._bdd[: self._beta_command(qpos, qvel, ref, lay.mask)]
         normals = self._normals(data) if self.distribution == "qp" else None
-        result = self.id.solve_terms(terms, beta_ddot, stance, normals)
+        if self.backend == "mujoco":
+            M, J, Jdd, G = self._terms_buf
+            DK.mujoco_terms(*self.dynamics.data_views(data), M, J, Jdd, G)
+            h = data.qfrc_bias
+            result = self.id.solve_compiled(M, h, J, Jdd, lay, beta_ddot, normals)
+            if result is None:
+                terms = DynamicsTerms(M.copy(), h.copy(), G.copy(), J.copy(), Jdd.copy())
+                result = self.id.solve_terms(terms, beta_ddot.copy(), stance, normals)
+        else:
+            terms = self.dynamics.terms(qpos, qvel)
+            result = self.id.solve_terms(terms, beta_ddot.copy(), stance, normals)
         self.last, self.last_reference = result, ref
-        return np.clip(result.tau, -self.torque_limit, self.torque_limit)
+        tau = np.empty(C.N_JOINTS)
+        K.clip_into(result.tau, self.torque_limit, tau)
+        return tau
 
     def select_stance(self, planned, measured: np.ndarray) -> tuple[bool, bool, bool, bool]:
         """Stance set from the plan and the measured contacts (rule in the module docstring)."""
@@ -191,29 +235,25 @@ class ComputedTorqueController:
         self, qpos: np.ndarray, qvel: np.ndarray, ref: ReferenceSample, stance: tuple[bool, bool, bool, bool]
     ) -> np.ndarray:
         """beta_ddot_cmd (n_beta,): reference acceleration plus PD on position, SO(3) orientation and swing joints."""
-        g = self.gains
-        lay = stance_layout(stance)
-        q, q_ref = qpos[3:7], ref.quat_WB
-        e_rot, q_inv, q_rel, R_rel = self._e_rot, self._q_inv, self._q_rel, self._R_rel
-        mujoco.mju_subQuat(e_rot, q_ref, q)  # log(R^T R_ref), current base frame
-        mujoco.mju_negQuat(q_inv, q)
-        mujoco.mju_mulQuat(q_rel, q_inv, q_ref)
-        mujoco.mju_quat2Mat(R_rel, q_rel)  # R^T R_ref: reference base frame -> current base frame
-        out = np.empty(lay.n_beta)
-        out[0:3] = ref.a_base_W + g.kd_pos * (ref.v_base_W - qvel[0:3]) + g.kp_pos * (ref.p_base_W - qpos[0:3])
-        out[3:6] = (
-            R_rel.reshape(3, 3) @ (ref.domega_base_B + g.kd_rot * ref.omega_base_B)
-            - g.kd_rot * qvel[3:6]
-            + g.kp_rot * e_rot
+        n = self._beta_command(
+            np.asarray(qpos, dtype=float), np.asarray(qvel, dtype=float), ref, stance_layout(stance).mask
         )
-        if lay.n_beta > 6:
-            j = lay.beta_index[6:] - 6
-            out[6:] = (
-                ref.qdd_joints[j]
-                + g.kd_joint * (ref.qd_joints[j] - qvel[6 + j])
-                + g.kp_joint * (ref.q_joints[j] - qpos[7 + j])
-            )
-        return out
+        return self._bdd[:n].copy()
+
+    def _beta_command(self, qpos: np.ndarray, qvel: np.ndarray, ref: ReferenceSample, mask: int) -> int:
+        """Write beta_ddot_cmd into ``self._bdd`` (compiled kernel); returns n_beta."""
+        args = [getattr(ref, f) for f in _CMD_INPUTS[:9]]
+        try:
+            n = K.beta_command(qpos, qvel, *args, self._gains, mask, self._bdd)
+        except TypeError:  # lists, other dtypes, read-only arrays: convert once
+            args = [np.ascontiguousarray(a, dtype=float).reshape(-1) for a in args]
+            n = K.beta_command(qpos, qvel, *args, self._gains, mask, self._bdd)
+        if n < 0:
+            what = _CMD_INPUTS[-n - 1]
+            got = np.shape(qpos if what == "qpos" else qvel if what == "qvel" else getattr(ref, what))
+            what = what if what in ("qpos", "qvel") else f"reference field {what}"
+            raise ValueError(f"{what} must have {_CMD_SIZES[-n - 1]} entries, got shape {got}")
+        return n
 
     def _normals(self, data: mujoco.MjData) -> np.ndarray | None:
         hf = getattr(self.terrain, "heightfield", None)

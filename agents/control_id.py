@@ -172,20 +172,28 @@ class InverseDynamics:
             raise ValueError(
                 f"beta_ddot must have shape ({lay.n_beta},) for stance {lay.stance}, got {beta_ddot.shape}"
             )
-        result = self._solve_compiled(terms, beta_ddot, lay, normals_W)
+        result = self.solve_compiled(terms.M, terms.h, terms.J_feet, terms.Jdot_qdot_feet, lay, beta_ddot, normals_W)
         if result is None:  # 1 or 2 stance feet (SVD pseudo-inverse), or inputs the kernel does not take
             result = self._solve(eliminate_constraints(terms, lay.stance), beta_ddot, normals_W)
         return result
 
-    # ---------------------------------------------------------------- internals
-    def _solve_compiled(
-        self, terms: DynamicsTerms, beta_ddot: np.ndarray, lay: StanceLayout, normals_W: np.ndarray | None
+    def solve_compiled(
+        self,
+        M: np.ndarray,
+        h: np.ndarray,
+        J_feet: np.ndarray,
+        Jdot_qdot_feet: np.ndarray,
+        lay: StanceLayout,
+        beta_ddot: np.ndarray,
+        normals_W: np.ndarray | None = None,
     ) -> IDResult | None:
-        """The "pinv" solution by the compiled kernel (:mod:`agents.control_kernels`); None if not handled."""
+        """Fast path of :meth:`solve_terms` on validated inputs (the terms' arrays, a layout, an
+        (n_beta,) float64 ``beta_ddot``) by the compiled kernel; None when it does not apply (1 or 2
+        stance feet, a degenerate stance, arrays it cannot take): then use :meth:`solve_terms`."""
         ws = self._ws
         try:
             status = K.id_pinv(
-                terms.M, terms.h, terms.J_feet, terms.Jdot_qdot_feet, lay.mask, beta_ddot,
+                M, h, J_feet, Jdot_qdot_feet, lay.mask, beta_ddot,
                 1.0 / SINGULAR_SIGMA, DAMPING, *ws,
             )  # fmt: skip
         except TypeError:  # not float64 arrays of the kernel's ranks (numba dispatch)
@@ -197,9 +205,10 @@ class InverseDynamics:
             exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
         )  # fmt: skip
         if self.distribution == "qp" and lay.n_stance:
-            self._distribute_qp(lay, terms.J_feet, ws[3], result, normals_W)
+            self._distribute_qp(lay, J_feet, ws[3], result, normals_W)
         return result
 
+    # ---------------------------------------------------------------- internals
     def _solve(self, proj: ProjectedDynamics, beta_ddot: np.ndarray, normals_W: np.ndarray | None) -> IDResult:
         lay, terms = proj.layout, proj.terms
         qacc = proj.qacc(beta_ddot)

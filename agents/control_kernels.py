@@ -69,6 +69,10 @@ def id_pinv(M, h, J, Jdd, mask, bdd, inv_sigma, damping, tau, F, qacc, r, Jinv, 
     0 when the numpy path must be used (1 or 2 stance feet, A A^T not positive definite),
     -1 when ``bdd`` does not have 18 - 3p entries.
     """
+    if M.shape[0] != NV or M.shape[1] != NV or h.shape[0] != NV or J.shape[0] != N_LEGS or J.shape[1] != 3:
+        return 0
+    if J.shape[2] != NV or Jdd.shape[0] != N_LEGS or Jdd.shape[1] != 3:
+        return 0
     p = 0
     for i in range(N_LEGS):
         p += (mask >> i) & 1
@@ -227,9 +231,13 @@ def beta_command(qpos, qvel, p, quat, v, w, a, dw, qj, qdj, qddj, gains, mask, o
 
     ``gains`` = (kp_pos, kd_pos, kp_rot, kd_rot, kp_joint, kd_joint). The orientation error is
     MuJoCo's ``mju_subQuat(q_ref, q)`` and ``R_rel = quat2Mat(q^-1 q_ref)``, reproduced here.
-    Returns n_beta, or -k when reference field k (1: p, 2: quat, 3: v, 4: w, 5: a, 6: dw,
-    7: q, 8: qd, 9: qdd) has the wrong length.
+    Returns n_beta, or -k when input k has the wrong length (reference fields 1: p, 2: quat,
+    3: v, 4: w, 5: a, 6: dw, 7: q, 8: qd, 9: qdd; 10: qpos, 11: qvel).
     """
+    if qpos.shape[0] != 19:
+        return -10
+    if qvel.shape[0] != NV:
+        return -11
     if p.shape[0] != 3:
         return -1
     if quat.shape[0] != 4:
