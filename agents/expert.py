@@ -1,0 +1,208 @@
+"""The scripted expert: the paper's planner and inverse-dynamics controller in the loop.
+
+:class:`ExpertPolicy` replans every gait cycle from the measured state (receding horizon:
+footholds, COG path, swing paths) heading +x, and runs the computed-torque controller
+(:class:`agents.control.ComputedTorqueController`) at physics rate through the env's control
+hook. It has **privileged access**: the terrain's height field (``env.unwrapped.terrain``) and
+the full MuJoCo state (COG, foot positions), as a scripted expert in simulation may.
+
+It follows SB3's ``predict`` protocol so the evaluation code runs it like a learned agent;
+``predict`` returns the zero action because the work is done in the physics-rate hook (the
+residual RL agent adds its action on top of it).
+
+When a plan fails (:class:`planners.PlanningError`) the expert degrades: it retries with half
+the stride, then steps in place, then stands still for one cycle (holding the measured pose)
+and replans; every failure is recorded in :attr:`ExpertPolicy.failure_log`. It never raises
+out of a rollout.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from agents.control import ComputedTorqueController, Gains
+from planners import PlanningError, Scenario, plan_gait_cycle
+from planners.types import ReferenceSample
+from quad_uneven_env import constants as C
+
+
+@dataclasses.dataclass(frozen=True)
+class ExpertConfig:
+    """Gait and control settings of the expert (SI units)."""
+
+    durations: tuple[float, ...] = (0.5, 0.5, 0.5, 0.1, 0.5, 0.5, 0.5)
+    """s: the 7 phases of the walk cycle (paper order; the paper uses 1, 1, 1, 0.1, 1, 1, 1)."""
+    stride: float = 0.3
+    """m: body advance per cycle along +x (0.3 m / 3.1 s = 0.097 m/s nominal)."""
+    cog_height: float = 0.36
+    """m: COG height above the mean foothold height."""
+    epsilon: float = 1.0
+    """N m: stability margin required of the planned COG path."""
+    clearance: float = 0.05
+    """m: swing clearance of the foot sphere above the terrain."""
+    distribution: str = "qp"
+    """inverse-dynamics torque distribution: "pinv" (paper) or "qp" (friction cones)."""
+    backend: str = "mujoco"
+    """dynamics backend of the controller."""
+    gains: Gains = dataclasses.field(default_factory=Gains)
+    """computed-torque gains."""
+
+
+class _HoldReference:
+    """Hold a fixed whole-robot pose with all four feet in stance (the stand-still fallback)."""
+
+    def __init__(self, qpos: np.ndarray, duration: float) -> None:
+        z3 = np.zeros(3)
+        self.duration = duration
+        self.sample_value = ReferenceSample(
+            t=0.0,
+            p_base_W=qpos[:3].copy(),
+            quat_WB=qpos[3:7].copy(),
+            v_base_W=z3,
+            omega_base_B=z3,
+            a_base_W=z3,
+            domega_base_B=z3,
+            q_joints=qpos[7:].copy(),
+            qd_joints=np.zeros(12),
+            qdd_joints=np.zeros(12),
+            stance=(True, True, True, True),
+        )
+
+    def sample(self, t: float) -> ReferenceSample:
+        return self.sample_value
+
+
+class ExpertPolicy:
+    """Planner + inverse-dynamics controller as an SB3-style policy for ``QuadUneven-v0``.
+
+    :param env: the environment (wrapped or not); the expert installs itself as its
+        physics-rate controller, so create it before ``env.reset``.
+    :param config: gait and control settings.
+    """
+
+    def __init__(self, env: gym.Env, config: ExpertConfig | None = None) -> None:
+        self.config = config or ExpertConfig()
+        self.env = env.unwrapped
+        self.cfg = self.env.robot_cfg
+        self.controller = ComputedTorqueController(
+            reference=self._reference,
+            backend=self.config.backend,
+            distribution=self.config.distribution,
+            gains=self.config.gains,
+        )
+        self.planner_times_ms: list[float] = []
+        """wall time of every gait-cycle plan (ms)."""
+        self.failure_log: list[str] = []
+        """why plans failed and what the expert did instead."""
+        self.plans: list[Any] = []
+        """(t_start, plan or hold reference) of every cycle of the current episode."""
+        self._current: Any = None
+        self._t_start = 0.0
+        self._t_end = 0.0
+        self._data: mujoco.MjData | None = None
+        self._terrain: Any = None
+        self._zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+        self.env.set_controller(self)
+
+    # -------------------------------------------------------------- SB3 protocol
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        """The zero action: the expert acts through the physics-rate hook."""
+        return self._zero.copy(), state
+
+    # -------------------------------------------------------------- env hook
+    def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any) -> None:
+        """Called by the env at every reset: plan the first cycle from the measured stand."""
+        self._data = data
+        self._terrain = terrain
+        self.planner_times_ms.clear()
+        self.failure_log.clear()
+        self.plans.clear()
+        self.controller.reset(model, data, terrain)
+        self._start_cycle(0.0, cog_start=None)
+
+    def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
+        """Joint torques (N m) of the computed-torque controller at the current state."""
+        return self.controller(model, data, action)
+
+    # -------------------------------------------------------------- planning
+    def _reference(self, t: float) -> ReferenceSample:
+        if t >= self._t_end:
+            goal = None
+            if hasattr(self._current, "cog"):
+                tc = self._t_end - self._t_start
+                goal = {
+                    "pos": self._current.cog.position(np.array([tc]))[0],
+                    "vel": self._current.cog.velocity(np.array([tc]))[0],
+                    "acc": self._current.cog.acceleration(np.array([tc]))[0],
+                }
+            self._start_cycle(self._t_end, cog_start=goal)
+        return self._current_ref.sample(t - self._t_start)
+
+    def _measured_footholds(self) -> np.ndarray:
+        """(4, 3) points on the terrain below the foot sites (m, world)."""
+        sites = self._data.site_xpos[self.env.idx.foot_sites]
+        ground = self._terrain.heightfield.height(sites[:, 0], sites[:, 1])
+        return np.column_stack([sites[:, :2], ground])
+
+    def _start_cycle(self, t0: float, cog_start: dict | None) -> None:
+        d, cfgx = self._data, self.config
+        feet = self._measured_footholds()
+        if cog_start is None or np.linalg.norm(cog_start["pos"] - d.subtree_com[self.env.idx.trunk_body]) > 0.05:
+            # First cycle, after a hold, or drifted: start from the measured COG at rest.
+            cog_start = {"pos": d.subtree_com[self.env.idx.trunk_body].copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
+        plan = None
+        for stride in (cfgx.stride, 0.5 * cfgx.stride, 0.0):
+            scenario = Scenario(
+                terrain=self._terrain.heightfield,
+                feet_start=feet,
+                cog_start=cog_start,
+                durations=cfgx.durations,
+                epsilon=cfgx.epsilon,
+                clearance=cfgx.clearance,
+                cog_height=cfgx.cog_height,
+                stride=(stride, 0.0),
+                robot=self.cfg,
+            )
+            tic = time.perf_counter()
+            try:
+                plan = plan_gait_cycle(scenario)
+            except PlanningError as err:
+                self.failure_log.append(f"t={t0:.2f} s, stride {stride:.3f} m: {err}")
+                continue
+            finally:
+                self.planner_times_ms.append(1e3 * (time.perf_counter() - tic))
+            break
+        if plan is None:
+            qpos = d.qpos.copy()
+            hold = _HoldReference(qpos, float(sum(cfgx.durations)))
+            self.failure_log.append(f"t={t0:.2f} s: no feasible plan, standing still for {hold.duration:.2f} s")
+            self._current, self._current_ref = hold, hold
+            duration = hold.duration
+        else:
+            self._current, self._current_ref = plan, plan.reference(self.cfg)
+            duration = plan.duration
+        self.plans.append((t0, self._current))
+        self._t_start, self._t_end = t0, t0 + duration
+
+
+def make_expert_env(terrain: Any = "rough", config: ExpertConfig | None = None, **env_kwargs: Any):
+    """``(env, expert)``: a QuadUneven-v0 env (frame_skip 10) with the expert installed."""
+    import quad_uneven_env  # noqa: F401
+
+    env = gym.make("QuadUneven-v0", terrain=terrain, **env_kwargs)
+    return env, ExpertPolicy(env, config)
+
+
+__all__ = ["C", "ExpertConfig", "ExpertPolicy", "make_expert_env"]
