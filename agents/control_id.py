@@ -33,7 +33,6 @@ unsolved QP falls back to "pinv" and sets ``result.qp_fallback``.
 from __future__ import annotations
 
 import dataclasses
-import functools
 
 import mujoco
 import numpy as np
@@ -94,13 +93,6 @@ def friction_pyramid(normal_W: np.ndarray, mu: float) -> np.ndarray:
     return np.stack([mn - t1, mn + t1, mn - t2, mn + t2, n], axis=-2)
 
 
-@functools.lru_cache(maxsize=8)
-def _block_index(p: int, rows: int, cols: int) -> tuple[np.ndarray, np.ndarray]:
-    """Fancy index placing p blocks (rows x cols) on the diagonal of a (p rows, p cols) matrix."""
-    k = np.arange(p)[:, None, None]
-    return rows * k + np.arange(rows)[None, :, None], cols * k + np.arange(cols)[None, None, :]
-
-
 class InverseDynamics:
     """Torques and contact forces realising a commanded ``beta_ddot`` for a stance set.
 
@@ -135,7 +127,10 @@ class InverseDynamics:
             raise ValueError(f"mu must be > 0, got {mu}")
         self.mu = float(mu)
         self.min_normal_force = float(min_normal_force)
-        self._cone_up = np.broadcast_to(friction_pyramid(np.array([0.0, 0.0, 1.0]), self.mu), (C.N_LEGS, 5, 3))
+        self._cone_up = np.ascontiguousarray(
+            np.broadcast_to(friction_pyramid(np.array([0.0, 0.0, 1.0]), self.mu), (C.N_LEGS, 5, 3))
+        )
+        self._qp: dict[int, _StanceQP] = {}
         self._cone_lower = np.array([0.0, 0.0, 0.0, 0.0, self.min_normal_force])
         # kernel work buffers: tau, F, qacc, r = M qacc + h, J_L^-1, S stance blocks
         self._ws = (
@@ -264,41 +259,64 @@ class InverseDynamics:
         st = lay.stance_legs
         p = len(st)
         cones = self._cone_up[:p] if normals_W is None else friction_pyramid(np.asarray(normals_W)[st], self.mu)
-        J_st = J_feet if p == C.N_LEGS else J_feet[st]
-        J_L = J_st[lay.leg_block]  # (p, 3, 3)
-        W = np.zeros((3 * p, 3 * p))
-        W[_block_index(p, 3, 3)] = J_L @ np.swapaxes(J_L, -1, -2)  # |tau - tau_pinv|^2 in terms of F
-        Cmat = np.zeros((5 * p, 3 * p))
-        Cmat[_block_index(p, 5, 3)] = cones
-        lower = np.tile(self._cone_lower, p)
-        F0 = result.contact_forces[st].reshape(-1)
-        A_eq = J_st[:, :, :6].transpose(2, 0, 1).reshape(6, 3 * p)  # [J_b,i^T]_i
-        res = proxsuite.proxqp.dense.solve(
-            W + 1e-9 * np.eye(3 * p),
-            -W @ F0,
-            A_eq,
-            r[:6],
-            Cmat,
-            lower,
-            np.full(5 * p, 1e20),
-            eps_abs=1e-9,
-            max_iter=200,
-            verbose=False,
-            compute_preconditioner=False,
-        )
-        x = res.x
-        ok = res.info.status == proxsuite.proxqp.PROXQP_SOLVED and bool(np.isfinite(x).all())
-        if ok:
-            ok = bool((Cmat @ x >= lower - 1e-6).all()) and bool(
-                np.abs(A_eq @ x - r[:6]).max() < 1e-6 * max(1.0, np.abs(r[:6]).max())
-            )
-        if not ok:
+        qp = self._qp.get(p) or _StanceQP(p)
+        self._qp[p] = qp
+        try:
+            K.qp_fill(J_feet, lay.mask, r, result.contact_forces, cones, self._cone_lower, *qp.problem)
+        except TypeError:  # arrays the kernel does not take (numba dispatch): convert once
+            J_feet, r = np.ascontiguousarray(J_feet, dtype=float), np.ascontiguousarray(r, dtype=float)
+            cones = np.ascontiguousarray(cones, dtype=float)
+            K.qp_fill(J_feet, lay.mask, r, result.contact_forces, cones, self._cone_lower, *qp.problem)
+        x = qp.solve()
+        _, _, A, b, C_in, lower = qp.problem
+        tau, F = result.tau.copy(), np.zeros((C.N_LEGS, 3))
+        if x is None or not K.qp_apply(x, C_in, lower, A, b, J_feet, lay.mask, r, tau, F):
             result.qp_fallback = True
             return
-        F_st = x.reshape(p, 3)
-        tau = result.tau.copy()
-        tau[lay.stance_dofs - 6] = r[lay.stance_dofs] - (np.swapaxes(J_L, -1, -2) @ F_st[..., None]).reshape(-1)
-        result.tau = tau
-        result.contact_forces = np.zeros((C.N_LEGS, 3))
-        result.contact_forces[st] = F_st
-        result.distribution = "qp"
+        result.tau, result.contact_forces, result.distribution = tau, F, "qp"
+
+
+class _StanceQP:
+    """A preallocated ProxQP problem for p stance feet (3p forces, 6 equalities, 5p cone rows), warm-started.
+
+    Each solve starts from the previous solution; if that does not converge, the problem is solved
+    again from ProxQP's default (equality-constrained) initial guess, as a one-off solve would.
+    """
+
+    def __init__(self, p: int) -> None:
+        n, n_in = 3 * p, 5 * p
+        self.problem = (
+            np.zeros((n, n)),
+            np.zeros(n),
+            np.zeros((6, n)),
+            np.zeros(6),
+            np.zeros((n_in, n)),
+            np.zeros(n_in),
+        )
+        self.upper = np.full(n_in, 1e20)
+        self.qp = proxsuite.proxqp.dense.QP(n, 6, n_in)
+        s = self.qp.settings
+        s.eps_abs, s.max_iter, s.verbose = _QP_EPS_ABS, _QP_MAX_ITER, False
+        s.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+        self.ready = False
+
+    def solve(self) -> np.ndarray | None:
+        """Solution x (3p,) of the current problem, None if ProxQP does not solve it."""
+        H, g, A, b, C_in, lower = self.problem
+        if self.ready:
+            self.qp.update(H, g, A, b, C_in, lower, self.upper, update_preconditioner=False)
+        else:
+            self.qp.init(H, g, A, b, C_in, lower, self.upper, compute_preconditioner=False)
+        self.qp.solve()
+        res = self.qp.results
+        self.ready = res.info.status == proxsuite.proxqp.PROXQP_SOLVED
+        if self.ready:
+            return np.array(res.x)
+        res = proxsuite.proxqp.dense.solve(  # cold, exactly the one-off solve
+            H, g, A, b, C_in, lower, self.upper,
+            eps_abs=_QP_EPS_ABS, max_iter=_QP_MAX_ITER, verbose=False, compute_preconditioner=False,
+        )  # fmt: skip
+        return np.array(res.x) if res.info.status == proxsuite.proxqp.PROXQP_SOLVED else None
+
+
+_QP_EPS_ABS, _QP_MAX_ITER = 1e-9, 200

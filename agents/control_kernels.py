@@ -328,3 +328,87 @@ def clip_into(x, limit, out):  # pragma: no cover - compiled
     for i in range(x.shape[0]):
         v = x[i]
         out[i] = v if v != v else min(max(v, -limit[i]), limit[i])  # NaN passes through, as np.clip
+
+
+@nb.njit(nb.void(_f3, nb.int64, _f1, _f2, _f3, _f1, _f2, _f1, _f2, _f1, _f2, _f1), cache=False, nogil=True)
+def qp_fill(J, mask, r, F0, cones, lower, H, g, A, b, C, l):  # pragma: no cover - compiled
+    """The "qp" problem in the stance forces x = [F_i]_i (see ``agents.control_id``), into preallocated arrays.
+
+    H = blockdiag(J_L,i J_L,i^T) + 1e-9 I, g = -blockdiag(J_L,i J_L,i^T) F0, A = [J_b,i^T]_i,
+    b = r[:6], C = blockdiag(cones[k]) (k-th stance leg), l = lower per leg.
+    """
+    n = H.shape[0]
+    for i in range(n):
+        for j in range(n):
+            H[i, j] = 0.0
+    for i in range(C.shape[0]):
+        for j in range(n):
+            C[i, j] = 0.0
+    for i in range(6):
+        b[i] = r[i]
+    W = np.empty((3, 3))
+    k = 0
+    for leg in range(N_LEGS):
+        if not (mask >> leg) & 1:
+            continue
+        c0 = 6 + 3 * leg
+        for a in range(3):
+            for e in range(3):
+                s = 0.0
+                for m in range(3):
+                    s += J[leg, a, c0 + m] * J[leg, e, c0 + m]
+                W[a, e] = s
+        for a in range(3):
+            s = 0.0
+            for e in range(3):
+                H[3 * k + a, 3 * k + e] = W[a, e]
+                s += W[a, e] * F0[leg, e]
+            H[3 * k + a, 3 * k + a] += 1e-9
+            g[3 * k + a] = -s
+            for c in range(6):
+                A[c, 3 * k + a] = J[leg, a, c]
+        for a in range(5):
+            for e in range(3):
+                C[5 * k + a, 3 * k + e] = cones[k, a, e]
+            l[5 * k + a] = lower[a]
+        k += 1
+
+
+@nb.njit(nb.boolean(_f1, _f2, _f1, _f2, _f1, _f3, nb.int64, _f1, _f1, _f2), cache=False, nogil=True)
+def qp_apply(x, C, l, A, b, J, mask, r, tau, F):  # pragma: no cover - compiled
+    """Accept the QP solution x if finite, inside the cones (1e-6) and on the base equation (1e-6 relative);
+    then write the stance forces into F (4, 3) and the stance torques r_i - J_L,i^T F_i into tau."""
+    for i in range(x.shape[0]):
+        if not math.isfinite(x[i]):
+            return False
+    for i in range(C.shape[0]):
+        s = 0.0
+        for j in range(x.shape[0]):
+            s += C[i, j] * x[j]
+        if not s >= l[i] - 1e-6:
+            return False
+    big, err = 1.0, 0.0
+    for i in range(6):
+        s = -b[i]
+        for j in range(x.shape[0]):
+            s += A[i, j] * x[j]
+        err = max(err, abs(s))
+        big = max(big, abs(b[i]))
+    if not err < 1e-6 * big:
+        return False
+    k = 0
+    for leg in range(N_LEGS):
+        for a in range(3):
+            F[leg, a] = 0.0
+        if not (mask >> leg) & 1:
+            continue
+        for a in range(3):
+            F[leg, a] = x[3 * k + a]
+        c0 = 6 + 3 * leg
+        for a in range(3):
+            s = r[c0 + a]
+            for e in range(3):
+                s -= J[leg, e, c0 + a] * F[leg, e]
+            tau[3 * leg + a] = s
+        k += 1
+    return True
