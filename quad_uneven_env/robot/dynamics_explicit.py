@@ -33,6 +33,7 @@ import numpy as np
 
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot.dynamics import DynamicsTerms
+from quad_uneven_env.robot.dynamics_kernels import explicit_terms
 
 _TOL = 1e-12
 _AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0))  # HAA, HFE, KFE
@@ -159,6 +160,11 @@ class ExplicitDynamics:
         D0[0, :, 0:3, 0:3] = self._m_all[:, None, None] * np.eye(3)
         D0[0, 0, 3:6, 3:6] = self.I_trunk_B
         self._D0 = D0
+        self._kernel_params = tuple(
+            np.ascontiguousarray(x, dtype=float)
+            for x in (self.hips_B, a_pts, b_pts, self._m_all, self.I_pts.reshape(12, 3, 3), self.I_trunk_B,
+                      self.r_trunk_B, self.gravity_W)
+        )  # fmt: skip
 
     @staticmethod
     def _inertia(model: mujoco.MjModel, body: int) -> np.ndarray:
@@ -174,8 +180,26 @@ class ExplicitDynamics:
         if qpos.shape[-1] != C.NQ or qvel.shape[-1] != C.NV or qpos.shape[:-1] != qvel.shape[:-1]:
             raise ValueError(f"qpos must be (..., {C.NQ}) and qvel (..., {C.NV}), got {qpos.shape}, {qvel.shape}")
         batch = qpos.shape[:-1]
+        out = self._terms_compiled(qpos.reshape(-1, C.NQ), qvel.reshape(-1, C.NV))
+        return DynamicsTerms(*(x.reshape(batch + x.shape[1:]) for x in out))
+
+    def terms_numpy(self, qpos: np.ndarray, qvel: np.ndarray) -> DynamicsTerms:
+        """As :meth:`terms`, by the vectorised numpy implementation (reference of the compiled kernel)."""
+        qpos = np.asarray(qpos, dtype=float)
+        qvel = np.asarray(qvel, dtype=float)
+        batch = qpos.shape[:-1]
         out = self._terms(qpos.reshape(-1, C.NQ), qvel.reshape(-1, C.NV))
         return DynamicsTerms(*(x.reshape(batch + x.shape[1:]) for x in out))
+
+    def _terms_compiled(self, qpos: np.ndarray, qvel: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Same formulas as :meth:`_terms`, one state at a time in the compiled kernel."""
+        N = qpos.shape[0]
+        M, h, G = np.empty((N, C.NV, C.NV)), np.empty((N, C.NV)), np.empty((N, C.NV))
+        J_feet, Jdd = np.empty((N, C.N_LEGS, 3, C.NV)), np.empty((N, C.N_LEGS, 3))
+        explicit_terms(
+            np.ascontiguousarray(qpos), np.ascontiguousarray(qvel), *self._kernel_params, M, h, G, J_feet, Jdd
+        )
+        return M, h, G, J_feet, Jdd
 
     def _terms(self, qpos: np.ndarray, qvel: np.ndarray) -> tuple[np.ndarray, ...]:
         """All 13 points (trunk COM, per leg thigh COM, shank COM, foot) in one stacked pass."""
