@@ -30,6 +30,8 @@ from agents.control import ComputedTorqueController, Gains
 from planners import PlanningError, Scenario, plan_gait_cycle
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
+from quad_uneven_env.physics import quat_to_rotation
+from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 
 
 @dataclasses.dataclass(frozen=True)
@@ -38,14 +40,18 @@ class ExpertConfig:
 
     durations: tuple[float, ...] = (0.5, 0.5, 0.5, 0.1, 0.5, 0.5, 0.5)
     """s: the 7 phases of the walk cycle (paper order; the paper uses 1, 1, 1, 0.1, 1, 1, 1)."""
-    stride: float = 0.3
-    """m: body advance per cycle along +x (0.3 m / 3.1 s = 0.097 m/s nominal)."""
+    stride: float = 0.33
+    """m: body advance per cycle along +x (0.33 m / 3.1 s = 0.106 m/s nominal)."""
     cog_height: float = 0.36
     """m: COG height above the mean foothold height."""
-    epsilon: float = 1.0
-    """N m: stability margin required of the planned COG path."""
+    epsilon: float = 20.0
+    """N m: stability margin of the planned COG path (20 N m = 4 cm of static margin for 50 kg):
+    much more than the paper's 0.1 N m, because the measured index must stay positive under
+    tracking errors and the QP needs room to keep every stance force inside its cone."""
     clearance: float = 0.05
     """m: swing clearance of the foot sphere above the terrain."""
+    touchdown_depth: float = 0.015
+    """m: how far below its foothold a late foot (planned stance, no contact yet) is aimed."""
     distribution: str = "qp"
     """inverse-dynamics torque distribution: "pinv" (paper) or "qp" (friction cones)."""
     backend: str = "mujoco"
@@ -90,6 +96,7 @@ class ExpertPolicy:
         self.config = config or ExpertConfig()
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
+        self._hips_B = hip_positions_B(self.cfg)
         self.controller = ComputedTorqueController(
             reference=self._reference,
             backend=self.config.backend,
@@ -148,7 +155,40 @@ class ExpertPolicy:
                     "acc": self._current.cog.acceleration(np.array([tc]))[0],
                 }
             self._start_cycle(self._t_end, cog_start=goal)
-        return self._current_ref.sample(t - self._t_start)
+        ref = self._current_ref.sample(t - self._t_start)
+        return self._push_late_touchdowns(ref, t - self._t_start)
+
+    def _push_late_touchdowns(self, ref: ReferenceSample, tc: float) -> ReferenceSample:
+        """Aim a planned-stance foot that has not touched down ``touchdown_depth`` below its foothold.
+
+        The swing spline ends exactly on the surface; a few millimetres of tracking error leave
+        the foot hovering, and the controller then treats it as a swing leg (its stance
+        fallback). Pushing the joint target below the surface makes the foot land.
+        """
+        if not hasattr(self._current, "footholds"):
+            return ref
+        sd = self._data.sensordata
+        contact = sd[self.env.idx.foot_sensor_adr] > 0
+        late = np.asarray(ref.stance) & ~contact
+        if not late.any():
+            return ref
+        plan = self._current
+        q = ref.q_joints.copy()
+        qd = ref.qd_joints.copy()
+        qdd = ref.qdd_joints.copy()
+        R = quat_to_rotation(ref.quat_WB)
+        for i in np.flatnonzero(late):
+            leg = C.LEG_NAMES[i]
+            landed = leg in plan.swing and tc >= plan.swing[leg].t_end - 1e-9
+            foothold = plan.footholds[i] if landed else plan.feet_start[i]
+            target_W = foothold + np.array([0.0, 0.0, self.cfg.foot_radius - self.config.touchdown_depth])
+            hip_W = ref.p_base_W + R @ self._hips_B[i]
+            q[3 * i : 3 * i + 3] = leg_ik_hip(
+                R.T @ (target_W - hip_W), self.cfg.thigh.length, self.cfg.shank.length, C.KNEE_SIGN[leg]
+            )
+            qd[3 * i : 3 * i + 3] = 0.0
+            qdd[3 * i : 3 * i + 3] = 0.0
+        return dataclasses.replace(ref, q_joints=q, qd_joints=qd, qdd_joints=qdd)
 
     def _measured_footholds(self) -> np.ndarray:
         """(4, 3) points on the terrain below the foot sites (m, world)."""
