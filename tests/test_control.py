@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
+import gymnasium as gym
 import mujoco
 import numpy as np
 import pytest
@@ -14,7 +16,9 @@ from agents.control import (
     Gains,
     InverseDynamics,
     eliminate_constraints,
+    foot_lookup,
     friction_pyramid,
+    measured_foot_contacts,
     verify_inverse_dynamics,
 )
 from agents.control_references import BaseWaveReference, track_in_env
@@ -253,3 +257,114 @@ def test_controller_runs_on_every_backend(backend):
     """The same control law with the numpy and Pinocchio dynamics inside the env (1 s of the base wave)."""
     out = run_in_env(1.0, "pinv", wave=1.0, backend=backend)
     assert out["rms_pos"] <= 0.005 and out["rms_rot"] <= 0.01 and out["min_fn"] > 0.0
+
+
+# ----------------------------------------------------------------------------- compiled hot path vs numpy
+def test_compiled_pinv_equals_numpy_path(mj_model, dyn, robot_cfg, rng):
+    """The kernel (3 or 4 stance feet, or none) gives the numpy elimination's result; 1-2 feet use numpy."""
+    ID = InverseDynamics(dyn, "pinv")
+    for tilt in (0.1, 0.3):
+        qpos, qvel = perturbed_stand(robot_cfg, rng, tilt)
+        terms = dyn.terms(qpos, qvel)
+        for stance in ALL_STANCES:
+            bdd = rng.normal(0.0, 2.0, C.NV - 3 * sum(stance))
+            fast = ID.solve_terms(terms, bdd, stance)
+            ref = ID._solve(eliminate_constraints(terms, stance), bdd, None)
+            for f in ("tau", "contact_forces", "qacc"):
+                np.testing.assert_allclose(getattr(fast, f), getattr(ref, f), rtol=0, atol=1e-9)
+            assert (fast.exact, fast.damped, fast.stance) == (ref.exact, ref.damped, ref.stance)
+            lay = eliminate_constraints(terms, stance).layout
+            compiled = ID.solve_compiled(terms.M, terms.h, terms.J_feet, terms.Jdot_qdot_feet, lay, bdd)
+            assert (compiled is not None) == (sum(stance) in (0, 3, 4))
+    qpos = home_qpos(robot_cfg)
+    qpos[7 + 1] = qpos[7 + 2] = 0.0  # stretched LF knee: damped inverse in both paths
+    terms = dyn.terms(qpos, np.zeros(C.NV))
+    fast = ID.solve_terms(terms, np.ones(6), (True,) * 4)
+    ref = ID._solve(eliminate_constraints(terms, (True,) * 4), np.ones(6), None)
+    assert fast.damped and ref.damped
+    np.testing.assert_allclose(fast.tau, ref.tau, rtol=1e-9, atol=1e-9)
+
+
+def _beta_ddot_reference(gains, qpos, qvel, ref, stance):
+    """The PD command with MuJoCo's quaternion functions (the numpy implementation it replaced)."""
+    e_rot, q_inv, q_rel, R_rel = np.empty(3), np.empty(4), np.empty(4), np.empty(9)
+    mujoco.mju_subQuat(e_rot, ref.quat_WB, qpos[3:7])
+    mujoco.mju_negQuat(q_inv, qpos[3:7])
+    mujoco.mju_mulQuat(q_rel, q_inv, ref.quat_WB)
+    mujoco.mju_quat2Mat(R_rel, q_rel)
+    g = gains
+    out = [ref.a_base_W + g.kd_pos * (ref.v_base_W - qvel[0:3]) + g.kp_pos * (ref.p_base_W - qpos[0:3])]
+    out.append(
+        R_rel.reshape(3, 3) @ (ref.domega_base_B + g.kd_rot * ref.omega_base_B)
+        - g.kd_rot * qvel[3:6]
+        + g.kp_rot * e_rot
+    )
+    j = np.array([3 * i + k for i in range(4) if not stance[i] for k in range(3)], dtype=int)
+    out.append(
+        ref.qdd_joints[j] + g.kd_joint * (ref.qd_joints[j] - qvel[6 + j]) + g.kp_joint * (ref.q_joints[j] - qpos[7 + j])
+    )
+    return np.concatenate(out)
+
+
+def test_compiled_pd_command_equals_mujoco_quaternions(robot_cfg, rng):
+    gains = Gains(kp_pos=300.0, kd_pos=30.0, kp_rot=200.0, kd_rot=20.0, kp_joint=800.0, kd_joint=50.0)
+    ctrl = ComputedTorqueController(lambda t: None, gains=gains)
+    for k in range(50):
+        qpos, qvel = perturbed_stand(robot_cfg, rng, tilt=0.5)
+        quat = rng.normal(size=4)
+        ref = ReferenceSample(
+            0.0, *(rng.normal(size=3),), quat / np.linalg.norm(quat), *(rng.normal(size=(4, 3))),
+            *(rng.normal(size=(3, 12))), ALL_STANCES[k % 16],
+        )  # fmt: skip
+        stance = ALL_STANCES[(3 * k) % 16]
+        got = ctrl.beta_ddot_command(qpos, qvel, ref, stance)
+        np.testing.assert_allclose(got, _beta_ddot_reference(gains, qpos, qvel, ref, stance), rtol=0, atol=1e-10)
+    bad = dataclasses.replace(ref, q_joints=np.zeros(11))
+    with pytest.raises(ValueError, match="q_joints must have 12"):
+        ctrl.beta_ddot_command(qpos, qvel, bad, stance)
+    listed = dataclasses.replace(ref, p_base_W=list(ref.p_base_W))  # non-array fields are converted
+    np.testing.assert_allclose(ctrl.beta_ddot_command(qpos, qvel, listed, stance), got, atol=0)
+
+
+def test_controller_call_equals_public_api_composition():
+    """One env step: the fused hook = select_stance + beta_ddot_command + terms_from_data + solve_terms + clip."""
+    env = gym.make("QuadUneven-v0", terrain={"kind": "rough", "amplitude": 0.04, "spawn_radius": 0.0})
+    env.reset(seed=5)
+    u = env.unwrapped
+    m, d = u.model, u.data
+    for _ in range(50):
+        mujoco.mj_step(m, d)
+    mujoco.mj_step1(m, d)
+    feet = d.site_xpos[[m.site(s).id for s in C.FOOT_SITES]].copy()
+    ref = BaseWaveReference(d.qpos[:3] + np.array([0.0, 0.0, 0.01]), feet, u.robot_cfg)
+    for dist in ("pinv", "qp"):
+        for planned in ((True,) * 4, (True, False, True, True), (True, False, False, True)):
+            sample = dataclasses.replace(ref(0.3), stance=planned)
+            ctrl = ComputedTorqueController(lambda t, s=sample: s, distribution=dist)
+            ctrl.reset(m, d, u.terrain)
+            tau = ctrl(m, d)
+            stance = ctrl.select_stance(planned, measured_foot_contacts(d, foot_lookup(m), m.geom(C.TERRAIN_GEOM).id))
+            bdd = ctrl.beta_ddot_command(d.qpos, d.qvel, sample, stance)
+            normals = ctrl._normals(d) if dist == "qp" else None
+            ref_res = InverseDynamics(ctrl.dynamics, dist).solve_terms(
+                ctrl.dynamics.terms_from_data(d), bdd, stance, normals
+            )
+            assert ctrl.last.stance == stance and ctrl.last.distribution == ref_res.distribution
+            np.testing.assert_allclose(ctrl.last.tau, ref_res.tau, rtol=0, atol=1e-6 if dist == "qp" else 1e-12)
+            np.testing.assert_allclose(tau, np.clip(ref_res.tau, -ctrl.torque_limit, ctrl.torque_limit), atol=1e-6)
+    env.close()
+
+
+def test_warm_started_qp_equals_one_off_solve(dyn, robot_cfg, rng):
+    """A sequence of different problems through the warm-started QP gives the cold one-off solutions."""
+    warm = InverseDynamics(dyn, "qp", min_normal_force=10.0)
+    for _ in range(12):
+        qpos, qvel = perturbed_stand(robot_cfg, rng, tilt=0.05)
+        stance = ALL_STANCES[rng.integers(0, 5)]  # 3 or 4 stance feet
+        bdd = np.zeros(C.NV - 3 * sum(stance))
+        bdd[:6] = rng.normal(0.0, 0.5, 6)
+        got = warm.solve(qpos, 0.2 * qvel, bdd, stance)
+        cold = InverseDynamics(dyn, "qp", min_normal_force=10.0).solve(qpos, 0.2 * qvel, bdd, stance)
+        assert got.qp_fallback == cold.qp_fallback and got.distribution == cold.distribution
+        np.testing.assert_allclose(got.contact_forces, cold.contact_forces, rtol=0, atol=1e-5)
+        np.testing.assert_allclose(got.tau, cold.tau, rtol=0, atol=1e-5)
