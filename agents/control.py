@@ -170,6 +170,7 @@ class ComputedTorqueController:
         self.torque_limit = model.actuator_ctrlrange[act, 1].copy()
         self.foot_of_geom = foot_lookup(model).astype(np.int64)
         self.terrain_geom = model.geom(C.TERRAIN_GEOM).id
+        self._foot_sites = np.array([model.site(s).id for s in C.FOOT_SITES])
         # buffers of the compiled mujoco-backend path: M, J_feet, Jdot qdot, G
         self._terms_buf = (
             np.empty((C.NV, C.NV)),
@@ -259,8 +260,7 @@ class ComputedTorqueController:
         hf = getattr(self.terrain, "heightfield", None)
         if hf is None or not hasattr(hf, "normal"):
             return None
-        sites = [self._model.site(s).id for s in C.FOOT_SITES]
-        p = data.site_xpos[sites]
+        p = data.site_xpos[self._foot_sites]
         return np.asarray(hf.normal(p[:, 0], p[:, 1]), dtype=float).reshape(C.N_LEGS, 3)
 
 

@@ -84,13 +84,10 @@ def friction_pyramid(normal_W: np.ndarray, mu: float) -> np.ndarray:
         ``mu' = mu / sqrt(2)`` (so the pyramid lies inside the true cone), then ``n`` (normal force).
     """
     n = np.asarray(normal_W, dtype=float)
-    n = n / np.linalg.norm(n, axis=-1, keepdims=True)
-    helper = np.where((np.abs(n[..., 0]) < 0.9)[..., None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    t1 = np.cross(n, helper)
-    t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
-    t2 = np.cross(n, t1)
-    mn = (mu / np.sqrt(2.0)) * n
-    return np.stack([mn - t1, mn + t1, mn - t2, mn + t2, n], axis=-2)
+    flat = np.ascontiguousarray(n.reshape(-1, 3))
+    out = np.empty((len(flat), 5, 3))
+    K.friction_pyramid_into(flat, float(mu), out)
+    return out.reshape((*n.shape[:-1], 5, 3))
 
 
 class InverseDynamics:

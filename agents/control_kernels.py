@@ -412,3 +412,23 @@ def qp_apply(x, C, l, A, b, J, mask, r, tau, F):  # pragma: no cover - compiled
             tau[3 * leg + a] = s
         k += 1
     return True
+
+
+@nb.njit(nb.void(_f2, nb.float64, _f3), cache=False, nogil=True)
+def friction_pyramid_into(normals, mu, out):  # pragma: no cover - compiled
+    """out (p, 5, 3): ``mu' n - t1, mu' n + t1, mu' n - t2, mu' n + t2, n`` per normal (``agents.control_id``)."""
+    mus = mu / math.sqrt(2.0)
+    for i in range(normals.shape[0]):
+        nn = math.sqrt(normals[i, 0] ** 2 + normals[i, 1] ** 2 + normals[i, 2] ** 2)
+        n0, n1, n2 = normals[i, 0] / nn, normals[i, 1] / nn, normals[i, 2] / nn
+        h0, h1 = (1.0, 0.0) if abs(n0) < 0.9 else (0.0, 1.0)
+        a0, a1, a2 = -n2 * h1, n2 * h0, n0 * h1 - n1 * h0  # n x (h0, h1, 0)
+        tn = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        a0, a1, a2 = a0 / tn, a1 / tn, a2 / tn
+        b0, b1, b2 = n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0  # n x t1
+        m0, m1, m2 = mus * n0, mus * n1, mus * n2
+        out[i, 0, 0], out[i, 0, 1], out[i, 0, 2] = m0 - a0, m1 - a1, m2 - a2
+        out[i, 1, 0], out[i, 1, 1], out[i, 1, 2] = m0 + a0, m1 + a1, m2 + a2
+        out[i, 2, 0], out[i, 2, 1], out[i, 2, 2] = m0 - b0, m1 - b1, m2 - b2
+        out[i, 3, 0], out[i, 3, 1], out[i, 3, 2] = m0 + b0, m1 + b1, m2 + b2
+        out[i, 4, 0], out[i, 4, 1], out[i, 4, 2] = n0, n1, n2

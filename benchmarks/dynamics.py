@@ -90,6 +90,18 @@ def main() -> None:
             (f"ID solve backend={b} pinv", median_us(lambda ID=ID: ID.solve(qpos, qvel, bdd, stance), args.repeats))
         )
 
+    z3, z12 = np.zeros(3), np.zeros(12)
+    hold = ReferenceSample(0.0, qpos[:3].copy(), qpos[3:7].copy(), z3, z3, z3, z3, qpos[7:].copy(), z12, z12, stance)
+    for dist in ("pinv", "qp"):
+        ctrl = ComputedTorqueController(lambda t: hold, backend="mujoco", distribution=dist)
+        ctrl.reset(m, d, u.terrain)
+        rows.append(
+            (
+                f"controller call backend=mujoco {dist} (same state, after mj_step1)",
+                median_us(lambda c=ctrl: c(m, d), args.repeats),
+            )
+        )
+
     n_batch = 1000
     qpos_b = np.repeat(qpos[None], n_batch, 0)
     qvel_b = qvel[None] + rng.normal(0.0, 0.5, (n_batch, m.nv))
@@ -129,7 +141,9 @@ def main() -> None:
     for name, t in rows:
         print(f"{name:<{width}}  {t:8.1f}")
     id_pinv = dict(rows)["ID solve backend=mujoco pinv (terms_from_data + solve_terms)"]
+    ctrl_pinv = dict(rows)["controller call backend=mujoco pinv (same state, after mj_step1)"]
     print(f"\nID pinv (mujoco) / mj_step = {id_pinv / t_step:.2f}  (target <= 1.0)")
+    print(f"controller call pinv (mujoco) / mj_step = {ctrl_pinv / t_step:.2f}  (target <= 1.0)")
     print(f"controller / (mj_step1 + mj_step2) in the loop = {ctrl_us / phys_us:.2f}")
     print(
         f"explicit terms / Pinocchio reference = {dict(rows)['terms() backend=explicit'] / t_pin:.1f}  (target <= 20)"

@@ -368,3 +368,17 @@ def test_warm_started_qp_equals_one_off_solve(dyn, robot_cfg, rng):
         assert got.qp_fallback == cold.qp_fallback and got.distribution == cold.distribution
         np.testing.assert_allclose(got.contact_forces, cold.contact_forces, rtol=0, atol=1e-5)
         np.testing.assert_allclose(got.tau, cold.tau, rtol=0, atol=1e-5)
+
+
+def test_friction_pyramid_matches_numpy_construction(rng):
+    normals = rng.normal(size=(60, 3))
+    normals[:20, 0] *= 30.0  # normals near x: the other helper axis
+    n = normals / np.linalg.norm(normals, axis=-1, keepdims=True)
+    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    t1 = np.cross(n, helper)
+    t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
+    t2 = np.cross(n, t1)
+    mn = (0.7 / np.sqrt(2.0)) * n
+    ref = np.stack([mn - t1, mn + t1, mn - t2, mn + t2, n], axis=-2)
+    np.testing.assert_allclose(friction_pyramid(normals, 0.7), ref, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(friction_pyramid(normals[3], 0.7), ref[3], rtol=0, atol=1e-14)
