@@ -147,10 +147,16 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
     r = cfg.foot_radius
     sites = [foot_site_on(terrain, s, r) for s in supports]
     offsets = [(wb.hips + com_to_base)[np.asarray(p.stance)] for p in phases]
+    # The given start and goal COGs may already ask for more reach (e.g. a measured state): never
+    # let the reach limit make the boundary itself infeasible.
+    reach = STANCE_REACH * cfg.leg_length
+    for k, c in ((0, cog0[0]), (len(phases) - 1, goal[0])):
+        reach = max(reach, float(np.linalg.norm(c + offsets[k] - sites[k], axis=1).max()) + 1e-3)
+    reach = min(reach, REACH_MARGIN * cfg.leg_length)
     problem = CogProblem(
         t_knots, supports, names, targets, cog0, goal, mass, scenario.epsilon,
         tuple(scenario.weights), scenario.smoothing, [p.name() for p in phases],
-        sites, offsets, STANCE_REACH * cfg.leg_length,
+        sites, offsets, reach,
     )  # fmt: skip
     cog, cstats = plan_cog(problem, method=scenario.method)
     t_sw = time.perf_counter()
