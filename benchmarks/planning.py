@@ -12,15 +12,22 @@ Markdown table.
 
 from __future__ import annotations
 
-import argparse
-import dataclasses
+import os
 
-import numpy as np
+# The planner's matrices are small (~117 x 600): multi-threaded BLAS only adds overhead (and
+# thrashes on a loaded machine). One thread, unless the caller set it.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from planners import PlanningError, Scenario, choose_footholds, plan_gait_cycle
-from quad_uneven_env.config import load_robot_config
-from quad_uneven_env.robot.kinematics import hip_positions_B
-from quad_uneven_env.terrain import Terrain, parse_terrain_spec
+import argparse  # noqa: E402
+import dataclasses  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from planners import PlanningError, Scenario, choose_footholds, plan_gait_cycle  # noqa: E402
+from quad_uneven_env.config import load_robot_config  # noqa: E402
+from quad_uneven_env.robot.kinematics import hip_positions_B  # noqa: E402
+from quad_uneven_env.terrain import Terrain, parse_terrain_spec  # noqa: E402
 
 TERRAINS = {
     "rough (5 cm)": {"kind": "rough", "amplitude": 0.05},
