@@ -33,7 +33,7 @@ import numpy as np
 
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot.dynamics import DynamicsTerms
-from quad_uneven_env.robot.dynamics_kernels import explicit_terms
+from quad_uneven_env.robot.dynamics_kernels_explicit import explicit_terms
 
 _TOL = 1e-12
 _AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0))  # HAA, HFE, KFE
