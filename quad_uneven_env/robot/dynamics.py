@@ -9,7 +9,7 @@ base-frame angular velocity), the terms of ``M(q) qacc + h(q, qvel) = B tau + J^
 - ``Jdot_qdot_feet`` (4 x 3, m/s^2): the feet's world-frame classical acceleration at
   ``qacc = 0``, so that ``p_ddot_foot = J qacc + Jdot_qdot``.
 
-Backends: ``"explicit"`` (the paper's Lagrangian explicit method, numpy only,
+Backends: ``"explicit"`` (the paper's Lagrangian explicit method, closed form, numba-compiled,
 :mod:`quad_uneven_env.robot.dynamics_explicit`), ``"pinocchio"`` (CRBA/RNEA,
 :mod:`quad_uneven_env.robot.dynamics_pinocchio`) and ``"mujoco"`` (mj_fullM, qfrc_bias,
 mj_jacSite/mj_jacDot, :mod:`quad_uneven_env.robot.dynamics_mujoco`).

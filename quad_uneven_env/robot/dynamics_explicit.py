@@ -1,4 +1,4 @@
-"""The paper's explicit (Lagrangian) dynamics, Appendix A eq. 35-39, in vectorised numpy.
+"""The paper's explicit (Lagrangian) dynamics, Appendix A eq. 35-39 (compiled kernel; numpy reference).
 
 For every link l (trunk, 4 thighs, 4 shanks) with mass m_l, inertia I_l about its COM,
 COM Jacobian Jv_l and angular-velocity Jacobian Jw_l (both 3 x 18 in canonical coordinates):
@@ -24,6 +24,9 @@ one stacked pass; their B-frame Jacobians form J (13 x 6 x 18, rows v then w) an
 D = blockdiag(m I, I_B) per point, ``M = J^T D J``, ``h = J^T [m (a0 - g_B); I alpha0 + w x I w]``
 and ``G = J^T [-m g_B; 0]`` are three matrix products. The feet (zero mass) reuse the same J.
 Every array carries a leading batch axis, so many states are evaluated in one call.
+``terms`` runs the same formulas one state at a time in a compiled kernel
+(:mod:`quad_uneven_env.robot.dynamics_kernels_explicit`); ``terms_numpy`` is the vectorised
+numpy version it is tested against.
 """
 
 from __future__ import annotations
