@@ -203,7 +203,7 @@ class ComputedTorqueController:
         lay = stance_layout(stance)
         qpos, qvel = data.qpos, data.qvel
         beta_ddot = self._bdd[: self._beta_command(qpos, qvel, ref, lay.mask)]
-        normals = self._normals(data) if self.distribution == "qp" else None
+        normals = self._normals(data, stance) if self.distribution == "qp" else None
         if self.backend == "mujoco":
             M, J, Jdd, G = self._terms_buf
             DK.mujoco_terms(*self.dynamics.data_views(data), M, J, Jdd, G)
@@ -256,12 +256,26 @@ class ComputedTorqueController:
             raise ValueError(f"{what} must have {_CMD_SIZES[-n - 1]} entries, got shape {got}")
         return n
 
-    def _normals(self, data: mujoco.MjData) -> np.ndarray | None:
+    def _normals(self, data: mujoco.MjData, stance: tuple[bool, ...]) -> np.ndarray | None:
+        """(4, 3) terrain normals under the feet (world); only stance rows are used by the QP.
+
+        A stance foot does not move, so its normal is cached and recomputed only when its site
+        has moved more than 2 mm (the terrain query costs more than the rest of the QP set-up).
+        """
         hf = getattr(self.terrain, "heightfield", None)
         if hf is None or not hasattr(hf, "normal"):
             return None
+        if getattr(self, "_normal_hf", None) is not hf:
+            self._normal_hf = hf
+            self._normal_cache = np.tile([0.0, 0.0, 1.0], (C.N_LEGS, 1))
+            self._normal_at = np.full((C.N_LEGS, 3), np.inf)
         p = data.site_xpos[self._foot_sites]
-        return np.asarray(hf.normal(p[:, 0], p[:, 1]), dtype=float).reshape(C.N_LEGS, 3)
+        stale = np.asarray(stance) & (np.abs(p - self._normal_at).max(axis=1) > 0.002)
+        if stale.any():
+            q = p[stale]
+            self._normal_cache[stale] = np.asarray(hf.normal(q[:, 0], q[:, 1]), dtype=float).reshape(-1, 3)
+            self._normal_at[stale] = q
+        return self._normal_cache
 
 
 def verify(

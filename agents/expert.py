@@ -42,7 +42,7 @@ class ExpertConfig:
     """s: the 7 phases of the walk cycle (paper order; the paper uses 1, 1, 1, 0.1, 1, 1, 1)."""
     stride: float = 0.33
     """m: body advance per cycle along +x (0.33 m / 3.1 s = 0.106 m/s nominal)."""
-    cog_height: float = 0.36
+    cog_height: float = 0.33
     """m: COG height above the mean foothold height."""
     epsilon: float = 20.0
     """N m: stability margin of the planned COG path (20 N m = 4 cm of static margin for 50 kg):

@@ -345,7 +345,8 @@ def test_controller_call_equals_public_api_composition():
             tau = ctrl(m, d)
             stance = ctrl.select_stance(planned, measured_foot_contacts(d, foot_lookup(m), m.geom(C.TERRAIN_GEOM).id))
             bdd = ctrl.beta_ddot_command(d.qpos, d.qvel, sample, stance)
-            normals = ctrl._normals(d) if dist == "qp" else None
+            p_feet = d.site_xpos[[m.site(s).id for s in C.FOOT_SITES]]
+            normals = u.terrain.heightfield.normal(p_feet[:, 0], p_feet[:, 1]) if dist == "qp" else None
             ref_res = InverseDynamics(ctrl.dynamics, dist).solve_terms(
                 ctrl.dynamics.terms_from_data(d), bdd, stance, normals
             )
