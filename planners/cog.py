@@ -90,7 +90,7 @@ class CogStats:
     min_stability: float = np.inf
     """smallest stability index (N m) on the dense check grid."""
     n_constraints: int = 0
-    """stability constraints in the final problem."""
+    """sampled inequality constraints (stability edges and stance-leg reach) in the final problem."""
     method: str = ""
     """solver used."""
 
@@ -387,6 +387,6 @@ def plan_cog(
     coef = red.coef(z)
     path = PiecewisePolynomial(prob.t_knots, coef)
     stats.min_stability = worst
-    stats.n_constraints = sum(len(s) * len(e[2]) for s, e in zip(samples, red.edges, strict=True))
+    stats.n_constraints = len(red.constraints(z)[0])  # stability and stance-reach rows
     stats.solve_time = time.perf_counter() - t0
     return path, stats
