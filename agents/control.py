@@ -270,8 +270,9 @@ class ComputedTorqueController:
             self._normal_cache = np.tile([0.0, 0.0, 1.0], (C.N_LEGS, 1))
             self._normal_at = np.full((C.N_LEGS, 3), np.inf)
         p = data.site_xpos[self._foot_sites]
-        stale = np.asarray(stance) & (np.abs(p - self._normal_at).max(axis=1) > 0.002)
-        if stale.any():
+        d2 = ((p - self._normal_at) ** 2).sum(axis=1)
+        stale = [st and d > 4e-6 for st, d in zip(stance, d2.tolist(), strict=True)]  # moved > 2 mm
+        if any(stale):
             q = p[stale]
             self._normal_cache[stale] = np.asarray(hf.normal(q[:, 0], q[:, 1]), dtype=float).reshape(-1, 3)
             self._normal_at[stale] = q

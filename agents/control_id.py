@@ -264,8 +264,13 @@ class InverseDynamics:
             J_feet, r = np.ascontiguousarray(J_feet, dtype=float), np.ascontiguousarray(r, dtype=float)
             cones = np.ascontiguousarray(cones, dtype=float)
             K.qp_fill(J_feet, lay.mask, r, result.contact_forces, cones, self._cone_lower, *qp.problem)
-        x = qp.solve()
         _, _, A, b, C_in, lower = qp.problem
+        # The QP's optimum is the torque closest to "pinv"; when the "pinv" forces already lie in
+        # every cone with the minimum normal force, they are that optimum (zero cost): skip the solve.
+        if (C_in @ result.contact_forces[st].ravel() >= lower).all():
+            result.distribution = "qp"
+            return
+        x = qp.solve()
         tau, F = result.tau.copy(), np.zeros((C.N_LEGS, 3))
         if x is None or not K.qp_apply(x, C_in, lower, A, b, J_feet, lay.mask, r, tau, F):
             result.qp_fallback = True

@@ -97,6 +97,7 @@ class ExpertPolicy:
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
         self._hips_B = hip_positions_B(self.cfg)
+        self._foot_sensor_adr = [int(a) for a in self.env.idx.foot_sensor_adr]
         self.controller = ComputedTorqueController(
             reference=self._reference,
             backend=self.config.backend,
@@ -168,9 +169,8 @@ class ExpertPolicy:
         if not hasattr(self._current, "footholds"):
             return ref
         sd = self._data.sensordata
-        contact = sd[self.env.idx.foot_sensor_adr] > 0
-        late = np.asarray(ref.stance) & ~contact
-        if not late.any():
+        late = [st and sd[a] <= 0 for st, a in zip(ref.stance, self._foot_sensor_adr, strict=True)]
+        if not any(late):
             return ref
         plan = self._current
         q = ref.q_joints.copy()
