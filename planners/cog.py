@@ -262,9 +262,9 @@ def _solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lo: np.ndarray) -> np
     return res.x if res.info.status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED else None
 
 
-def _infeasible(red: _Reduced, z: np.ndarray, bound: float, what: str) -> PlanningError:
+def _infeasible(red: _Reduced, z: np.ndarray, bound: float, what: str, rows: np.ndarray | None = None) -> PlanningError:
     h, _ = red.constraints(z)
-    i = int(np.argmin(h))
+    i = int(np.argmin(np.where(rows, h, np.inf) if rows is not None else h))
     k, label = red.locate(i)
     name = red.prob.phase_names[k] if red.prob.phase_names else f"phase {k}"
     if label.startswith("reach"):
@@ -295,8 +295,13 @@ def _sqp(red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, max_iter: 
     h, J = red.constraints(z)
     if h.min() >= bound:  # the best unconstrained path is already stable
         return z
+    # Rows the variables cannot move (the given start and end states): check them, then drop them,
+    # so a measured start state between epsilon and epsilon + margin stays plannable.
+    fixed = np.abs(J).max(axis=1) < 1e-12
+    if np.any(fixed & (h < red.prob.epsilon)):
+        raise _infeasible(red, z, red.prob.epsilon, "the given start or end state itself", fixed)
     for _ in range(max_iter):
-        lo = bound - h + J @ z
+        lo = np.where(fixed, -1e20, bound - h + J @ z)
         z_new = _solve_qp(red.H, red.g, J, lo)
         stats.iterations += 1
         if z_new is None:
@@ -304,9 +309,9 @@ def _sqp(red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, max_iter: 
         step = np.abs(z_new - z).max()
         z = z_new
         h, J = red.constraints(z)
-        if h.min() >= bound - 1e-5 and step < 1e-4:
+        if h[~fixed].min() >= bound - 1e-5 and step < 1e-4:
             return z
-    if h.min() < bound - 1e-4:
+    if h[~fixed].min() < bound - 1e-4:
         raise _infeasible(red, z, bound, f"SQP did not converge in {max_iter} iterations")
     return z
 

@@ -110,3 +110,14 @@ def test_unconstrained_optimum_hits_reachable_targets():
     err = np.abs(path.position(prob.t_knots[1:-1]) - prob.targets).max()
     assert err < 0.02
     assert stats.iterations == 0 or stats.min_stability >= 0.1
+
+
+def test_unstable_start_state_raises_naming_it():
+    prob = make_problem(0.1)
+    start = prob.start.copy()
+    start[0, 1] = 0.19  # outside the support polygon (left feet at y = 0.185): the given state is unstable
+    with pytest.raises(PlanningError, match=r"start or end state.*phase 0.*edge"):
+        plan_cog(dataclasses.replace(prob, start=start))
+    start[0, 1] = 0.12  # 6.5 cm inside: plannable
+    path, _ = plan_cog(dataclasses.replace(prob, start=start))
+    assert dense_index(dataclasses.replace(prob, start=start), path).min() >= 0.1 - 1e-6
