@@ -139,6 +139,13 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         goal = np.zeros((3, 3))
         goal[0, :2] = target[:, :2].mean(axis=0)
         goal[0, 2] = target[:, 2].mean() + scenario.cog_height
+        # ... but low enough for every leg to reach its foothold (stairs: the hind feet a step lower).
+        sites_end = foot_site_on(terrain, target, cfg.foot_radius)
+        hips_end = wb.hips + com_to_base
+        horiz = np.linalg.norm(goal[0, :2] + hips_end[:, :2] - sites_end[:, :2], axis=1)
+        reach_end = STANCE_REACH * cfg.leg_length - 0.005
+        z_max = sites_end[:, 2] - hips_end[:, 2] + np.sqrt(np.maximum(reach_end**2 - horiz**2, 0.0))
+        goal[0, 2] = min(goal[0, 2], float(z_max.min()))
     feet_phase = [np.where(np.asarray(p.moved)[:, None], target, start) for p in phases]
     supports = [f[np.asarray(p.stance)] for f, p in zip(feet_phase, phases, strict=True)]
     names = [[leg for leg, s in zip(LEG_NAMES, p.stance, strict=True) if s] for p in phases]

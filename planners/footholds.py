@@ -3,7 +3,7 @@
 Each leg's nominal foothold is under its hip at the end of the cycle (body moved by the
 stride). Candidates on a grid in a window around it are kept when the terrain is locally flat
 (plane slope and roughness limits), away from step edges and holes (small height range in a
-disc larger than the foot), not at the bottom of a hole, and reachable from the hip at
+disc larger than the foot), not at the bottom of a hole (deep below its neighbourhood), and reachable from the hip at
 touch-down and at the end of the cycle along the (straight-line) body path; the kept candidate
 nearest the nominal point wins. Returns 3-D points on the terrain surface.
 """
@@ -38,8 +38,11 @@ class FootholdLimits:
     """radius (m) of the disc that must hold no step edge or hole."""
     max_step: float = 0.02
     """largest height range (m) within ``edge_radius`` (edges of steps, stones, holes)."""
-    max_drop: float = 0.08
-    """a candidate more than this (m) below the highest terrain in the window is in a hole."""
+    max_drop: float = 0.2
+    """a candidate more than this (m) below the highest terrain within ``hole_radius`` is in a hole
+    (deeper than a stair riser, shallower than the gaps between stepping stones)."""
+    hole_radius: float = 0.08
+    """radius (m) of the neighbourhood of the hole test."""
     reach: float = 0.97
     """fraction of the stretched leg length allowed from hip to foot site."""
 
@@ -86,7 +89,9 @@ def choose_footholds(
     cog_start = np.asarray(cog_start, dtype=float)
     goal_xy = np.asarray(goal_xy, dtype=float)
     nominal = goal_xy + hips[:, :2]
-    z_goal = float(np.mean(terrain.height(nominal[:, 0], nominal[:, 1]))) + cog_height
+    h_nom = terrain.height(nominal[:, 0], nominal[:, 1])
+    # Body height at the end: nominal above the mean, but the lowest foothold must stay in reach (stairs).
+    z_goal = float(min(np.mean(h_nom), np.min(h_nom) + 0.02)) + cog_height
     phases = walk_cycle(durations)
     total = phases[-1].t_end
     offs = np.arange(-lim.window, lim.window + 1e-9, lim.step)
@@ -98,16 +103,16 @@ def choose_footholds(
         h = terrain.height(x, y)
         slope, rough, rng_h = _patch(terrain, x, y, lim.edge_radius)
         ok = (slope <= lim.max_slope) & (rough <= lim.max_roughness) & (rng_h <= lim.max_step)
-        ok &= h >= h.max() - lim.max_drop
+        ok &= h >= max_height_in_disk(terrain, np.column_stack([x, y]), lim.hole_radius) - lim.max_drop
         # Sphere must rest on this spot without the surroundings lifting it.
         ok &= max_height_in_disk(terrain, np.column_stack([x, y]), cfg.foot_radius) <= h + 0.005
         # Reach from the hip at touch-down and at the end of the cycle (straight-line body path).
         t_touch = next(p.t_end for p in phases if p.swing_leg == leg)
         site = np.column_stack([x, y, h + cfg.foot_radius])
         for frac in (t_touch / total, 1.0):
-            body = np.append(
-                cog_start[:2] + frac * (goal_xy - cog_start[:2]), cog_start[2] + frac * (z_goal - cog_start[2])
-            )
+            # Height: the COG optimiser may lower the body early (stairs down), so no higher than the goal.
+            z_body = min(cog_start[2] + frac * (z_goal - cog_start[2]), z_goal)
+            body = np.append(cog_start[:2] + frac * (goal_xy - cog_start[:2]), z_body)
             dist = np.linalg.norm(site - (body + hips[i]), axis=1)
             ok &= dist <= lim.reach * cfg.leg_length
         if not np.any(ok):
