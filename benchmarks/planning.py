@@ -117,5 +117,43 @@ def main() -> None:
             print(f"- {name} failure: {f}")
 
 
+def walk(n_cycles: int = 16) -> None:
+    """Continuous walking: chain cycles (each starts where the last ended), footholds chosen automatically."""
+    cfg = load_robot_config("paper")
+    print(f"\n| terrain (seed 0) | cycles planned in a row (of {n_cycles}) | distance (m) | first failure |")
+    print("|---|---|---|---|")
+    for spec in ("flat", "rough", "slope", "stairs", {"kind": "stairs", "riser": 0.1}, "stepping_stones", "paper"):
+        terr = Terrain(parse_terrain_spec(spec))
+        hf = terr.generate(np.random.default_rng(0))
+        sx, sy = terr.spawn_xy
+        feet = np.column_stack([hip_positions_B(cfg)[:, :2] + [sx, sy], np.zeros(4)])
+        feet[:, 2] = hf.height(feet[:, 0], feet[:, 1])
+        if spec == "paper":
+            from quad_uneven_env.terrain import PAPER_BLOCKS
+
+            feet = np.array(PAPER_BLOCKS["start"])
+        cog = {"pos": np.array([*feet[:, :2].mean(0), feet[:, 2].mean() + 0.36])}
+        x0, ok, why = cog["pos"][0], 0, ""
+        for _ in range(n_cycles):
+            sc = Scenario(
+                terrain=hf, feet_start=feet, cog_start=cog, durations=(0.4, 0.8, 0.8, 0.2, 0.8, 0.8, 0.4), epsilon=5.0
+            )
+            try:
+                plan = plan_gait_cycle(sc)
+            except PlanningError as err:
+                why = str(err)[:120]
+                break
+            ok += 1
+            end = np.array([plan.duration])
+            feet = plan.footholds
+            cog = {
+                "pos": plan.cog.position(end)[0],
+                "vel": plan.cog.velocity(end)[0],
+                "acc": plan.cog.acceleration(end)[0],
+            }
+        print(f"| {spec} | {ok} | {cog['pos'][0] - x0:.2f} | {why} |")
+
+
 if __name__ == "__main__":
     main()
+    walk()
