@@ -17,6 +17,7 @@ from planners.scenario import Scenario
 from planners.swing import SwingPath, plan_swing
 from planners.terrain_query import HeightMap, foot_site_on
 from planners.wholebody import WholeBody
+from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import LEG_NAMES
 from quad_uneven_env.robot.kinematics import standing_joint_angles
 from quad_uneven_env.stability import stability_index
@@ -56,6 +57,8 @@ class GaitCyclePlan:
     stats: dict[str, Any]
     """cog_solve_time (s), swing_solve_time (s), total_time (s), iterations, refinements,
     min_stability (N m), min_clearance (m), method."""
+    robot: RobotConfig | None = None
+    """the robot planned for (the reference's default)."""
 
     @property
     def duration(self) -> float:
@@ -87,7 +90,7 @@ class GaitCyclePlan:
         """The joint reference for the controller (:class:`planners.reference.Reference`); cfg: robot (Table 1)."""
         from planners.reference import Reference
 
-        return Reference(self, cfg)
+        return Reference(self, cfg or self.robot)
 
 
 def _junction_targets(phases, feet_phase, cog_height: float) -> np.ndarray:
@@ -184,7 +187,7 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         )  # fmt: skip
     t_end = time.perf_counter()
     stats = _stats(cstats, t_end - t_sw, t_end - t_all, swings)
-    return GaitCyclePlan(phases, cog, swings, start, target, targets, terrain, mass, scenario.epsilon, r, stats)
+    return GaitCyclePlan(phases, cog, swings, start, target, targets, terrain, mass, scenario.epsilon, r, stats, cfg)
 
 
 def _stats(c: CogStats, swing_time: float, total: float, swings: dict[str, SwingPath]) -> dict[str, Any]:
