@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from agents.evaluate import add_evaluate_parser, evaluate
+from agents.paper_sim import add_paper_parser
 from agents.suites import suite_from_dict
 
 
@@ -39,6 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--distance", type=float, default=2.0, help="goal distance along +x (m)")
     p_demo.add_argument("--no-video", action="store_true", help="skip the MP4 (rendering is the slow part)")
     add_evaluate_parser(sub)
+    add_paper_parser(sub)
     args = parser.parse_args(argv)
     if getattr(args, "func", None) is not None:
         return args.func(args)
