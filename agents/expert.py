@@ -25,6 +25,7 @@ from typing import Any
 import gymnasium as gym
 import mujoco
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from agents.control import ComputedTorqueController, Gains
 from planners import PlanningError, Scenario, plan_gait_cycle
@@ -217,7 +218,10 @@ class ExpertPolicy:
             )
             tic = time.perf_counter()
             try:
-                plan = plan_gait_cycle(scenario)
+                # Small dense problems: multi-threaded BLAS only adds contention (10-50x slower
+                # on a loaded 2-core machine), so the planner runs single-threaded.
+                with threadpool_limits(limits=1, user_api="blas"):
+                    plan = plan_gait_cycle(scenario)
             except PlanningError as err:
                 self.failure_log.append(f"t={t0:.2f} s, stride {stride:.3f} m: {err}")
                 continue

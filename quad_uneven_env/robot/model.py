@@ -75,7 +75,7 @@ def _trunk_xml(cfg: RobotConfig, with_camera: bool) -> str:
     hips = hip_positions_B(cfg)
     legs = "".join(_leg_xml(cfg, leg, hips[i]) for i, leg in enumerate(C.LEG_NAMES))
     camera = (
-        f'<camera name="{C.TRACK_CAMERA}" mode="trackcom" pos="0.4 -2.2 0.9" xyaxes="1 0 0 0 0.35 1"/>'
+        f'<camera name="{C.TRACK_CAMERA}" mode="trackcom" pos="0.3 -1.7 0.75" xyaxes="1 0 0 0 0.4 1"/>'
         if with_camera
         else ""
     )
@@ -164,7 +164,7 @@ def scene_mjcf(
     {hfield_asset}
   </asset>
   <worldbody>
-    <light name="sun" directional="true" pos="0 0 5" dir="-0.3 0.3 -1" castshadow="false"/>
+    <light name="sun" directional="true" pos="0 0 5" dir="-0.3 0.3 -1" castshadow="true"/>
     {hfield_geom}{_trunk_xml(cfg, with_camera=True)}
   </worldbody>
   <actuator>
