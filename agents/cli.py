@@ -41,7 +41,13 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--no-video", action="store_true", help="skip the MP4 (rendering is the slow part)")
     add_evaluate_parser(sub)
     add_paper_parser(sub)
+    p_plan = sub.add_parser("plan-paper", help="plan the paper's §6 scenario (no simulator): Figs. 4-6, plan.json")
+    p_plan.add_argument("--out", required=True, help="output directory (created if missing)")
     args = parser.parse_args(argv)
+    if args.command == "plan-paper":
+        from planners.paper_figures import main as plan_paper
+
+        return plan_paper(["--out", args.out])
     if getattr(args, "func", None) is not None:
         return args.func(args)
     if args.command == "demo":
