@@ -169,6 +169,7 @@ class QuadUnevenEnv(gym.Env):
         self._mass = self.idx.total_mass
         self._gravity = self.model.opt.gravity.copy()
         self._g = float(-self._gravity[2])
+        self._cos_max_tilt = math.cos(math.radians(self.termination.max_tilt_deg))
         self._hips_B = hip_positions_B(self.robot_cfg)
         # Row 0 is the point under the base, the rest the height scan grid.
         self._scan_B = np.vstack([np.zeros((1, 2)), height_scan_points_B(self.height_scan)])
@@ -225,6 +226,9 @@ class QuadUnevenEnv(gym.Env):
             raise ValueError(f"reset options are not supported (got keys {sorted(options)}); pass terrain to make()")
         self.terrain.generate(self.np_random)
         self.terrain.upload(self.model)
+        (xmin, xmax), (ymin, ymax) = self.terrain.heightfield.extent
+        margin = 0.3  # m: the robot has left the terrain before its trunk reaches the edge
+        self._inside_xy = (xmin + margin, xmax - margin, ymin + margin, ymax - margin)
         self._upload_terrain_to_renderer()
 
         mujoco.mj_resetData(self.model, self.data)
@@ -376,12 +380,12 @@ class QuadUnevenEnv(gym.Env):
             return f"fall: base height {height:.3f} m < {lim.min_base_height} m"
         if height > lim.max_base_height:
             return f"fall: base height {height:.3f} m > {lim.max_base_height} m"
-        if meas["R"][2, 2] < np.cos(np.deg2rad(lim.max_tilt_deg)):
+        if meas["R"][2, 2] < self._cos_max_tilt:
             tilt = np.rad2deg(np.arccos(np.clip(meas["R"][2, 2], -1, 1)))
             return f"fall: tilt {tilt:.1f} deg > {lim.max_tilt_deg} deg"
-        (xmin, xmax), (ymin, ymax) = self.terrain.heightfield.extent
-        x, y = meas["base"][:2]
-        if not (xmin + 0.3 < x < xmax - 0.3 and ymin + 0.3 < y < ymax - 0.3):
+        xmin, xmax, ymin, ymax = self._inside_xy
+        x, y = meas["base"][0], meas["base"][1]
+        if not (xmin < x < xmax and ymin < y < ymax):
             return "left the terrain"
         return None
 
@@ -398,7 +402,7 @@ class QuadUnevenEnv(gym.Env):
         obs[st["joint_vel"]] = d.qvel[6:]
         obs[st["foot_contact"]] = meas["contacts"].foot_contact
         norm = self._mass * self._g
-        obs[st["stability_index"]] = meas["index_norm"] if np.isfinite(meas["index_norm"]) else -STABILITY_CLIP
+        obs[st["stability_index"]] = meas["index_norm"] if math.isfinite(meas["index_norm"]) else -STABILITY_CLIP
         edges = np.zeros(4)
         moments = meas["moments"]
         if moments.size and np.isfinite(moments).all():
@@ -407,7 +411,7 @@ class QuadUnevenEnv(gym.Env):
             edges[:] = -STABILITY_CLIP
         obs[st["edge_moments"]] = edges
         phase = 2.0 * np.pi * d.time / self.gait_period
-        obs[st["gait_clock"]] = (np.sin(phase), np.cos(phase))
+        obs[st["gait_clock"]] = (math.sin(phase), math.cos(phase))
         obs[st["height_scan"]] = meas["scan"] - meas["base"][2]
         obs[st["prev_action"]] = self._prev_action
         np.clip(obs, self._obs_low, self._obs_high, out=obs)
