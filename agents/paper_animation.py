@@ -1,4 +1,4 @@
-"""Fig. 9 of the simulated §6 run: a side-view (x-z) stick-figure animation as a GIF (matplotlib + imageio)."""
+"""Fig. 9 of the simulated §6 run: a side-view (x-z) stick-figure animation as a GIF (matplotlib + pillow)."""
 
 from __future__ import annotations
 
@@ -22,16 +22,16 @@ def frame_indices(time: np.ndarray, fps: float) -> np.ndarray:
     return np.unique(np.clip(np.searchsorted(time, want - 1e-9), 0, len(time) - 1))
 
 
-def write_stick_animation(run, path: Path, fps: float = 20.0, size: tuple[float, float] = (6.0, 3.4),
-                          dpi: int = 72) -> Path:  # fmt: skip
+def write_stick_animation(run, path: Path, fps: float = 20.0, size: tuple[float, float] = (5.6, 3.0),
+                          dpi: int = 64) -> Path:  # fmt: skip
     """Write the stick figure of ``run`` (a :class:`agents.paper_sim.PaperRun`) to ``path`` (GIF).
 
     Side view: terrain profiles under the left (y > 0, solid) and right (y < 0, lighter) feet, the
     trunk between the hips, each leg hip -> knee -> foot site, the measured COG (dot) and the planned
     one (cross). ``fps`` frames per simulated second (real-time playback); ``size`` in inches.
     """
-    import imageio.v3 as iio
     import matplotlib.pyplot as plt
+    from PIL import Image
 
     a, plan = run.arrays, run.plan
     ks = frame_indices(run.time, fps)
@@ -72,5 +72,8 @@ def write_stick_animation(run, path: Path, fps: float = 20.0, size: tuple[float,
         frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
     plt.close(fig)
     path = Path(path)
-    iio.imwrite(path, np.stack(frames), extension=".gif", duration=1000.0 / fps, loop=0)
+    # A shared 32-colour palette keeps the GIF small (the figure has few colours).
+    first = Image.fromarray(frames[0]).quantize(colors=32)
+    images = [first] + [Image.fromarray(f).quantize(palette=first) for f in frames[1:]]
+    images[0].save(path, save_all=True, append_images=images[1:], duration=round(1000.0 / fps), loop=0, optimize=True)
     return path

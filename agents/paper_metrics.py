@@ -64,6 +64,9 @@ def summarize(run) -> dict[str, Any]:
     saturated = np.abs(a["tau"]) >= run.torque_limit - 1e-6
     contact = a["contact"]
     plan = run.plan
+    landed = t[:, None] >= np.array([plan.swing[leg].t_end for leg in LEG_NAMES])[None, :]
+    planned_xy = np.where(landed[..., None], plan.footholds[None, :, :2], plan.feet_start[None, :, :2])
+    slip = np.linalg.norm(a["feet"][..., :2] - planned_xy, axis=-1)
     t_dense = np.linspace(0.0, min(plan.duration, max(float(t[-1]), 0.0)) if len(t) else 0.0, 6001)
     return {
         "scenario": "paper §6: footholds PAPER_BLOCKS start -> target, phases 1, 1, 1, 0.1, 1, 1, 1 s",
@@ -92,6 +95,9 @@ def summarize(run) -> dict[str, Any]:
         },
         "swing_with_contact_s": {
             leg: float(np.count_nonzero(~stance[:, i] & contact[:, i]) * dt) for i, leg in enumerate(LEG_NAMES)
+        },
+        "stance_foot_xy_error_max_m": {
+            leg: _max_or(slip[stance[:, i] & settled[:, i], i]) for i, leg in enumerate(LEG_NAMES)
         },
         "cog_tracking_error_max_m": _max_or(err),
         "cog_tracking_error_rms_m": float(np.sqrt(np.mean(err**2))) if len(err) else 0.0,

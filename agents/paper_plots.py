@@ -20,17 +20,18 @@ COLOURS = {"LF": "tab:blue", "RF": "tab:orange", "LH": "tab:green", "RH": "tab:r
 _DPI = 130
 
 
-def _phases(ax, run, label: bool = False) -> None:
-    """Phase boundaries, swing phases shaded by leg, the final hold shaded grey."""
+def _phases(ax, run, label: bool | str = False, shade: bool = True) -> None:
+    """Phase boundaries, swing phases shaded by leg (``shade``), labels on top (``"short"``: leg only)."""
     plan = run.plan
     for ph in plan.phases[:-1]:
         ax.axvline(ph.t_end, color="0.55", lw=0.6, ls=":", zorder=0)
     for ph in plan.phases:
-        if ph.swing_leg:
+        if ph.swing_leg and shade:
             ax.axvspan(ph.t_start, ph.t_end, color=COLOURS[ph.swing_leg], alpha=0.08, lw=0, zorder=0)
-            if label:
-                ax.text(0.5 * (ph.t_start + ph.t_end), 1.0, f"{ph.swing_leg} swing", transform=ax.get_xaxis_transform(),
-                        ha="center", va="bottom", fontsize=7, color=COLOURS[ph.swing_leg])  # fmt: skip
+        if ph.swing_leg and label:
+            text = ph.swing_leg if label == "short" else f"{ph.swing_leg} swing"
+            ax.text(0.5 * (ph.t_start + ph.t_end), 1.0, text, transform=ax.get_xaxis_transform(),
+                    ha="center", va="bottom", fontsize=7, color=COLOURS[ph.swing_leg])  # fmt: skip
     t_end = float(run.time[-1]) if len(run.time) else 0.0
     if t_end > plan.duration:
         ax.axvspan(plan.duration, t_end, color="0.5", alpha=0.08, lw=0, zorder=0)
@@ -111,7 +112,8 @@ def fig4_swing_paths(run, path: Path) -> None:
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title("top view: foot and COG paths over the block terrain", fontsize=9)
-    ax.legend(loc="center left", bbox_to_anchor=(1.08, 0.5), fontsize=7)
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower left", bbox_to_anchor=(0.03, 0.06), fontsize=8, title="top view")
     fig.suptitle("Fig. 4 (simulated): swing-leg foot paths over the terrain")
     _save(fig, path)
 
@@ -126,7 +128,7 @@ def fig5_cog(run, path: Path) -> None:
     for r, (key, lab) in enumerate(rows):
         for c, axis in enumerate("xyz"):
             ax = axes[r, c]
-            _phases(ax, run, label=r == 0)
+            _phases(ax, run, label="short" if r == 0 else False)
             ax.plot(t, a[key][:, c], color="tab:blue", lw=1.1, label="measured")
             ax.plot(t, a[key + "_plan"][:, c], color="k", ls="--", lw=1.1, label="planned")
             ax.set_ylim(*_robust_limits(a[key][:, c], a[key + "_plan"][:, c]))
@@ -206,7 +208,7 @@ def fig8_contact_forces(run, path: Path) -> None:
     fig, axes = plt.subplots(4, 1, figsize=(9.0, 7.5), sharex=True, sharey=True)
     for i, leg in enumerate(LEG_NAMES):
         ax = axes[i]
-        _phases(ax, run)
+        _phases(ax, run, shade=False)
         ax.plot(t, a["normal_force"][:, i], color=COLOURS[leg], lw=1.2, label=f"{leg} normal force")
         swing = ~a["stance"][:, i]
         if swing.any():
@@ -218,7 +220,7 @@ def fig8_contact_forces(run, path: Path) -> None:
         ax.legend(fontsize=7, loc="upper right")
     axes[-1].set_xlabel("t (s)")
     total = run.mass * 9.81
-    fig.suptitle(f"Fig. 8 (simulated): normal contact forces (weight m g = {total:.0f} N); positive in stance, "
+    fig.suptitle(f"Fig. 8 (simulated): vertical contact forces (weight m g = {total:.0f} N); positive in stance, "
                  "zero in swing", fontsize=10)  # fmt: skip
     _save(fig, path)
 
