@@ -23,16 +23,16 @@ _DPI = 130
 def _phases(ax, run, label: bool | str = False, shade: bool = True) -> None:
     """Phase boundaries, swing phases shaded by leg (``shade``), labels on top (``"short"``: leg only)."""
     plan = run.plan
+    t_end = float(run.time[-1]) if len(run.time) else 0.0
     for ph in plan.phases[:-1]:
         ax.axvline(ph.t_end, color="0.55", lw=0.6, ls=":", zorder=0)
     for ph in plan.phases:
         if ph.swing_leg and shade:
             ax.axvspan(ph.t_start, ph.t_end, color=COLOURS[ph.swing_leg], alpha=0.08, lw=0, zorder=0)
-        if ph.swing_leg and label:
+        if ph.swing_leg and label and ph.t_end <= t_end + 1e-9:
             text = ph.swing_leg if label == "short" else f"{ph.swing_leg} swing"
             ax.text(0.5 * (ph.t_start + ph.t_end), 1.0, text, transform=ax.get_xaxis_transform(),
                     ha="center", va="bottom", fontsize=7, color=COLOURS[ph.swing_leg])  # fmt: skip
-    t_end = float(run.time[-1]) if len(run.time) else 0.0
     if t_end > plan.duration:
         ax.axvspan(plan.duration, t_end, color="0.5", alpha=0.08, lw=0, zorder=0)
     ax.set_xlim(0.0, max(t_end, 1e-3))
