@@ -217,9 +217,9 @@ class InverseDynamics:
             A = proj.S_stance.transpose(2, 0, 1).reshape(6, -1)  # base rows of S_a^T: -J_b^T J_L^-T
             r_st = r[lay.stance_dofs]
             rhs_b = r[:6] + A @ r_st
-            if lay.n_stance >= 3:
+            if lay.n_stance >= 3 and np.linalg.cond(A @ A.T) < 1e12:
                 tau_st = A.T @ np.linalg.solve(A @ A.T, rhs_b)
-            else:
+            else:  # 1-2 stance feet, or a degenerate stance (A A^T singular): SVD pseudo-inverse
                 tau_st = np.linalg.pinv(A) @ rhs_b
                 exact = bool(np.abs(A @ tau_st - rhs_b).max() < 1e-9 * max(1.0, np.abs(rhs_b).max()))
             tau[lay.stance_dofs - 6] = tau_st

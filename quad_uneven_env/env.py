@@ -289,12 +289,20 @@ class QuadUnevenEnv(gym.Env):
             lim = self.idx.torque_limit
             for _ in range(self.frame_skip):
                 mujoco.mj_step1(m, d)
-                tau = np.asarray(self._controller(m, d, a), dtype=np.float64)
+                if instability_warnings(d) > self._warnings_at_reset:
+                    break  # reported below; the controller must not see a garbage state
+                try:
+                    tau = np.asarray(self._controller(m, d, a), dtype=np.float64)
+                except (np.linalg.LinAlgError, ArithmeticError) as err:
+                    reason = f"diverged: controller failed ({type(err).__name__}: {err})"
+                    break
                 if tau.shape != (C.N_JOINTS,) or not np.isfinite(tau).all():
                     reason = "diverged: controller returned non-finite or mis-shaped torques"
                     break
                 np.clip(tau, -lim, lim, out=d.ctrl)
                 mujoco.mj_step2(m, d)
+                if instability_warnings(d) > self._warnings_at_reset:
+                    break
         else:
             if self.action_mode == "torque":
                 np.multiply(a, self.idx.torque_limit, out=d.ctrl)

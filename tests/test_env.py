@@ -289,3 +289,29 @@ def test_contact_sensors_match_raw_contact_list():
         np.testing.assert_allclose(fast.foot_points[fast.foot_contact], ref.foot_points[ref.foot_contact], atol=1e-6)
         checked += int(fast.foot_contact.sum())
     assert checked > 100
+
+
+def test_controller_numerical_failure_ends_episode_without_raising():
+    def singular(model, data, action):
+        return np.linalg.solve(np.zeros((3, 3)), np.ones(3))  # LinAlgError, as a degenerate ID would
+
+    env = make(controller=singular)
+    env.reset(seed=0)
+    obs, reward, terminated, _, info = env.step(np.zeros(12))
+    assert terminated and info["diverged"] and "LinAlgError" in info["termination_reason"]
+    assert np.isfinite(obs).all() and np.isfinite(reward)
+
+
+def test_instability_inside_the_control_loop_stops_before_the_controller_sees_it():
+    seen_bad_state = []
+
+    def controller(model, data, action):
+        seen_bad_state.append(not np.isfinite(data.qvel).all())
+        return np.zeros(12)
+
+    env = make(controller=controller)
+    env.reset(seed=0)
+    env.unwrapped.data.qvel[:] = np.nan
+    _, _, terminated, _, info = env.step(np.zeros(12))
+    assert terminated and info["diverged"]
+    assert not any(seen_bad_state)
