@@ -209,7 +209,7 @@ def fig8_contact_forces(run, path: Path) -> None:
     for i, leg in enumerate(LEG_NAMES):
         ax = axes[i]
         _phases(ax, run, shade=False)
-        ax.plot(t, a["normal_force"][:, i], color=COLOURS[leg], lw=1.2, label=f"{leg} normal force")
+        ax.plot(t, a["normal_force"][:, i], color=COLOURS[leg], lw=1.2, label=f"{leg} vertical force")
         swing = ~a["stance"][:, i]
         if swing.any():
             ax.fill_between(t, 0, 1, where=swing, transform=ax.get_xaxis_transform(), color="0.3", alpha=0.18, lw=0,
