@@ -104,8 +104,11 @@ def choose_footholds(
         slope, rough, rng_h = _patch(terrain, x, y, lim.edge_radius)
         ok = (slope <= lim.max_slope) & (rough <= lim.max_roughness) & (rng_h <= lim.max_step)
         ok &= h >= max_height_in_disk(terrain, np.column_stack([x, y]), lim.hole_radius) - lim.max_drop
-        # Sphere must rest on this spot without the surroundings lifting it.
-        ok &= max_height_in_disk(terrain, np.column_stack([x, y]), cfg.foot_radius) <= h + 0.005
+        # Sphere must rest on this spot without the surroundings lifting it; on a slope the
+        # uphill side of the disc is legitimately higher by up to radius * tan(slope).
+        ok &= max_height_in_disk(terrain, np.column_stack([x, y]), cfg.foot_radius) <= (
+            h + 0.005 + cfg.foot_radius * np.tan(slope)
+        )
         # Reach from the hip at touch-down and at the end of the cycle (straight-line body path).
         t_touch = next(p.t_end for p in phases if p.swing_leg == leg)
         site = np.column_stack([x, y, h + cfg.foot_radius])
