@@ -74,6 +74,9 @@ class IDResult:
     """the projected equation (eq. 16) is solved exactly (False: least squares, e.g. < 2 stance feet)."""
     damped: bool = False
     """a stance leg Jacobian was singular and inverted with damping."""
+    relaxed: bool = False
+    """"qp" was infeasible with the commanded base acceleration: the forces closest to producing it
+    inside the friction cones were used instead (the base acceleration is then not exact)."""
 
 
 def friction_pyramid(normal_W: np.ndarray, mu: float) -> np.ndarray:
@@ -273,9 +276,33 @@ class InverseDynamics:
         x = qp.solve()
         tau, F = result.tau.copy(), np.zeros((C.N_LEGS, 3))
         if x is None or not K.qp_apply(x, C_in, lower, A, b, J_feet, lay.mask, r, tau, F):
-            result.qp_fallback = True
+            self._relax(lay, J_feet, r, result, qp)
             return
         result.tau, result.contact_forces, result.distribution = tau, F, "qp"
+
+    def _relax(self, lay: StanceLayout, J_feet: np.ndarray, r: np.ndarray, result: IDResult, qp: _StanceQP) -> None:
+        """Infeasible cones at the commanded base acceleration: keep the forces physical.
+
+        Solves min |A F - b|^2 + 1e-3 (F - F0)^T H (F - F0) subject to the cones only (always
+        feasible: F = 0 is), i.e. the base wrench closest to the commanded one that the feet can
+        really push. Without it the "pinv" forces pull on the ground, the feet lift and the robot
+        falls. The stance torques follow from the leg rows, r_i - J_L,i^T F_i.
+        """
+        H, g, A, b, C_in, lower = qp.problem
+        Hr = A.T @ A + 1e-3 * H
+        gr = -A.T @ b + 1e-3 * g
+        res = proxsuite.proxqp.dense.solve(
+            Hr, gr, None, None, C_in, np.zeros_like(lower), qp.upper, eps_abs=1e-9, max_iter=200, verbose=False
+        )
+        if res.info.status != proxsuite.proxqp.PROXQP_SOLVED or not np.isfinite(res.x).all():
+            result.qp_fallback = True
+            return
+        tau, F = result.tau.copy(), np.zeros((C.N_LEGS, 3))
+        F[lay.stance_legs] = np.asarray(res.x).reshape(-1, 3)
+        for leg in lay.stance_legs:
+            c = slice(6 + 3 * leg, 9 + 3 * leg)
+            tau[3 * leg : 3 * leg + 3] = r[c] - J_feet[leg][:, c].T @ F[leg]
+        result.tau, result.contact_forces, result.distribution, result.relaxed = tau, F, "qp", True
 
 
 class _StanceQP:

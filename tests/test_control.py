@@ -127,6 +127,26 @@ def test_pinv_is_the_papers_formula_and_satisfies_mujoco(backend, mj_model, robo
                 assert check.eom > 1e-6  # least squares: reported as inexact, and it is
 
 
+def _cone_feasible(dyn, qpos, qvel, res, stance, mu, fmin) -> bool:
+    """An LP (scipy): is there F with J_b^T F = (M qacc + h)[:6], F_i in the pyramid, F_i,z >= fmin?"""
+    from scipy.optimize import linprog
+
+    t = dyn.terms(qpos, qvel)
+    r = t.M @ res.qacc + t.h
+    legs = np.flatnonzero(stance)
+    A_eq = np.hstack([t.J_feet[leg][:, :6].T for leg in legs])
+    cone = friction_pyramid(np.array([0.0, 0.0, 1.0]), mu)[:4]
+    rows = []
+    for k in range(len(legs)):
+        block = np.zeros((5, 3 * len(legs)))
+        block[:4, 3 * k : 3 * k + 3] = -cone
+        block[4, 3 * k + 2] = -1.0
+        rows.append(block)
+    b_ub = np.tile(np.r_[np.zeros(4), -fmin], len(legs))
+    lp = linprog(np.zeros(3 * len(legs)), A_ub=np.vstack(rows), b_ub=b_ub, A_eq=A_eq, b_eq=r[:6], bounds=(None, None))
+    return lp.status == 0
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_qp_keeps_forces_in_cone_and_satisfies_mujoco(backend, mj_model, robot_cfg, rng):
     ID = InverseDynamics(make_dynamics(backend, mj_model, robot_cfg), "qp", min_normal_force=10.0)
@@ -143,6 +163,12 @@ def test_qp_keeps_forces_in_cone_and_satisfies_mujoco(backend, mj_model, robot_c
             if res.qp_fallback:
                 continue
             assert res.distribution == "qp"
+            if res.relaxed:
+                # Only when no force distribution exists: checked independently with an LP.
+                assert not _cone_feasible(ID.dynamics, qpos, qvel, res, stance, ID.mu, 10.0)
+                for i in np.flatnonzero(stance):
+                    assert np.all(friction_pyramid(np.array([0.0, 0.0, 1.0]), ID.mu)[:4] @ res.contact_forces[i] >= -1e-6)
+                continue
             assert verify_inverse_dynamics(mj_model, qpos, qvel, bdd, res).ok(1e-8)
             for i in np.flatnonzero(stance):
                 cone = friction_pyramid(np.array([0.0, 0.0, 1.0]), ID.mu)
@@ -154,15 +180,29 @@ def test_qp_keeps_forces_in_cone_and_satisfies_mujoco(backend, mj_model, robot_c
     assert n_pinv_outside > 0  # the cases include some where the paper's pinv leaves the cone
 
 
-def test_qp_infeasible_falls_back_to_pinv(dyn, robot_cfg):
+def test_qp_infeasible_relaxes_to_physical_forces(dyn, robot_cfg):
+    """Commanding the base down faster than free fall needs pulling feet: the "qp" keeps the forces in
+    the cones (the base wrench closest to the command), where "pinv" would pull on the ground."""
     qpos = home_qpos(robot_cfg)
     bdd = np.zeros(6)
     bdd[2] = -20.0  # faster than free fall: needs pulling feet
     res = InverseDynamics(dyn, "qp").solve(qpos, np.zeros(C.NV), bdd, (True,) * 4)
     ref = InverseDynamics(dyn, "pinv").solve(qpos, np.zeros(C.NV), bdd, (True,) * 4)
-    assert res.qp_fallback and res.distribution == "pinv"
-    np.testing.assert_allclose(res.tau, ref.tau)
-    assert np.all(res.contact_forces[:, 2] < 0)
+    assert np.all(ref.contact_forces[:, 2] < 0)  # the paper's choice pulls
+    assert res.relaxed and not res.qp_fallback and res.distribution == "qp"
+    cone = friction_pyramid(np.array([0.0, 0.0, 1.0]), dyn.model.geom_friction[0, 0] if hasattr(dyn, "model") else 1.0)
+    for i in range(4):
+        assert np.all(cone @ res.contact_forces[i] >= -1e-6)
+    # The closest physical wrench to "fall faster than g" is no contact force at all.
+    np.testing.assert_allclose(res.contact_forces, 0.0, atol=1e-3)
+    # Stance torques are consistent with those forces through the leg rows.
+    t = dyn.terms(qpos, np.zeros(C.NV))
+    r = t.M @ res.qacc + t.h
+    for leg in range(4):
+        c = slice(6 + 3 * leg, 9 + 3 * leg)
+        np.testing.assert_allclose(
+            res.tau[3 * leg : 3 * leg + 3], r[c] - t.J_feet[leg][:, c].T @ res.contact_forces[leg], atol=1e-8
+        )
 
 
 def test_stretched_knee_gives_finite_damped_torques(dyn, robot_cfg):
@@ -367,6 +407,7 @@ def test_warm_started_qp_equals_one_off_solve(dyn, robot_cfg, rng):
         got = warm.solve(qpos, 0.2 * qvel, bdd, stance)
         cold = InverseDynamics(dyn, "qp", min_normal_force=10.0).solve(qpos, 0.2 * qvel, bdd, stance)
         assert got.qp_fallback == cold.qp_fallback and got.distribution == cold.distribution
+        assert got.relaxed == cold.relaxed
         np.testing.assert_allclose(got.contact_forces, cold.contact_forces, rtol=0, atol=1e-5)
         np.testing.assert_allclose(got.tau, cold.tau, rtol=0, atol=1e-5)
 
