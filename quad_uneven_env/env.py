@@ -165,6 +165,7 @@ class QuadUnevenEnv(gym.Env):
         # Divergence must end the episode visibly, not be hidden by MuJoCo's automatic reset.
         self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
         self.data = mujoco.MjData(self.model)
+        self._dt = float(self.model.opt.timestep) * self.frame_skip
         self.idx = RobotIndex.from_model(self.model)
         self._mass = self.idx.total_mass
         self._gravity = self.model.opt.gravity.copy()
@@ -202,7 +203,7 @@ class QuadUnevenEnv(gym.Env):
     @property
     def dt(self) -> float:
         """Control period (s) = frame_skip x physics timestep."""
-        return self.model.opt.timestep * self.frame_skip
+        return self._dt
 
     @property
     def physics_dt(self) -> float:
@@ -310,11 +311,10 @@ class QuadUnevenEnv(gym.Env):
                 np.clip(self._home_joints + self.pd_action_scale * a, self._joint_lo, self._joint_hi, out=d.ctrl)
             mujoco.mj_step(m, d, self.frame_skip)
 
-        if reason is None:
-            if instability_warnings(d) > self._warnings_at_reset:
-                reason = "diverged: MuJoCo reported a bad qpos/qvel/qacc"
-            elif not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all() and np.isfinite(d.qacc).all()):
-                reason = "diverged: non-finite state"
+        # MuJoCo's own checks (mj_checkPos/Vel/Acc) flag NaN, Inf and huge values in qpos, qvel
+        # and qacc; with auto-reset disabled the bad state stays for us to see.
+        if reason is None and instability_warnings(d) > self._warnings_at_reset:
+            reason = "diverged: MuJoCo reported a bad (NaN, Inf or huge) qpos/qvel/qacc"
         diverged = reason is not None
 
         if diverged:
