@@ -36,6 +36,9 @@ lint: venv
 
 bench: venv
 	$(PY) benchmarks/env_throughput.py
+	$(PY) benchmarks/dynamics.py
+	$(PY) benchmarks/planning.py
+	$(PY) benchmarks/expert.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
