@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
 from pathlib import Path
 from typing import Any
 
@@ -49,17 +48,9 @@ def policy_env_kwargs(name: str) -> dict[str, Any]:
 
 
 def _expert(env: gym.Env) -> Policy:
-    try:
-        module = importlib.import_module("agents.expert")
-    except ModuleNotFoundError as e:
-        if e.name != "agents.expert":
-            raise
-        raise PolicyError(
-            "policy 'expert' needs agents.expert.ExpertPolicy, which is not in this checkout yet"
-        ) from None
-    if not hasattr(module, "ExpertPolicy"):
-        raise PolicyError("policy 'expert': agents.expert has no ExpertPolicy")
-    return module.ExpertPolicy(env)
+    from agents.expert import ExpertPolicy  # deferred: compiling the controller's kernels takes seconds
+
+    return ExpertPolicy(env)
 
 
 def _sb3(path: str, algo: str) -> Policy:
