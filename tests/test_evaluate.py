@@ -152,12 +152,15 @@ def test_make_policy_errors_and_env_kwargs(tmp_path):
         make_policy(str(tmp_path / "missing.zip"), env=None, algo="dqn")
 
 
-def test_expert_policy_missing_module_is_a_clear_error(monkeypatch):
-    import sys
+def test_expert_policy_installs_its_controller():
+    import gymnasium as gym
 
-    monkeypatch.setitem(sys.modules, "agents.expert", None)  # as if agents/expert.py did not exist
-    with pytest.raises(PolicyError, match=r"agents\.expert"):
-        make_policy("expert", env=None)
+    from agents.expert import ExpertPolicy
+
+    env = gym.make("QuadUneven-v0", terrain="flat", **policy_env_kwargs("expert"))
+    policy = make_policy("expert", env)
+    assert isinstance(policy, ExpertPolicy)
+    assert env.unwrapped.controller is policy
 
 
 # ------------------------------------------------------------------ end to end
