@@ -492,3 +492,5 @@ def test_docs_parameter_tables_are_in_sync():
     assert parameter_tables().strip() in doc
     for kind in TERRAIN_KINDS:
         assert f"### `{kind}`" in doc
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert parameter_tables().strip().replace("### `", "#### `") in readme
