@@ -362,7 +362,7 @@ class QuadUnevenEnv(gym.Env):
         yaw = math.atan2(R[1, 0], R[0, 0])
         c, s = math.cos(yaw), math.sin(yaw)
         sx, sy = self._scan_B[:, 0], self._scan_B[:, 1]
-        heights = self.terrain.heightfield.height(base[0] + (c * sx - s * sy), base[1] + (s * sx + c * sy))
+        heights = self.terrain.heightfield.height_points(base[0] + (c * sx - s * sy), base[1] + (s * sx + c * sy))
         ground = float(heights[0])
         return {
             "contacts": contacts,

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 
+import numba as nb
 import numpy as np
 
 NO_SUPPORT = -np.inf
@@ -62,8 +63,8 @@ def stability_index(
     lead = cog.shape[:-1]
     if n < 3:
         return np.full(lead, NO_SUPPORT), np.full((*lead, n), NO_SUPPORT)
-    if cog.ndim == 1 and n <= 8:
-        return _stability_index_one(cog.tolist(), cog_acc.tolist(), feet.tolist(), float(mass), float(g))
+    if cog.ndim == 1:
+        return _stability_index_one(cog, cog_acc, np.ascontiguousarray(feet), float(mass), float(g))
     ordered = feet[order_clockwise(feet)]
     edges = ordered[np.r_[1:n, 0]] - ordered
     kappa = edges / np.linalg.norm(edges, axis=1, keepdims=True)
@@ -93,20 +94,32 @@ def normalized_stability_index(
 
 
 def _stability_index_one(
-    cog: list[float], acc: list[float], feet: list[list[float]], mass: float, g: float
+    cog: np.ndarray, acc: np.ndarray, feet: np.ndarray, mass: float, g: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`stability_index` of one instant in plain Python: the env calls it every step,
-    where numpy's per-call overhead on 3-vectors would dominate. Same arithmetic."""
-    n = len(feet)
-    cx = sum(p[0] for p in feet) / n
-    cy = sum(p[1] for p in feet) / n
-    order = sorted(range(n), key=lambda i: -math.atan2(feet[i][1] - cy, feet[i][0] - cx))
-    fx, fy, fz = -mass * acc[0], -mass * acc[1], -mass * (g + acc[2])
-    moments = np.empty(n)
-    for k in range(n):
-        p, q = feet[order[k]], feet[order[(k + 1) % n]]
-        ex, ey, ez = q[0] - p[0], q[1] - p[1], q[2] - p[2]
-        norm = math.sqrt(ex * ex + ey * ey + ez * ez)
-        rx, ry, rz = cog[0] - p[0], cog[1] - p[1], cog[2] - p[2]
-        moments[k] = (ex * (ry * fz - rz * fy) + ey * (rz * fx - rx * fz) + ez * (rx * fy - ry * fx)) / norm
+    """:func:`stability_index` of one instant, compiled: the env calls it every step, where
+    numpy's per-call overhead on 3-vectors would dominate. Same arithmetic (tested equal)."""
+    moments = np.empty(feet.shape[0])
+    _moments_one(cog, acc, feet, mass, g, moments)
     return np.float64(moments.min()), moments
+
+
+@nb.njit(cache=False, nogil=True)
+def _moments_one(cog, acc, feet, mass, g, out):  # pragma: no cover - compiled
+    n = feet.shape[0]
+    cx = 0.0
+    cy = 0.0
+    for i in range(n):
+        cx += feet[i, 0] / n
+        cy += feet[i, 1] / n
+    key = np.empty(n)
+    for i in range(n):
+        key[i] = -math.atan2(feet[i, 1] - cy, feet[i, 0] - cx)
+    order = np.argsort(key, kind="mergesort")
+    fx, fy, fz = -mass * acc[0], -mass * acc[1], -mass * (g + acc[2])
+    for k in range(n):
+        p = order[k]
+        q = order[(k + 1) % n]
+        ex, ey, ez = feet[q, 0] - feet[p, 0], feet[q, 1] - feet[p, 1], feet[q, 2] - feet[p, 2]
+        norm = math.sqrt(ex * ex + ey * ey + ez * ez)
+        rx, ry, rz = cog[0] - feet[p, 0], cog[1] - feet[p, 1], cog[2] - feet[p, 2]
+        out[k] = (ex * (ry * fz - rz * fy) + ey * (rz * fx - rx * fz) + ez * (rx * fy - ry * fx)) / norm

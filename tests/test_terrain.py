@@ -494,3 +494,14 @@ def test_docs_parameter_tables_are_in_sync():
         assert f"### `{kind}`" in doc
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     assert parameter_tables().strip().replace("### `", "#### `") in readme
+
+
+def test_compiled_height_points_equal_numpy_height():
+    from quad_uneven_env.terrain import Terrain, parse_terrain_spec
+
+    rng = np.random.default_rng(3)
+    hf = Terrain(parse_terrain_spec("stepping_stones")).generate(rng)
+    (x0, x1), (y0, y1) = hf.extent
+    x = rng.uniform(x0 - 0.5, x1 + 0.5, 5000)  # includes points outside the grid (clamped)
+    y = rng.uniform(y0 - 0.5, y1 + 0.5, 5000)
+    np.testing.assert_allclose(hf.height_points(x, y), hf.height(x, y), rtol=0, atol=1e-12)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -148,6 +149,16 @@ class HeightField:
         a, b = np.where(lower, fu, fv), np.where(lower, fv, fu)
         return h00 + a * (h_mid - h00) + b * (h11 - h_mid)
 
+    def height_points(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """:meth:`height` of 1-D float64 arrays of equal length, compiled (the env's per-step scan).
+
+        Same arithmetic as :meth:`height` (tested equal); about 10 x faster on ~100 points.
+        """
+        out = np.empty(x.shape[0])
+        nrow, ncol = self._h.shape
+        _height_kernel(self._flat, nrow, ncol, self._origin[0], self._origin[1], 1.0 / self._cell, x, y, out)
+        return out
+
     def _height_scalar(self, x: float, y: float) -> float:
         """:meth:`height` of one point in plain Python (the same arithmetic, ~20 x faster than numpy)."""
         nrow, ncol = self._h.shape
@@ -270,3 +281,22 @@ class HeightField:
             f"HeightField(shape={self.shape}, cell_size={self._cell:g} m, x=[{x0:g}, {x1:g}] m, y=[{y0:g}, {y1:g}] m, "
             f"z=[{self._h.min():g}, {self._h.max():g}] m)"
         )
+
+
+@nb.njit(cache=False, nogil=True)
+def _height_kernel(flat, nrow, ncol, ox, oy, inv_cell, xs, ys, out):  # pragma: no cover - compiled
+    """MuJoCo's triangulated surface at (xs[k], ys[k]) into out[k]; see :meth:`HeightField.height`."""
+    for k in range(xs.shape[0]):
+        u = min(max((xs[k] - ox) * inv_cell, 0.0), ncol - 1.0)
+        v = min(max((ys[k] - oy) * inv_cell, 0.0), nrow - 1.0)
+        c = min(int(u), ncol - 2)
+        r = min(int(v), nrow - 2)
+        fu, fv = u - c, v - r
+        i00 = r * ncol + c
+        h00, h11 = flat[i00], flat[i00 + ncol + 1]
+        if fu >= fv:
+            hm = flat[i00 + 1]
+            out[k] = h00 + fu * (hm - h00) + fv * (h11 - hm)
+        else:
+            hm = flat[i00 + ncol]
+            out[k] = h00 + fv * (hm - h00) + fu * (h11 - hm)
