@@ -32,6 +32,9 @@ def measure(env_id: str, steps: int, **kwargs) -> dict[str, float]:
     t_env = t_mj = 0.0
     done = 0
     env.reset(seed=0)
+    for _ in range(20):  # warm-up: compiled kernels are built on first use
+        env.step(zero)
+    env.reset(seed=0)
     while done < steps:
         mujoco.mj_getState(u.model, u.data, state, spec)
         n, ended = 0, False
