@@ -241,12 +241,4 @@ class ExpertPolicy:
         self._t_start, self._t_end = t0, t0 + duration
 
 
-def make_expert_env(terrain: Any = "rough", config: ExpertConfig | None = None, **env_kwargs: Any):
-    """``(env, expert)``: a QuadUneven-v0 env (frame_skip 10) with the expert installed."""
-    import quad_uneven_env  # noqa: F401
-
-    env = gym.make("QuadUneven-v0", terrain=terrain, **env_kwargs)
-    return env, ExpertPolicy(env, config)
-
-
-__all__ = ["C", "ExpertConfig", "ExpertPolicy", "make_expert_env"]
+__all__ = ["ExpertConfig", "ExpertPolicy"]
