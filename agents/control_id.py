@@ -258,7 +258,7 @@ class InverseDynamics:
     ) -> None:
         st = lay.stance_legs
         p = len(st)
-        cones = self._cone_up[:p] if normals_W is None else friction_pyramid(np.asarray(normals_W)[st], self.mu)
+        cones = self._cone_up[:p] if normals_W is None else self._cones(np.asarray(normals_W)[st])
         qp = self._qp.get(p) or _StanceQP(p)
         self._qp[p] = qp
         try:
@@ -279,6 +279,14 @@ class InverseDynamics:
             self._relax(lay, J_feet, r, result, qp)
             return
         result.tau, result.contact_forces, result.distribution = tau, F, "qp"
+
+    def _cones(self, normals_st: np.ndarray) -> np.ndarray:
+        """Friction pyramids of the stance normals, reused while the normals do not change (stance feet)."""
+        last = getattr(self, "_cones_for", None)
+        if last is None or last.shape != normals_st.shape or not np.array_equal(last, normals_st):
+            self._cones_for = normals_st.copy()
+            self._cones_last = friction_pyramid(normals_st, self.mu)
+        return self._cones_last
 
     def _relax(self, lay: StanceLayout, J_feet: np.ndarray, r: np.ndarray, result: IDResult, qp: _StanceQP) -> None:
         """Infeasible cones at the commanded base acceleration: keep the forces physical.

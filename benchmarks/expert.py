@@ -34,6 +34,10 @@ def main(argv: list[str] | None = None) -> None:
 
     env = gym.make("QuadUneven-v0", terrain=args.terrain, max_episode_steps=10**7)
     policy = ExpertPolicy(env, ExpertConfig(distribution=args.distribution))
+    # Warm-up: numba kernels compile on first use; keep that out of the timing.
+    obs, _ = env.reset(seed=1)
+    for _ in range(5):
+        obs, *_ = env.step(policy.predict(obs)[0])
     obs, info = env.reset(seed=0)
     u = env.unwrapped
     standing = mujoco.MjData(u.model)

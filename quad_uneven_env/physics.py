@@ -198,11 +198,11 @@ def state_is_finite(data: mujoco.MjData) -> bool:
     return bool(np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all() and np.isfinite(data.qacc).all())
 
 
-_BAD_WARNINGS = np.array(
-    [mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL, mujoco.mjtWarning.mjWARN_BADQACC], dtype=int
-)
+_W = mujoco.mjtWarning
+_BAD_WARNINGS = (int(_W.mjWARN_BADQPOS), int(_W.mjWARN_BADQVEL), int(_W.mjWARN_BADQACC))
 
 
 def instability_warnings(data: mujoco.MjData) -> int:
-    """Number of MuJoCo bad-qpos/qvel/qacc warnings raised so far in ``data``."""
-    return int(data.warning.number[_BAD_WARNINGS].sum())
+    """Number of MuJoCo bad-qpos/qvel/qacc warnings raised so far in ``data`` (runs every physics step)."""
+    n = data.warning.number
+    return int(n[_BAD_WARNINGS[0]]) + int(n[_BAD_WARNINGS[1]]) + int(n[_BAD_WARNINGS[2]])
