@@ -58,6 +58,8 @@ def main(argv: list[str] | None = None) -> int:
         for k in keys:
             print(f"{k:24s} {ep.get(k)}")
         print(f"report: {(args.out / 'report.md').resolve()}")
+        for video in sorted((args.out / "videos").glob("*.mp4")):
+            print(f"video:  {video.resolve()}")
     return 0
 
 
