@@ -7,6 +7,7 @@ named (``"paper"`` -> ``configs/robot/paper.yaml``) or given as a path.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -181,7 +182,12 @@ def resolve_config_path(name_or_path: str | os.PathLike[str], group: str) -> Pat
 
 
 def load_robot_config(name_or_path: str | os.PathLike[str] = "paper") -> RobotConfig:
-    """Load a robot config by name (``configs/robot/NAME.yaml``) or path."""
+    """Load a robot config by name (``configs/robot/NAME.yaml``) or path (cached: planners ask often)."""
+    return _load_robot_config(str(name_or_path))
+
+
+@functools.lru_cache(maxsize=16)
+def _load_robot_config(name_or_path: str) -> RobotConfig:
     return robot_config_from_dict(read_yaml(resolve_config_path(name_or_path, "robot")))
 
 
