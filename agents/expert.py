@@ -29,10 +29,8 @@ from threadpoolctl import threadpool_limits
 
 from agents.control import ComputedTorqueController, Gains
 from planners import PlanningError, Scenario, plan_gait_cycle
+from planners.reference import aim_feet_below_footholds
 from planners.types import ReferenceSample
-from quad_uneven_env import constants as C
-from quad_uneven_env.physics import quat_to_rotation
-from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 
 
 @dataclasses.dataclass(frozen=True)
@@ -97,7 +95,6 @@ class ExpertPolicy:
         self.config = config or ExpertConfig()
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
-        self._hips_B = hip_positions_B(self.cfg)
         self._foot_sensor_adr = [int(a) for a in self.env.idx.foot_sensor_adr]
         self.controller = ComputedTorqueController(
             reference=self._reference,
@@ -173,23 +170,7 @@ class ExpertPolicy:
         late = [st and sd[a] <= 0 for st, a in zip(ref.stance, self._foot_sensor_adr, strict=True)]
         if not any(late):
             return ref
-        plan = self._current
-        q = ref.q_joints.copy()
-        qd = ref.qd_joints.copy()
-        qdd = ref.qdd_joints.copy()
-        R = quat_to_rotation(ref.quat_WB)
-        for i in np.flatnonzero(late):
-            leg = C.LEG_NAMES[i]
-            landed = leg in plan.swing and tc >= plan.swing[leg].t_end - 1e-9
-            foothold = plan.footholds[i] if landed else plan.feet_start[i]
-            target_W = foothold + np.array([0.0, 0.0, self.cfg.foot_radius - self.config.touchdown_depth])
-            hip_W = ref.p_base_W + R @ self._hips_B[i]
-            q[3 * i : 3 * i + 3] = leg_ik_hip(
-                R.T @ (target_W - hip_W), self.cfg.thigh.length, self.cfg.shank.length, C.KNEE_SIGN[leg]
-            )
-            qd[3 * i : 3 * i + 3] = 0.0
-            qdd[3 * i : 3 * i + 3] = 0.0
-        return dataclasses.replace(ref, q_joints=q, qd_joints=qd, qdd_joints=qdd)
+        return aim_feet_below_footholds(ref, self._current, tc, np.array(late), self.config.touchdown_depth, self.cfg)
 
     def _measured_footholds(self) -> np.ndarray:
         """(4, 3) points on the terrain below the foot sites (m, world)."""

@@ -28,11 +28,9 @@ import numpy as np
 from agents.control import ComputedTorqueController, Gains
 from planners import paper_scenario, plan_gait_cycle
 from planners.cycle import GaitCyclePlan
-from planners.reference import Reference
+from planners.reference import Reference, aim_feet_below_footholds
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
-from quad_uneven_env.physics import quat_to_rotation
-from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 
 DISTRIBUTIONS = ("qp", "pinv")
 """Torque distributions offered on the command line ("qp": friction-cone aware; "pinv": the paper's)."""
@@ -124,9 +122,7 @@ class PaperReference:
         self.depth = float(touchdown_depth)
         self._data = data
         self._sensor = np.asarray(idx.foot_sensor_adr)
-        cfg = reference.cfg
-        self._hips_B = hip_positions_B(cfg)
-        self._l1, self._l2, self._r = cfg.thigh.length, cfg.shank.length, cfg.foot_radius
+        self._cfg = reference.cfg
 
     def __call__(self, t: float) -> ReferenceSample:
         """The reference sample at controller time ``t`` (s)."""
@@ -137,18 +133,7 @@ class PaperReference:
         late = np.asarray(ref.stance) & ~(self._data.sensordata[self._sensor] > 0)
         if not late.any():
             return ref
-        q, qd, qdd = ref.q_joints.copy(), ref.qd_joints.copy(), ref.qdd_joints.copy()
-        R = quat_to_rotation(ref.quat_WB)
-        for i in np.flatnonzero(late):
-            sw = self.plan.swing.get(C.LEG_NAMES[i])
-            foothold = self.plan.footholds[i] if sw is not None and tp >= sw.t_end - 1e-9 else self.plan.feet_start[i]
-            target_W = foothold + np.array([0.0, 0.0, self._r - self.depth])
-            hip_W = ref.p_base_W + R @ self._hips_B[i]
-            leg = C.LEG_NAMES[i]
-            q[3 * i : 3 * i + 3] = leg_ik_hip(R.T @ (target_W - hip_W), self._l1, self._l2, C.KNEE_SIGN[leg])
-            qd[3 * i : 3 * i + 3] = 0.0
-            qdd[3 * i : 3 * i + 3] = 0.0
-        return dataclasses.replace(ref, q_joints=q, qd_joints=qd, qdd_joints=qdd)
+        return aim_feet_below_footholds(ref, self.plan, tp, late, self.depth, self._cfg)
 
 
 def plan_paper_cycle(terrain, robot_cfg, epsilon: float = 0.1) -> GaitCyclePlan:

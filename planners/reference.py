@@ -10,6 +10,8 @@ derivatives (:mod:`planners.wholebody`), not from finite differences.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from planners.gait import phase_index
@@ -17,7 +19,9 @@ from planners.terrain_query import foot_site_on
 from planners.types import ReferenceSample
 from planners.wholebody import WholeBody
 from quad_uneven_env.config import RobotConfig, load_robot_config
-from quad_uneven_env.constants import LEG_NAMES
+from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
+from quad_uneven_env.robot.conventions import quat_wxyz_to_matrix
+from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 
 _IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 _ZERO3 = np.zeros(3)
@@ -103,3 +107,31 @@ class Reference:
             qdd_joints=qdd.copy(),
             stance=tuple(bool(s) for s in stance),  # type: ignore[arg-type]
         )
+
+
+def aim_feet_below_footholds(
+    sample: ReferenceSample, plan, t: float, legs: np.ndarray, depth: float, cfg: RobotConfig
+) -> ReferenceSample:
+    """``sample`` with the joints of ``legs`` (4 bools) aimed ``depth`` (m) below their current footholds.
+
+    For a planned-stance foot that has not touched down: the swing spline ends exactly on the
+    surface, and a few millimetres of tracking error would leave the foot hovering. The joint
+    targets come from the closed-form leg IK against the sample's base pose; their velocity and
+    acceleration references are zero.
+
+    :param t: plan time (s) of ``sample``: a leg whose swing has ended aims at its target foothold,
+        otherwise at its start foothold.
+    """
+    q, qd, qdd = sample.q_joints.copy(), sample.qd_joints.copy(), sample.qdd_joints.copy()
+    R = quat_wxyz_to_matrix(sample.quat_WB)
+    hips_B = hip_positions_B(cfg)
+    for i in np.flatnonzero(legs):
+        leg = LEG_NAMES[i]
+        sw = plan.swing.get(leg)
+        foothold = plan.footholds[i] if sw is not None and t >= sw.t_end - 1e-9 else plan.feet_start[i]
+        target_W = foothold + np.array([0.0, 0.0, cfg.foot_radius - depth])
+        hip_W = sample.p_base_W + R @ hips_B[i]
+        q[3 * i : 3 * i + 3] = leg_ik_hip(R.T @ (target_W - hip_W), cfg.thigh.length, cfg.shank.length, KNEE_SIGN[leg])
+        qd[3 * i : 3 * i + 3] = 0.0
+        qdd[3 * i : 3 * i + 3] = 0.0
+    return dataclasses.replace(sample, q_joints=q, qd_joints=qd, qdd_joints=qdd)

@@ -91,3 +91,29 @@ def test_com_offset_matches_mujoco_random_pose(rng, robot_cfg, mj):
     np.testing.assert_allclose(
         wb.com_offset(q.reshape(4, 3)) + np.array([0.1, -0.2, 0.5]), d.subtree_com[m.body("trunk").id], atol=1e-12
     )
+
+
+def test_aim_feet_below_footholds_places_late_feet_under_the_surface():
+    """The late-touchdown targets: foot sites (by the leg FK) `depth` below the foothold sites."""
+    from planners import paper_scenario, plan_gait_cycle
+    from planners.reference import aim_feet_below_footholds
+    from quad_uneven_env.constants import LEG_NAMES
+    from quad_uneven_env.robot.kinematics import hip_positions_B, leg_fk_hip
+
+    plan = plan_gait_cycle(paper_scenario())
+    ref = plan.reference()
+    cfg = ref.cfg
+    t = 2.05  # RH has landed (its swing is 1-2 s), RF is swinging
+    sample = ref.sample(t)
+    legs = np.array([True, False, True, True])
+    depth = 0.015
+    out = aim_feet_below_footholds(sample, plan, t, legs, depth, cfg)
+    hips = hip_positions_B(cfg)
+    for i in np.flatnonzero(legs):
+        landed = plan.swing[LEG_NAMES[i]].t_end <= t
+        foothold = plan.footholds[i] if landed else plan.feet_start[i]
+        q_leg = out.q_joints[3 * i : 3 * i + 3]
+        site = sample.p_base_W + hips[i] + leg_fk_hip(q_leg, cfg.thigh.length, cfg.shank.length)
+        np.testing.assert_allclose(site, foothold + np.array([0.0, 0.0, cfg.foot_radius - depth]), atol=1e-9)
+        assert np.all(out.qd_joints[3 * i : 3 * i + 3] == 0.0)
+    np.testing.assert_array_equal(out.q_joints[3:6], sample.q_joints[3:6])  # RF untouched
