@@ -68,6 +68,8 @@ class RobotConfig:
     """symmetric motor torque limits (N m) keyed HAA, HFE, KFE."""
     joint_damping: float
     """viscous joint damping (N m s / rad)."""
+    joint_armature: float
+    """rotor inertia reflected through the gearbox, added to each joint's diagonal of M (kg m^2)."""
     friction: float
     """Coulomb friction coefficient between feet and terrain."""
 
@@ -90,6 +92,13 @@ def _positive(value: Any, field: str) -> float:
     v = float(value)
     if not np.isfinite(v) or v <= 0.0:
         raise ValueError(f"{field} must be a finite number > 0, got {value!r}")
+    return v
+
+
+def _non_negative(value: Any, field: str) -> float:
+    v = float(value)
+    if not np.isfinite(v) or v < 0.0:
+        raise ValueError(f"{field} must be a finite number >= 0, got {value!r}")
     return v
 
 
@@ -152,7 +161,8 @@ def robot_config_from_dict(raw: Mapping[str, Any]) -> RobotConfig:
         link_radius=_positive(raw["link_radius"], "robot.link_radius"),
         joint_range=ranges,
         torque_limit=limits,
-        joint_damping=float(raw["joint_damping"]),
+        joint_damping=_non_negative(raw["joint_damping"], "robot.joint_damping"),
+        joint_armature=_non_negative(raw["joint_armature"], "robot.joint_armature"),
         friction=_positive(raw["friction"], "robot.friction"),
     )
 

@@ -20,25 +20,18 @@ from quad_uneven_env.config import (
     dataclass_from_mapping,
     load_robot_config,
 )
+from quad_uneven_env.measurement import StepMeasurement
 from quad_uneven_env.observations import (
-    STABILITY_CLIP,
     height_scan_points_B,
     observation_fields,
     observation_space,
     observation_structure,
     observation_table,
 )
-from quad_uneven_env.physics import (
-    ContactMeasurement,
-    RobotIndex,
-    instability_warnings,
-    measure_contacts,
-    quat_to_rotation,
-)
+from quad_uneven_env.physics import RobotIndex, instability_warnings
 from quad_uneven_env.rewards import reward_terms
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT, PhysicsOptions, scene_mjcf
-from quad_uneven_env.stability import stability_index
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec
 
 ACTION_MODES = ("torque", "joint_pd")
@@ -185,8 +178,6 @@ class QuadUnevenEnv(gym.Env):
         self._fields = observation_fields(self.height_scan, C.N_JOINTS)
         self.observation_structure: dict[str, slice] = observation_structure(self._fields)
         self.observation_space = observation_space(self._fields)
-        self._obs_low = self.observation_space.low.astype(np.float64)
-        self._obs_high = self.observation_space.high.astype(np.float64)
 
         self.render_mode = render_mode
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.dt))
@@ -194,8 +185,18 @@ class QuadUnevenEnv(gym.Env):
         self._renderer = None
 
         self._prev_action = np.zeros(C.N_JOINTS)
+        self._meas = StepMeasurement(
+            self.model,
+            self.data,
+            self.idx,
+            self.robot_cfg.foot_radius,
+            self._scan_B,
+            self._fields,
+            self.observation_space.low,
+            self.observation_space.high,
+        )
         self._last_obs = np.zeros(self.observation_space.shape, dtype=np.float32)
-        self._last: dict[str, Any] = {}
+        self._last_index_norm = 0.0
         self._start_x = 0.0
         self._warnings_at_reset = 0
 
@@ -249,11 +250,11 @@ class QuadUnevenEnv(gym.Env):
             self._controller.reset(self.model, self.data, self.terrain)
 
         self._prev_action[:] = 0.0
-        mujoco.mj_subtreeVel(self.model, self.data)
-        m = self._measure()
-        self._start_x = float(m["cog"][0])
-        info = self._info(m, terms={}, diverged=False, reason=None)
-        return self._observation(m), info
+        meas = self._measure()
+        self._start_x = float(meas.cog[0])
+        self._last_index_norm = meas.index / (self._mass * self._g)
+        self._last_obs = meas.obs.astype(np.float32)
+        return self._last_obs.copy(), self._info(meas, terms={}, diverged=False, reason=None)
 
     def _spawn_qpos(self) -> np.ndarray:
         """Standing pose over the spawn point: each foot on the terrain below its hip."""
@@ -283,7 +284,7 @@ class QuadUnevenEnv(gym.Env):
             )
         a = np.clip(a, -1.0, 1.0)
         m, d = self.model, self.data
-        x_before = float(self._last["cog"][0])
+        x_before = float(self._meas.cog[0])
 
         reason = None
         if self._controller is not None:
@@ -315,132 +316,74 @@ class QuadUnevenEnv(gym.Env):
             reason = "diverged: MuJoCo reported a bad (NaN, Inf or huge) qpos/qvel/qacc"
         diverged = reason is not None
 
-        if diverged:
-            meas = self._last  # last good measurement keeps the observation finite
-        else:
-            mujoco.mj_subtreeVel(m, d)
-            meas = self._measure()
-            reason = self._fall_reason(meas)
-        fell = reason is not None
+        meas = self._meas
         self._prev_action[:] = a
+        if diverged:
+            index_norm = self._last_index_norm  # the buffers still hold the last good measurement
+        else:
+            self._measure()
+            reason = self._fall_reason(meas)
+            index_norm = meas.index / (self._mass * self._g)
+        fell = reason is not None
 
-        cog_vel_x = 0.0 if diverged else (float(meas["cog"][0]) - x_before) / self.dt
+        cog_x = float(meas.cog[0])
+        cog_vel_x = 0.0 if diverged else (cog_x - x_before) / self.dt
         torque = d.actuator_force
         tau_frac = np.zeros(C.N_JOINTS) if diverged else torque / self.idx.torque_limit
         power = 0.0 if diverged else float(np.abs(torque * d.qvel[6:]).sum())
-        terms = reward_terms(
-            self.reward_weights,
-            cog_vel_x,
-            float(meas["index_norm"]),
-            tau_frac,
-            power,
-            self._mass * self._g,
-            fell,
-        )
+        terms = reward_terms(self.reward_weights, cog_vel_x, index_norm, tau_frac, power, self._mass * self._g, fell)
         reward = float(sum(terms.values()))
         # After a divergence the state is garbage: repeat the last good observation.
-        obs = self._last_obs.copy() if diverged else self._observation(meas)
+        if not diverged:
+            self._last_obs = meas.obs.astype(np.float32)
+            self._last_index_norm = index_norm
+        obs = self._last_obs.copy()
         info = self._info(meas, terms, diverged, reason)
         if self.render_mode == "human":
             self.render()
         return obs, reward, fell, False, info
 
     # ------------------------------------------------------------------ measurement
-    def _measure(self) -> dict[str, Any]:
-        m, d, idx = self.model, self.data, self.idx
-        contacts: ContactMeasurement = measure_contacts(m, d, idx, self.robot_cfg.foot_radius)
-        cog = d.subtree_com[idx.trunk_body].copy()
-        cog_vel = d.subtree_linvel[idx.trunk_body].copy()
-        cog_acc = contacts.total_force / self._mass + self._gravity
-        stance = contacts.foot_points[contacts.foot_contact]
-        index, moments = stability_index(cog, cog_acc, stance, self._mass, self._g)
-        R = quat_to_rotation(d.qpos[3:7])
-        base = d.qpos[:3]
-        # One terrain query for the point under the base and the height scan grid.
-        yaw = math.atan2(R[1, 0], R[0, 0])
-        c, s = math.cos(yaw), math.sin(yaw)
-        sx, sy = self._scan_B[:, 0], self._scan_B[:, 1]
-        heights = self.terrain.heightfield.height_points(base[0] + (c * sx - s * sy), base[1] + (s * sx + c * sy))
-        ground = float(heights[0])
-        return {
-            "contacts": contacts,
-            "cog": cog,
-            "cog_vel": cog_vel,
-            "cog_acc": cog_acc,
-            "index": float(index),
-            "index_norm": float(index) / (self._mass * self._g),
-            "moments": moments,
-            "R": R,
-            "base": base.copy(),
-            "ground": ground,
-            "scan": heights[1:],
-            "feet_pos": d.site_xpos[idx.foot_sites].copy(),
-        }
+    def _measure(self) -> StepMeasurement:
+        """Refresh :attr:`_meas` (contacts, COG, stability, terrain scan, observation) from ``data``."""
+        mujoco.mj_subtreeVel(self.model, self.data)
+        self._meas.update(self.terrain.heightfield, self._prev_action, self.gait_period)
+        return self._meas
 
-    def _fall_reason(self, meas: dict[str, Any]) -> str | None:
+    def _fall_reason(self, meas: StepMeasurement) -> str | None:
         lim = self.termination
-        height = meas["base"][2] - meas["ground"]
-        if lim.trunk_contact and meas["contacts"].trunk_contact:
+        height = meas.base[2] - meas.ground
+        if lim.trunk_contact and meas.trunk_contact:
             return "fall: trunk touched the terrain"
         if height < lim.min_base_height:
             return f"fall: base height {height:.3f} m < {lim.min_base_height} m"
         if height > lim.max_base_height:
             return f"fall: base height {height:.3f} m > {lim.max_base_height} m"
-        if meas["R"][2, 2] < self._cos_max_tilt:
-            tilt = np.rad2deg(np.arccos(np.clip(meas["R"][2, 2], -1, 1)))
+        if meas.R[2, 2] < self._cos_max_tilt:
+            tilt = np.rad2deg(np.arccos(np.clip(meas.R[2, 2], -1, 1)))
             return f"fall: tilt {tilt:.1f} deg > {lim.max_tilt_deg} deg"
         xmin, xmax, ymin, ymax = self._inside_xy
-        x, y = meas["base"][0], meas["base"][1]
+        x, y = meas.base[0], meas.base[1]
         if not (xmin < x < xmax and ymin < y < ymax):
             return "left the terrain"
         return None
 
-    def _observation(self, meas: dict[str, Any]) -> np.ndarray:
-        d = self.data
-        R = meas["R"]
-        st = self.observation_structure
-        obs = np.empty(self.observation_space.shape[0])
-        obs[st["base_height"]] = meas["base"][2] - meas["ground"]
-        obs[st["projected_gravity"]] = -R[2, :]
-        obs[st["base_lin_vel"]] = R.T @ d.qvel[:3]
-        obs[st["base_ang_vel"]] = d.qvel[3:6]
-        obs[st["joint_pos"]] = d.qpos[7:]
-        obs[st["joint_vel"]] = d.qvel[6:]
-        obs[st["foot_contact"]] = meas["contacts"].foot_contact
-        norm = self._mass * self._g
-        obs[st["stability_index"]] = meas["index_norm"] if math.isfinite(meas["index_norm"]) else -STABILITY_CLIP
-        edges = np.zeros(4)
-        moments = meas["moments"]
-        if moments.size and np.isfinite(moments).all():
-            edges[: moments.size] = moments / norm
-        elif moments.size:
-            edges[:] = -STABILITY_CLIP
-        obs[st["edge_moments"]] = edges
-        phase = 2.0 * np.pi * d.time / self.gait_period
-        obs[st["gait_clock"]] = (math.sin(phase), math.cos(phase))
-        obs[st["height_scan"]] = meas["scan"] - meas["base"][2]
-        obs[st["prev_action"]] = self._prev_action
-        np.clip(obs, self._obs_low, self._obs_high, out=obs)
-        self._last_obs = obs.astype(np.float32)
-        return self._last_obs.copy()
-
     def _info(
-        self, meas: dict[str, Any], terms: dict[str, float], diverged: bool, reason: str | None
+        self, meas: StepMeasurement, terms: dict[str, float], diverged: bool, reason: str | None
     ) -> dict[str, Any]:
-        contacts: ContactMeasurement = meas["contacts"]
-        self._last = meas
+        index = meas.index
         return {
-            "stability_index": meas["index"],
-            "stability_index_normalized": meas["index_norm"],
-            "edge_moments": meas["moments"].copy(),
-            "contact_forces": contacts.foot_forces.copy(),
-            "foot_contact": contacts.foot_contact.copy(),
-            "cog": meas["cog"].copy(),
-            "cog_vel": meas["cog_vel"].copy(),
-            "cog_acc": meas["cog_acc"].copy(),
-            "feet_pos": meas["feet_pos"].copy(),
-            "terrain_height_under_base": meas["ground"],
-            "distance": float(meas["cog"][0]) - self._start_x,
+            "stability_index": index,
+            "stability_index_normalized": index / (self._mass * self._g),
+            "edge_moments": meas.moments.copy(),
+            "contact_forces": meas.foot_forces.copy(),
+            "foot_contact": meas.foot_contact.copy(),
+            "cog": meas.cog.copy(),
+            "cog_vel": meas.cog_vel.copy(),
+            "cog_acc": meas.cog_acc.copy(),
+            "feet_pos": meas.feet_pos.copy(),
+            "terrain_height_under_base": meas.ground,
+            "distance": float(meas.cog[0]) - self._start_x,
             "diverged": diverged,
             "termination_reason": reason,
             "reward_terms": dict(terms),

@@ -163,6 +163,9 @@ class ExplicitDynamics:
         D0[0, :, 0:3, 0:3] = self._m_all[:, None, None] * np.eye(3)
         D0[0, 0, 3:6, 3:6] = self.I_trunk_B
         self._D0 = D0
+        # Motor rotor inertia (MJCF ``armature``): a constant added to the joint diagonal of M.
+        self._armature_idx = np.arange(6, C.NV)
+        self.armature = model.dof_armature[6:].copy()
         self._kernel_params = tuple(
             np.ascontiguousarray(x, dtype=float)
             for x in (self.hips_B, a_pts, b_pts, self._m_all, self.I_pts.reshape(12, 3, 3), self.I_trunk_B,
@@ -202,6 +205,7 @@ class ExplicitDynamics:
         explicit_terms(
             np.ascontiguousarray(qpos), np.ascontiguousarray(qvel), *self._kernel_params, M, h, G, J_feet, Jdd
         )
+        M[:, self._armature_idx, self._armature_idx] += self.armature
         return M, h, G, J_feet, Jdd
 
     def _terms(self, qpos: np.ndarray, qvel: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -269,6 +273,7 @@ class ExplicitDynamics:
         D[:, 1:, 3:6, 3:6] = I_B.reshape(N, 12, 3, 3)
         Jf = J.reshape(N, 78, C.NV)
         M = np.swapaxes(Jf, -1, -2) @ (D @ J).reshape(N, 78, C.NV)
+        M[:, self._armature_idx, self._armature_idx] += self.armature
 
         g_B = self.gravity_W @ R  # (N, 3) = R^T g
         acc_t = ((self.r_trunk_B @ WxT[:, 0])[:, None, :] @ WxT[:, 0])[:, 0]

@@ -54,13 +54,13 @@ def _leg_xml(cfg: RobotConfig, leg: str, hip_pos: np.ndarray) -> str:
     fr = f'friction="{cfg.friction:.6g} 0.005 0.0001"'
     return f"""
       <body name="{C.thigh_body(leg)}" pos="{_fmt(hip_pos)}">
-        <joint name="{C.joint_name(leg, "HAA")}" axis="1 0 0" range="{_fmt(rng["HAA"])}" damping="{cfg.joint_damping:.6g}"/>
-        <joint name="{C.joint_name(leg, "HFE")}" axis="0 1 0" range="{_fmt(rng["HFE"])}" damping="{cfg.joint_damping:.6g}"/>
+        <joint name="{C.joint_name(leg, "HAA")}" axis="1 0 0" range="{_fmt(rng["HAA"])}" damping="{cfg.joint_damping:.6g}" armature="{cfg.joint_armature:.6g}"/>
+        <joint name="{C.joint_name(leg, "HFE")}" axis="0 1 0" range="{_fmt(rng["HFE"])}" damping="{cfg.joint_damping:.6g}" armature="{cfg.joint_armature:.6g}"/>
         <inertial pos="0 0 {-cfg.thigh.com:.10g}" mass="{cfg.thigh.mass:.10g}" diaginertia="{_fmt(_link_inertia(cfg.thigh))}"/>
         <site name="{C.hip_site(leg)}" pos="0 0 0" size="0.01"/>
         <geom name="{leg}_thigh_geom" type="capsule" fromto="0 0 0 0 0 {-l1:.10g}" size="{cfg.link_radius:.6g}" mass="0" {group} {fr} rgba="0.3 0.3 0.35 1"/>
         <body name="{C.shank_body(leg)}" pos="0 0 {-l1:.10g}">
-          <joint name="{C.joint_name(leg, "KFE")}" axis="0 1 0" range="{_fmt(kfe)}" damping="{cfg.joint_damping:.6g}"/>
+          <joint name="{C.joint_name(leg, "KFE")}" axis="0 1 0" range="{_fmt(kfe)}" damping="{cfg.joint_damping:.6g}" armature="{cfg.joint_armature:.6g}"/>
           <inertial pos="0 0 {-cfg.shank.com:.10g}" mass="{cfg.shank.mass:.10g}" diaginertia="{_fmt(_link_inertia(cfg.shank))}"/>
           <geom name="{leg}_shank_geom" type="capsule" fromto="0 0 0 0 0 {-(l2 - cfg.foot_radius):.10g}" size="{0.7 * cfg.link_radius:.6g}" mass="0" {group} {fr} rgba="0.55 0.55 0.6 1"/>
           <geom name="{C.foot_geom(leg)}" type="sphere" pos="0 0 {-l2:.10g}" size="{cfg.foot_radius:.6g}" mass="0" {group} {fr} rgba="0.1 0.1 0.1 1"/>

@@ -116,6 +116,13 @@ class HeightField:
         """(nrow,) world y (m) of the node rows."""
         return self._origin[1] + self._cell * np.arange(self._h.shape[0])
 
+    @property
+    def kernel_args(self) -> tuple[np.ndarray, int, int, float, float, float]:
+        """(flat heights, nrow, ncol, origin x, origin y, 1 / cell_size): the arguments of the
+        compiled height kernel, for other compiled code that queries this surface."""
+        nrow, ncol = self._h.shape
+        return self._flat, nrow, ncol, float(self._origin[0]), float(self._origin[1]), 1.0 / self._cell
+
     # --- point queries -------------------------------------------------------------------
     def _locate(self, x: ArrayLike, y: ArrayLike):
         """Cell indices (r, c) and in-cell fractions (fv, fu) of clamped query points."""
