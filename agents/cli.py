@@ -1,4 +1,4 @@
-"""The ``quad-uneven`` command line: ``demo``, ``evaluate``, ``paper`` (see ``--help`` of each)."""
+"""The ``quad-uneven`` command line: ``demo``, ``evaluate``, ``train``, ``paper`` (see ``--help`` of each)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from pathlib import Path
 from agents.evaluate import add_evaluate_parser, evaluate
 from agents.paper_sim import add_paper_parser
 from agents.suites import suite_from_dict
+from agents.train_cli import add_train_parser
 
 
 def demo(out: Path, terrain: str, seed: int, distance: float, video: bool) -> dict:
@@ -40,6 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--distance", type=float, default=2.0, help="goal distance along +x (m)")
     p_demo.add_argument("--no-video", action="store_true", help="skip the MP4 (rendering is the slow part)")
     add_evaluate_parser(sub)
+    add_train_parser(sub)
     add_paper_parser(sub)
     p_plan = sub.add_parser("plan-paper", help="plan the paper's §6 scenario (no simulator): Figs. 4-6, plan.json")
     p_plan.add_argument("--out", required=True, help="output directory (created if missing)")

@@ -14,7 +14,8 @@ POLICY_ENV_KWARGS: dict[str, dict[str, Any]] = {
     "zero": {"action_mode": "joint_pd"},
     # The expert installs its computed-torque controller as the env's physics-rate hook.
     "expert": {"action_mode": "torque"},
-    # A learned agent: the env defaults unless the user passes --env-kwargs (as it was trained).
+    # A learned agent: the env defaults plus the env_kwargs of its training run (rl_meta.json next to
+    # the model, see agents.rl_model), unless the user passes --env-kwargs.
     "sb3": {},
 }
 """Environment keyword arguments per policy kind (the one table; user env kwargs override it)."""
@@ -43,8 +44,17 @@ def policy_kind(name: str) -> str:
 
 
 def policy_env_kwargs(name: str) -> dict[str, Any]:
-    """Environment keyword arguments the policy ``name`` needs (a copy of its ``POLICY_ENV_KWARGS`` row)."""
-    return dict(POLICY_ENV_KWARGS[policy_kind(name)])
+    """Environment keyword arguments the policy ``name`` needs (a copy of its ``POLICY_ENV_KWARGS`` row).
+
+    For an SB3 model, the ``env_kwargs`` recorded by its training run (``rl_meta.json``) are added.
+    """
+    kind = policy_kind(name)
+    kwargs = dict(POLICY_ENV_KWARGS[kind])
+    if kind == "sb3":
+        from agents.rl_model import metadata_env_kwargs
+
+        kwargs.update(metadata_env_kwargs(name))
+    return kwargs
 
 
 def _expert(env: gym.Env) -> Policy:
@@ -53,22 +63,25 @@ def _expert(env: gym.Env) -> Policy:
     return ExpertPolicy(env)
 
 
-def _sb3(path: str, algo: str) -> Policy:
+def _sb3(path: str, env: gym.Env, algo: str) -> Policy:
     if algo not in SB3_ALGOS:
         raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {algo!r}")
     if not Path(path).is_file():
         raise PolicyError(f"policy: SB3 model file {path!r} does not exist")
-    import stable_baselines3
+    from agents.rl_model import ModelError, load_sb3_policy
 
-    cls = getattr(stable_baselines3, algo.upper())
-    return cls.load(path, device="cpu")
+    try:
+        return load_sb3_policy(path, env, algo)
+    except ModelError as err:
+        raise PolicyError(str(err)) from None
 
 
 def make_policy(name: str, env: gym.Env, algo: str = "ppo") -> Policy:
     """A policy with SB3's ``predict`` for ``env`` (built with :func:`policy_env_kwargs` of ``name``).
 
     :param name: ``"zero"`` (the zero action), ``"expert"`` (``agents.expert.ExpertPolicy(env)``, which installs
-        its physics-rate controller into ``env.unwrapped``), or the path of an SB3 model ``.zip``.
+        its physics-rate controller into ``env.unwrapped``), or the path of an SB3 model ``.zip`` (a residual
+        model, per its ``rl_meta.json``, installs the expert plus residual: :mod:`agents.rl_model`).
     :param algo: ``"ppo"`` or ``"sac"``: the class an SB3 model file is loaded with.
     :raises PolicyError: on an unknown name, a missing model file or expert module, or an unknown algo.
     """
@@ -77,4 +90,4 @@ def make_policy(name: str, env: gym.Env, algo: str = "ppo") -> Policy:
         return ZeroActionPolicy(env.action_space)
     if kind == "expert":
         return _expert(env)
-    return _sb3(name, algo)
+    return _sb3(name, env, algo)
