@@ -282,7 +282,7 @@ class QuadUnevenEnv(gym.Env):
             raise ValueError(
                 f"action must be finite, got NaN/Inf at indices {np.flatnonzero(~np.isfinite(a)).tolist()}"
             )
-        a = np.clip(a, -1.0, 1.0)
+        a = np.minimum(np.maximum(a, -1.0), 1.0)  # = np.clip, without its Python-level overhead
         m, d = self.model, self.data
         x_before = float(self._meas.cog[0])
 

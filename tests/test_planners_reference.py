@@ -117,3 +117,11 @@ def test_aim_feet_below_footholds_places_late_feet_under_the_surface():
         np.testing.assert_allclose(site, foothold + np.array([0.0, 0.0, cfg.foot_radius - depth]), atol=1e-9)
         assert np.all(out.qd_joints[3 * i : 3 * i + 3] == 0.0)
     np.testing.assert_array_equal(out.q_joints[3:6], sample.q_joints[3:6])  # RF untouched
+
+
+def test_inv3_matches_lapack_on_batches():
+    from planners.wholebody import inv3
+
+    A = np.random.default_rng(1).normal(size=(50, 4, 3, 3)) + 2.0 * np.eye(3)
+    np.testing.assert_allclose(inv3(A), np.linalg.inv(A), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(inv3(A) @ A, np.broadcast_to(np.eye(3), A.shape), atol=1e-12)

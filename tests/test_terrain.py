@@ -496,7 +496,7 @@ def test_docs_parameter_tables_are_in_sync():
     assert parameter_tables().strip().replace("### `", "#### `") in readme
 
 
-def test_compiled_height_points_equal_numpy_height():
+def test_compiled_height_and_normal_points_equal_numpy():
     from quad_uneven_env.terrain import Terrain, parse_terrain_spec
 
     rng = np.random.default_rng(3)
@@ -505,3 +505,6 @@ def test_compiled_height_points_equal_numpy_height():
     x = rng.uniform(x0 - 0.5, x1 + 0.5, 5000)  # includes points outside the grid (clamped)
     y = rng.uniform(y0 - 0.5, y1 + 0.5, 5000)
     np.testing.assert_allclose(hf.height_points(x, y), hf.height(x, y), rtol=0, atol=1e-12)
+    normals = hf.normal_points(np.column_stack([x, y, np.zeros_like(x)]))
+    np.testing.assert_allclose(normals, hf.normal(x, y), rtol=0, atol=1e-12)
+    assert (normals[:, 2] < 0.999).mean() > 0.05  # the stones' edges: tilted triangles were sampled
