@@ -132,6 +132,7 @@ class InverseDynamics:
         )
         self._qp: dict[int, _StanceQP] = {}
         self._cone_lower = np.array([0.0, 0.0, 0.0, 0.0, self.min_normal_force])
+        self._cone_buf = np.empty((C.N_LEGS, 5, 3))
         # kernel work buffers: tau, F, qacc, r = M qacc + h, J_L^-1, S stance blocks
         self._ws = (
             np.zeros(C.N_JOINTS), np.zeros((C.N_LEGS, 3)), np.zeros(C.NV), np.zeros(C.NV),
@@ -256,21 +257,24 @@ class InverseDynamics:
     def _distribute_qp(
         self, lay: StanceLayout, J_feet: np.ndarray, r: np.ndarray, result: IDResult, normals_W: np.ndarray | None
     ) -> None:
-        st = lay.stance_legs
-        p = len(st)
-        cones = self._cone_up[:p] if normals_W is None else self._cones(np.asarray(normals_W)[st])
-        qp = self._qp.get(p) or _StanceQP(p)
-        self._qp[p] = qp
+        p = lay.n_stance
+        if normals_W is None:
+            cones = self._cone_up[:p]
+        else:
+            cones = self._cone_buf[:p]
+            K.stance_pyramids_into(np.ascontiguousarray(normals_W, dtype=float), lay.mask, self.mu, cones)
+        qp = self._qp.get(p)
+        if qp is None:
+            qp = self._qp[p] = _StanceQP(p)
         try:
-            K.qp_fill(J_feet, lay.mask, r, result.contact_forces, cones, self._cone_lower, *qp.problem)
+            inside = K.qp_fill(J_feet, lay.mask, r, result.contact_forces, cones, self._cone_lower, *qp.problem)
         except TypeError:  # arrays the kernel does not take (numba dispatch): convert once
             J_feet, r = np.ascontiguousarray(J_feet, dtype=float), np.ascontiguousarray(r, dtype=float)
-            cones = np.ascontiguousarray(cones, dtype=float)
-            K.qp_fill(J_feet, lay.mask, r, result.contact_forces, cones, self._cone_lower, *qp.problem)
+            inside = K.qp_fill(J_feet, lay.mask, r, result.contact_forces, cones, self._cone_lower, *qp.problem)
         _, _, A, b, C_in, lower = qp.problem
         # The QP's optimum is the torque closest to "pinv"; when the "pinv" forces already lie in
         # every cone with the minimum normal force, they are that optimum (zero cost): skip the solve.
-        if (C_in @ result.contact_forces[st].ravel() >= lower).all():
+        if inside:
             result.distribution = "qp"
             return
         x = qp.solve()
@@ -279,14 +283,6 @@ class InverseDynamics:
             self._relax(lay, J_feet, r, result, qp)
             return
         result.tau, result.contact_forces, result.distribution = tau, F, "qp"
-
-    def _cones(self, normals_st: np.ndarray) -> np.ndarray:
-        """Friction pyramids of the stance normals, reused while the normals do not change (stance feet)."""
-        last = getattr(self, "_cones_for", None)
-        if last is None or last.shape != normals_st.shape or not np.array_equal(last, normals_st):
-            self._cones_for = normals_st.copy()
-            self._cones_last = friction_pyramid(normals_st, self.mu)
-        return self._cones_last
 
     def _relax(self, lay: StanceLayout, J_feet: np.ndarray, r: np.ndarray, result: IDResult, qp: _StanceQP) -> None:
         """Infeasible cones at the commanded base acceleration: keep the forces physical.

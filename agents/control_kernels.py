@@ -330,12 +330,13 @@ def clip_into(x, limit, out):  # pragma: no cover - compiled
         out[i] = v if v != v else min(max(v, -limit[i]), limit[i])  # NaN passes through, as np.clip
 
 
-@nb.njit(nb.void(_f3, nb.int64, _f1, _f2, _f3, _f1, _f2, _f1, _f2, _f1, _f2, _f1), cache=False, nogil=True)
+@nb.njit(nb.boolean(_f3, nb.int64, _f1, _f2, _f3, _f1, _f2, _f1, _f2, _f1, _f2, _f1), cache=False, nogil=True)
 def qp_fill(J, mask, r, F0, cones, lower, H, g, A, b, C, l):  # pragma: no cover - compiled
     """The "qp" problem in the stance forces x = [F_i]_i (see ``agents.control_id``), into preallocated arrays.
 
     H = blockdiag(J_L,i J_L,i^T) + 1e-9 I, g = -blockdiag(J_L,i J_L,i^T) F0, A = [J_b,i^T]_i,
     b = r[:6], C = blockdiag(cones[k]) (k-th stance leg), l = lower per leg.
+    Returns whether F0 already satisfies the cones, C x0 >= l (then it is the QP's optimum).
     """
     n = H.shape[0]
     for i in range(n):
@@ -348,6 +349,7 @@ def qp_fill(J, mask, r, F0, cones, lower, H, g, A, b, C, l):  # pragma: no cover
         b[i] = r[i]
     W = np.empty((3, 3))
     k = 0
+    inside = True
     for leg in range(N_LEGS):
         if not (mask >> leg) & 1:
             continue
@@ -371,7 +373,10 @@ def qp_fill(J, mask, r, F0, cones, lower, H, g, A, b, C, l):  # pragma: no cover
             for e in range(3):
                 C[5 * k + a, 3 * k + e] = cones[k, a, e]
             l[5 * k + a] = lower[a]
+            if cones[k, a, 0] * F0[leg, 0] + cones[k, a, 1] * F0[leg, 1] + cones[k, a, 2] * F0[leg, 2] < lower[a]:
+                inside = False
         k += 1
+    return inside
 
 
 @nb.njit(nb.boolean(_f1, _f2, _f1, _f2, _f1, _f3, nb.int64, _f1, _f1, _f2), cache=False, nogil=True)
@@ -432,3 +437,19 @@ def friction_pyramid_into(normals, mu, out):  # pragma: no cover - compiled
         out[i, 2, 0], out[i, 2, 1], out[i, 2, 2] = m0 - b0, m1 - b1, m2 - b2
         out[i, 3, 0], out[i, 3, 1], out[i, 3, 2] = m0 + b0, m1 + b1, m2 + b2
         out[i, 4, 0], out[i, 4, 1], out[i, 4, 2] = n0, n1, n2
+
+
+@nb.njit(nb.void(_f2, nb.int64, nb.float64, _f3), cache=False, nogil=True)
+def stance_pyramids_into(normals, mask, mu, out):  # pragma: no cover - compiled
+    """out[:p] = friction pyramids (p, 5, 3) of ``normals[leg]`` for the p stance legs of ``mask``, in order."""
+    p = 0
+    for leg in range(N_LEGS):
+        p += (mask >> leg) & 1
+    stance = np.empty((p, 3))
+    k = 0
+    for leg in range(N_LEGS):
+        if (mask >> leg) & 1:
+            for e in range(3):
+                stance[k, e] = normals[leg, e]
+            k += 1
+    friction_pyramid_into(stance, mu, out)

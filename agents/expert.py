@@ -95,7 +95,7 @@ class ExpertPolicy:
         self.config = config or ExpertConfig()
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
-        self._foot_sensor_adr = [int(a) for a in self.env.idx.foot_sensor_adr]
+        self._foot_sensor_adr = np.asarray(self.env.idx.foot_sensor_adr, dtype=np.intp)
         self.controller = ComputedTorqueController(
             reference=self._reference,
             backend=self.config.backend,
@@ -166,11 +166,10 @@ class ExpertPolicy:
         """
         if not hasattr(self._current, "footholds"):
             return ref
-        sd = self._data.sensordata
-        late = [st and sd[a] <= 0 for st, a in zip(ref.stance, self._foot_sensor_adr, strict=True)]
-        if not any(late):
+        late = (self._data.sensordata[self._foot_sensor_adr] <= 0) & ref.stance
+        if not late.any():
             return ref
-        return aim_feet_below_footholds(ref, self._current, tc, np.array(late), self.config.touchdown_depth, self.cfg)
+        return aim_feet_below_footholds(ref, self._current, tc, late, self.config.touchdown_depth, self.cfg)
 
     def _measured_footholds(self) -> np.ndarray:
         """(4, 3) points on the terrain below the foot sites (m, world)."""

@@ -51,6 +51,7 @@ class Reference:
         self._grid_t = np.arange(0.0, self.t_end + 0.5 * grid_dt, grid_dt)
         self._grid = self.evaluate(self._grid_t, newton_steps=3)  # converged to ~1e-14 (tests)
         self._grid_p = self._grid[0]
+        self._grid_stance = [tuple(bool(s) for s in row) for row in self._grid[6]]
 
     def feet(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Planned foot-site positions, velocities, accelerations (T, 4, 3) (m, m/s, m/s^2) at times ``t`` (s)."""
@@ -90,10 +91,12 @@ class Reference:
         tc = min(max(float(t), 0.0), self.t_end)
         k = round(tc / self._grid_dt)
         if k < len(self._grid_t) and abs(self._grid_t[k] - tc) < 1e-9:
-            p, pd, pdd, q, qd, qdd, stance = (a[k] for a in self._grid)
+            p, pd, pdd, q, qd, qdd, _ = (a[k] for a in self._grid)
+            stance = self._grid_stance[k]
         else:
             guess = np.array([np.interp(tc, self._grid_t, self._grid_p[:, j]) for j in range(3)])[None]
             p, pd, pdd, q, qd, qdd, stance = (a[0] for a in self.evaluate(np.array([tc]), 2, guess))
+            stance = tuple(bool(s) for s in stance)
         return ReferenceSample(
             t=float(t),
             p_base_W=p.copy(),
@@ -105,7 +108,7 @@ class Reference:
             q_joints=q.copy(),
             qd_joints=qd.copy(),
             qdd_joints=qdd.copy(),
-            stance=tuple(bool(s) for s in stance),  # type: ignore[arg-type]
+            stance=stance,  # type: ignore[arg-type]
         )
 
 

@@ -20,7 +20,7 @@ from quad_uneven_env.config import (
     dataclass_from_mapping,
     load_robot_config,
 )
-from quad_uneven_env.measurement import StepMeasurement
+from quad_uneven_env.measurement import StepMeasurement, clip_finite_into
 from quad_uneven_env.observations import (
     height_scan_points_B,
     observation_fields,
@@ -288,7 +288,7 @@ class QuadUnevenEnv(gym.Env):
 
         reason = None
         if self._controller is not None:
-            lim = self.idx.torque_limit
+            lim, ctrl = self.idx.torque_limit, d.ctrl
             for _ in range(self.frame_skip):
                 mujoco.mj_step1(m, d)
                 if instability_warnings(d) > self._warnings_at_reset:
@@ -298,10 +298,9 @@ class QuadUnevenEnv(gym.Env):
                 except (np.linalg.LinAlgError, ArithmeticError) as err:
                     reason = f"diverged: controller failed ({type(err).__name__}: {err})"
                     break
-                if tau.shape != (C.N_JOINTS,) or not np.isfinite(tau).all():
+                if tau.shape != (C.N_JOINTS,) or not clip_finite_into(tau, lim, ctrl):
                     reason = "diverged: controller returned non-finite or mis-shaped torques"
                     break
-                np.clip(tau, -lim, lim, out=d.ctrl)
                 mujoco.mj_step2(m, d)  # a bad qacc here is caught by the next check (or the one below)
         else:
             if self.action_mode == "torque":

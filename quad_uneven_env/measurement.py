@@ -373,3 +373,14 @@ def _measure_observe(  # pragma: no cover - compiled
         obs[o[10] + i - 1] = heights[i] - base[2]
     for i in range(obs.shape[0]):
         obs[i] = min(max(obs[i], obs_low[i]), obs_high[i])
+
+
+@nb.njit(cache=False, nogil=True)
+def clip_finite_into(x, limit, out):  # pragma: no cover - compiled
+    """out = clip(x, -limit, limit) if every x is finite (returns True); else False and out untouched."""
+    for i in range(x.shape[0]):
+        if not math.isfinite(x[i]):
+            return False
+    for i in range(x.shape[0]):
+        out[i] = min(max(x[i], -limit[i]), limit[i])
+    return True

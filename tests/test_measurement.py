@@ -116,3 +116,16 @@ def test_kernel_with_a_yawed_base_and_without_support(lift):
     check_against_reference(u)
     if lift:
         assert u._meas.index == NO_SUPPORT and u._meas.obs[u.observation_structure["stability_index"]] == -0.5
+
+
+def test_clip_finite_into():
+    from quad_uneven_env.measurement import clip_finite_into
+
+    lim = np.array([1.0, 2.0, 3.0])
+    out = np.full(3, 7.0)
+    assert clip_finite_into(np.array([5.0, -5.0, 0.5]), lim, out)
+    np.testing.assert_array_equal(out, [1.0, -2.0, 0.5])
+    out[:] = 7.0
+    assert not clip_finite_into(np.array([0.0, np.nan, 0.0]), lim, out)
+    np.testing.assert_array_equal(out, 7.0)  # untouched
+    assert not clip_finite_into(np.array([np.inf, 0.0, 0.0]), lim, out)
