@@ -25,7 +25,7 @@ from typing import Any
 import gymnasium as gym
 import mujoco
 import numpy as np
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from agents.control import ComputedTorqueController, Gains
 from planners import PlanningError, Scenario, plan_gait_cycle
@@ -57,6 +57,16 @@ class ExpertConfig:
     """dynamics backend of the controller."""
     gains: Gains = dataclasses.field(default_factory=Gains)
     """computed-torque gains."""
+
+
+_BLAS: list[ThreadpoolController] = []
+
+
+def _blas_controller() -> ThreadpoolController:
+    """One ThreadpoolController per process: building it scans the loaded libraries (~2 ms)."""
+    if not _BLAS:
+        _BLAS.append(ThreadpoolController())
+    return _BLAS[0]
 
 
 class _HoldReference:
@@ -200,7 +210,7 @@ class ExpertPolicy:
             try:
                 # Small dense problems: multi-threaded BLAS only adds contention (10-50x slower
                 # on a loaded 2-core machine), so the planner runs single-threaded.
-                with threadpool_limits(limits=1, user_api="blas"):
+                with _blas_controller().limit(limits=1, user_api="blas"):
                     plan = plan_gait_cycle(scenario)
             except PlanningError as err:
                 self.failure_log.append(f"t={t0:.2f} s, stride {stride:.3f} m: {err}")

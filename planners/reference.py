@@ -51,7 +51,7 @@ class Reference:
         self._grid_t = np.arange(0.0, self.t_end + 0.5 * grid_dt, grid_dt)
         self._grid = self.evaluate(self._grid_t, newton_steps=3)  # converged to ~1e-14 (tests)
         self._grid_p = self._grid[0]
-        self._grid_stance = [tuple(bool(s) for s in row) for row in self._grid[6]]
+        self._grid_stance = [tuple(row) for row in self._grid[6].tolist()]
 
     def feet(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Planned foot-site positions, velocities, accelerations (T, 4, 3) (m, m/s, m/s^2) at times ``t`` (s)."""
@@ -81,10 +81,14 @@ class Reference:
         cog = self.plan.cog
         c, cd, cdd = cog.position(t), cog.velocity(t), cog.acceleration(t)
         x, xd, xdd = self.feet(t)
-        p, pd, pdd, q, qd, qdd = self.wb.place_base(c, cd, cdd, x, xd, xdd, p_guess, newton_steps)
-        stance = self._stance[phase_index(self.plan.phases, t)]
         n = len(t)
-        return p, pd, pdd, q.reshape(n, 12), qd.reshape(n, 12), qdd.reshape(n, 12), stance
+        if p_guess is None:
+            p, pd, pdd, q, qd, qdd = self.wb.place_base_compiled(c, cd, cdd, x, xd, xdd, newton_steps)
+        else:
+            p, pd, pdd, q, qd, qdd = self.wb.place_base(c, cd, cdd, x, xd, xdd, p_guess, newton_steps)
+            q, qd, qdd = q.reshape(n, 12), qd.reshape(n, 12), qdd.reshape(n, 12)
+        stance = self._stance[phase_index(self.plan.phases, t)]
+        return p, pd, pdd, q, qd, qdd, stance
 
     def sample(self, t: float) -> ReferenceSample:
         """The planned whole-robot state at time ``t`` (s from the cycle start; clipped to the cycle)."""

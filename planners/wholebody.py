@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from planners.wholebody_kernel import place_base_grid
 from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
@@ -154,3 +155,31 @@ class WholeBody:
         p_dd = (Kinv @ (c_dd - inner.sum(axis=-2) / M)[..., None])[..., 0]
         qdd = np.einsum("...lij,...lj->...li", Jinv, x_dd - p_dd[..., None, :] - jd)
         return p, p_d, p_dd, q, qd, qdd
+
+    def place_base_compiled(
+        self,
+        c: np.ndarray,
+        c_d: np.ndarray,
+        c_dd: np.ndarray,
+        x: np.ndarray,
+        x_d: np.ndarray,
+        x_dd: np.ndarray,
+        newton_steps: int = 3,
+    ) -> tuple[np.ndarray, ...]:
+        """:meth:`place_base` of T time points by the compiled kernel (same formulas, no initial guess).
+
+        :param c, c_d, c_dd: (T, 3) planned COG position (m), velocity (m/s), acceleration (m/s^2).
+        :param x, x_d, x_dd: (T, 4, 3) foot-site positions, velocities, accelerations (world).
+        :return: ``(p, p_d, p_dd, q, qd, qdd)``: base (T, 3); leg joints (T, 12) in rad, rad/s, rad/s^2.
+        """
+        T = c.shape[0]
+        f = np.ascontiguousarray
+        p, pd, pdd = np.empty((T, 3)), np.empty((T, 3)), np.empty((T, 3))
+        q, qd, qdd = np.empty((T, 12)), np.empty((T, 12)), np.empty((T, 12))
+        place_base_grid(
+            f(c, dtype=float), f(c_d, dtype=float), f(c_dd, dtype=float),
+            f(x, dtype=float), f(x_d, dtype=float), f(x_dd, dtype=float),
+            self.hips, self.l1, self.l2, *self.moment_ab, self.knee_sign.astype(float),
+            self._hip_moment, self.mass, int(newton_steps), p, pd, pdd, q, qd, qdd,
+        )  # fmt: skip
+        return p, pd, pdd, q, qd, qdd

@@ -251,11 +251,14 @@ class HeightField:
         mask = (dx * dx + dy * dy <= radius * radius) | corner
         w = mask.astype(np.float64)
         # Weighted least-squares plane h = a dx + b dy + c (normal equations, 3 x 3 per point).
-        feats = np.stack([dx, dy, np.ones_like(dx)], axis=-1)  # (N, p, p, 3)
-        ata = np.einsum("npqi,npq,npqj->nij", feats, w, feats)
-        atb = np.einsum("npqi,npq,npq->ni", feats, w, hp)
-        coef = np.linalg.solve(ata, atb[..., None])[..., 0]
-        resid = hp - np.einsum("npqi,ni->npq", feats, coef)
+        n = hp.shape[0]
+        feats = np.stack([dx, dy, np.ones_like(dx)], axis=-1).reshape(n, p * p, 3)
+        feats_w = feats * w.reshape(n, p * p, 1)
+        # batched matmul: a 3-operand einsum here was 10 x slower
+        ata = np.swapaxes(feats_w, 1, 2) @ feats  # (N, 3, 3)
+        atb = np.swapaxes(feats_w, 1, 2) @ hp.reshape(n, p * p, 1)  # (N, 3, 1)
+        coef = np.linalg.solve(ata, atb)[..., 0]
+        resid = hp - (feats @ coef[..., None]).reshape(hp.shape)
         roughness = np.max(np.where(mask, np.abs(resid), 0.0), axis=(1, 2))
         a, b = coef[:, 0], coef[:, 1]
         plane_n = np.stack([-a, -b, np.ones_like(a)], axis=-1)
