@@ -52,6 +52,12 @@ class Reference:
         self._grid = self.evaluate(self._grid_t, newton_steps=3)  # converged to ~1e-14 (tests)
         self._grid_p = self._grid[0]
         self._grid_stance = [tuple(row) for row in self._grid[6].tolist()]
+        # One packed row per grid time, so that a sample is one copy plus views of it.
+        n_grid = len(self._grid_t)
+        p, pd, pdd, q, qd, qdd, _ = self._grid
+        quat = np.broadcast_to(_IDENTITY, (n_grid, 4))
+        zero = np.zeros((n_grid, 3))
+        self._packed = np.concatenate([p, quat, pd, zero, pdd, zero, q, qd, qdd], axis=1)
 
     def feet(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Planned foot-site positions, velocities, accelerations (T, 4, 3) (m, m/s, m/s^2) at times ``t`` (s)."""
@@ -95,8 +101,11 @@ class Reference:
         tc = min(max(float(t), 0.0), self.t_end)
         k = round(tc / self._grid_dt)
         if k < len(self._grid_t) and abs(self._grid_t[k] - tc) < 1e-9:
-            p, pd, pdd, q, qd, qdd, _ = (a[k] for a in self._grid)
-            stance = self._grid_stance[k]
+            row = self._packed[k].copy()
+            return ReferenceSample(
+                float(t), row[0:3], row[3:7], row[7:10], row[10:13], row[13:16], row[16:19],
+                row[19:31], row[31:43], row[43:55], self._grid_stance[k],
+            )  # fmt: skip
         else:
             guess = np.array([np.interp(tc, self._grid_t, self._grid_p[:, j]) for j in range(3)])[None]
             p, pd, pdd, q, qd, qdd, stance = (a[0] for a in self.evaluate(np.array([tc]), 2, guess))
