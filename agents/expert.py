@@ -105,7 +105,7 @@ class ExpertPolicy:
         self.config = config or ExpertConfig()
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
-        self._foot_sensor_adr = np.asarray(self.env.idx.foot_sensor_adr, dtype=np.intp)
+        self._foot_sensor_adr = [int(a) for a in self.env.idx.foot_sensor_adr]
         self.controller = ComputedTorqueController(
             reference=self._reference,
             backend=self.config.backend,
@@ -176,10 +176,11 @@ class ExpertPolicy:
         """
         if not hasattr(self._current, "footholds"):
             return ref
-        late = (self._data.sensordata[self._foot_sensor_adr] <= 0) & ref.stance
-        if not late.any():
+        sd, stance = self._data.sensordata, ref.stance
+        late = [stance[i] and sd[a] <= 0 for i, a in enumerate(self._foot_sensor_adr)]
+        if not (late[0] or late[1] or late[2] or late[3]):
             return ref
-        return aim_feet_below_footholds(ref, self._current, tc, late, self.config.touchdown_depth, self.cfg)
+        return aim_feet_below_footholds(ref, self._current, tc, np.array(late), self.config.touchdown_depth, self.cfg)
 
     def _measured_footholds(self) -> np.ndarray:
         """(4, 3) points on the terrain below the foot sites (m, world)."""
