@@ -29,7 +29,7 @@ from agents.train_config import TrainConfig, TrainConfigError
 from agents.train_env import EVAL_SEED_OFFSET, build_vec_env, normalize
 from agents.train_plot import plot_learning_curve
 
-__all__ = ["ProgressCallback", "SaveVecNormalizeCallback", "train"]
+__all__ = ["ProgressCallback", "SaveVecNormalizeCallback", "WallClockLimitCallback", "train"]
 
 
 class ProgressCallback(BaseCallback):
@@ -53,6 +53,23 @@ class ProgressCallback(BaseCallback):
 
     def _on_training_end(self) -> None:
         self.bar.close()
+
+
+class WallClockLimitCallback(BaseCallback):
+    """Stops training once ``minutes`` of wall-clock time have passed since training started."""
+
+    def __init__(self, minutes: float) -> None:
+        super().__init__()
+        self.seconds = 60.0 * minutes
+        self.start = 0.0
+        self.reached = False
+
+    def _on_training_start(self) -> None:
+        self.start = time.perf_counter()
+
+    def _on_step(self) -> bool:
+        self.reached = time.perf_counter() - self.start >= self.seconds
+        return not self.reached
 
 
 class SaveVecNormalizeCallback(BaseCallback):
@@ -107,6 +124,8 @@ def _make_model(cfg: TrainConfig, venv: Any) -> Any:
 
 def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCallback], Any]:
     callbacks: list[BaseCallback] = [ProgressCallback(progress)]
+    if cfg.time_limit_min > 0:
+        callbacks.append(WallClockLimitCallback(cfg.time_limit_min))
     eval_env = None
     if cfg.eval_freq > 0:
         eval_env = normalize(
@@ -139,15 +158,16 @@ def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCa
 def train(cfg: TrainConfig, out: str | Path, progress: bool = True) -> dict[str, Any]:
     """Train a residual agent with ``cfg``; write the model, its metadata and the learning curve to ``out``.
 
-    Numerical divergence or a fall ends an episode (``info["diverged"]``), never the run. Ctrl-C stops
-    training early and still saves the model (``interrupted`` in the summary).
+    Numerical divergence or a fall ends an episode (``info["diverged"]``), never the run. Ctrl-C or the
+    ``time_limit_min`` budget stops training early and still saves the model (``interrupted`` and
+    ``time_limit_reached`` in the summary).
 
     :param cfg: a validated :class:`TrainConfig` (see :func:`load_train_config`).
     :param out: output directory (created).
     :param progress: show a progress bar.
     :return: the ``train_summary.json`` content: ``timesteps`` done, ``wall_time`` (s), ``steps_per_s``,
         ``episodes``, ``mean_return``, ``mean_stability_index`` (N m), ``mean_distance`` (m), ``fall_rate``
-        (last 20 training episodes), ``interrupted``, ``model`` path.
+        (last 20 training episodes), ``interrupted``, ``time_limit_reached``, ``model`` path.
     :raises TrainConfigError: on hyperparameters the algorithm does not accept.
     """
     import torch
@@ -193,6 +213,7 @@ def train(cfg: TrainConfig, out: str | Path, progress: bool = True) -> dict[str,
         "steps_per_s": model.num_timesteps / wall if wall > 0 else None,
         **{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in curve.items()},
         "interrupted": interrupted,
+        "time_limit_reached": any(getattr(c, "reached", False) for c in callbacks),
         "model": str(out / "model.zip"),
     }
     (out / "train_summary.json").write_text(json.dumps(summary, indent=2))

@@ -32,6 +32,9 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     p.add_argument("--seed", type=int, default=None, help="seed of the model and envs (default: the config's)")
     p.add_argument("--n-envs", type=int, default=None, help="parallel envs (default: the config's)")
     p.add_argument("--residual-scale", type=float, default=None, help="residual torque per unit action / limit")
+    p.add_argument(
+        "--time-limit-min", type=float, default=None, help="stop (and save) after this many minutes of training"
+    )
     p.add_argument("--config", default=None, help="training config YAML (default configs/rl/ALGO_residual.yaml)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_train_command)
@@ -47,6 +50,7 @@ def run_train_command(args: argparse.Namespace) -> int:
         "seed": args.seed,
         "n_envs": args.n_envs,
         "residual_scale": args.residual_scale,
+        "time_limit_min": args.time_limit_min,
     }
     try:
         cfg = load_train_config(args.config, overrides)

@@ -43,6 +43,8 @@ class TrainConfig:
     """terrain kind, preset (``configs/terrain/``) or YAML path; a new surface is drawn at every reset."""
     timesteps: int = 100_000
     """total environment steps over all parallel envs."""
+    time_limit_min: float = 0.0
+    """wall-clock budget of the training loop (minutes); training stops there and saves; 0: none."""
     seed: int = 0
     """seed of the model and of the envs (env i gets seed + i; the evaluation env seed + 1000)."""
     n_envs: int = 2
@@ -118,6 +120,9 @@ def validate(cfg: TrainConfig) -> TrainConfig:
     scale = cfg.residual_scale
     if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0.0 < scale <= 1.0:
         raise TrainConfigError(f"residual_scale must be a number in (0, 1] (of the torque limit), got {scale!r}")
+    limit = cfg.time_limit_min
+    if isinstance(limit, bool) or not isinstance(limit, int | float) or not 0.0 <= limit < 1e6:
+        raise TrainConfigError(f"time_limit_min must be a number of minutes >= 0 (0: none), got {limit!r}")
     _bool("normalize_obs", cfg.normalize_obs)
     _bool("normalize_reward", cfg.normalize_reward)
     env_kwargs = _mapping("env_kwargs", cfg.env_kwargs)
