@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out/demo
 
-.PHONY: venv demo test test-slow lint bench clean
+.PHONY: venv demo test test-slow lint bench rl-baseline clean
 
 $(STAMP): pyproject.toml Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -39,6 +39,15 @@ bench: venv
 	$(PY) benchmarks/dynamics.py
 	$(PY) benchmarks/planning.py
 	$(PY) benchmarks/expert.py
+
+# The measured residual-RL result of docs/rl.md: PPO on rough terrain (18 min budget), then the
+# expert and the trained model on the rough suite.
+rl-baseline: venv
+	nice -n 10 $(PY) -m agents.cli train --algo ppo --terrain rough --timesteps 1000000 --time-limit-min 18 \
+	  --out runs/ppo_rough --seed 0 --n-envs 2
+	nice -n 10 $(PY) -m agents.cli evaluate --policy expert --suite rough --out runs/eval_rough_expert --workers 2
+	nice -n 10 $(PY) -m agents.cli evaluate --policy runs/ppo_rough/model.zip --algo ppo --suite rough \
+	  --out runs/eval_rough_ppo --workers 2
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
