@@ -109,7 +109,7 @@ def _make_model(cfg: TrainConfig, venv: Any) -> Any:
 
     cls = getattr(stable_baselines3, cfg.algo.upper())
     try:
-        return cls(
+        model = cls(
             "MlpPolicy",
             venv,
             seed=cfg.seed,
@@ -120,6 +120,24 @@ def _make_model(cfg: TrainConfig, venv: Any) -> Any:
         )
     except TypeError as err:  # an unknown keyword of the algorithm or of its policy
         raise TrainConfigError(f"hyperparams/policy_kwargs: {err}") from None
+    _zero_mean_action(model)
+    return model
+
+
+def _zero_mean_action(model: Any) -> None:
+    """Zero the layer that outputs the mean action (PPO ``action_net``, SAC ``actor.mu``).
+
+    The untrained deterministic agent is then exactly the expert (residual 0); the weights still get
+    gradients, since the layer's inputs are not zero.
+    """
+    import torch
+
+    head = getattr(model.policy, "action_net", None)
+    if head is None:
+        head = model.actor.mu
+    with torch.no_grad():
+        head.weight.zero_()
+        head.bias.zero_()
 
 
 def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCallback], Any]:

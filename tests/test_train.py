@@ -196,3 +196,19 @@ def test_wall_clock_limit_stops_training_and_still_saves(tmp_path):
     summary = train(cfg, tmp_path / "run", progress=False)
     assert summary["time_limit_reached"] is True and summary["timesteps"] < 10_000
     assert (tmp_path / "run" / "model.zip").is_file()
+
+
+@pytest.mark.parametrize("algo", ["PPO", "SAC"])
+def test_untrained_agent_has_zero_residual(algo):
+    """The mean-action layer starts at zero: the untrained deterministic agent is the expert."""
+    import gymnasium as gym
+    import stable_baselines3
+
+    from agents.train import _zero_mean_action
+
+    env = gym.make("Pendulum-v1")
+    model = getattr(stable_baselines3, algo)("MlpPolicy", env, policy_kwargs={"net_arch": [8]}, device="cpu", seed=0)
+    obs = np.stack([env.observation_space.sample() for _ in range(5)])
+    assert np.abs(model.predict(obs, deterministic=True)[0]).max() > 0  # not zero by SB3's own init
+    _zero_mean_action(model)
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], 0.0)
