@@ -35,11 +35,12 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from agents import control_fast as FK
 from agents import control_kernels as K
-from agents.control_elimination import ProjectedDynamics, eliminate_constraints, stance_layout
+from agents.control_elimination import DAMPING, SINGULAR_SIGMA, ProjectedDynamics, eliminate_constraints, stance_layout
 from agents.control_id import DISTRIBUTIONS, IDResult, InverseDynamics, friction_pyramid
 from agents.control_verify import IDCheck, verify_inverse_dynamics
-from planners.types import ReferenceSample
+from planners.types import PACKED_FIELDS, ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot import dynamics_kernels as DK
 from quad_uneven_env.robot.dynamics import DynamicsTerms, make_dynamics
@@ -57,7 +58,10 @@ __all__ = [
 ]
 
 STANCE_MODES: tuple[str, ...] = ("both", "planned", "measured")
-"""Allowed values of ``ComputedTorqueController(stance_mode=...)``."""
+"""Allowed values of ``ComputedTorqueController(stance_mode=...)``; index = ``agents.control_fast`` code."""
+
+_NO_TERRAIN = (np.empty(0), 0, 0, 0.0, 0.0, 0.0)
+"""height-field kernel arguments that tell :func:`agents.control_fast.control_step` to skip the normals."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,6 +122,11 @@ class ComputedTorqueController:
     :param gains: PD gains; default :class:`Gains`.
     :param stance_mode: ``"both"`` (plan and measured contacts, see module doc), ``"planned"``, ``"measured"``.
     :param min_normal_force: N, minimum normal force per stance foot in "qp".
+    :param reference_row: optional fast form of ``reference``: ``reference_row(t) -> (row, planned)``
+        with ``row`` the same sample packed as :data:`planners.types.PACKED_FIELDS` (55,) and
+        ``planned`` its stance bitmask, or None where only ``reference`` applies. With the
+        "mujoco" backend the controller then runs one compiled call per step
+        (:mod:`agents.control_fast`) and gives the same torques.
     """
 
     def __init__(
@@ -128,12 +137,14 @@ class ComputedTorqueController:
         gains: Gains | None = None,
         stance_mode: str = "both",
         min_normal_force: float = 5.0,
+        reference_row: Callable[[float], tuple[np.ndarray, int] | None] | None = None,
     ) -> None:
         if distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {distribution!r}")
         if stance_mode not in STANCE_MODES:
             raise ValueError(f"stance_mode must be one of {list(STANCE_MODES)}, got {stance_mode!r}")
         self.reference = reference
+        self.reference_row = reference_row
         self.backend = backend
         self.distribution = distribution
         self.gains = gains or Gains()
@@ -144,9 +155,23 @@ class ComputedTorqueController:
         self._model: mujoco.MjModel | None = None
         self.last: IDResult | None = None
         """the last inverse-dynamics result (diagnostics)."""
-        self.last_reference: ReferenceSample | None = None
+        self._last_reference: ReferenceSample | tuple[float, np.ndarray, int] | None = None
         self._bdd = np.empty(C.NV)
         self._stance_memo: dict = {}
+
+    @property
+    def last_reference(self) -> ReferenceSample | None:
+        """The reference sample of the last call (diagnostics)."""
+        last = self._last_reference
+        if isinstance(last, tuple):  # fast path: unpack the row on demand
+            t, row, planned = last
+            parts, k = [], 0
+            for _, n in PACKED_FIELDS:
+                parts.append(row[k : k + n].copy())
+                k += n
+            stance = tuple(bool(planned >> i & 1) for i in range(C.N_LEGS))
+            last = self._last_reference = ReferenceSample(t, *parts, stance)  # type: ignore[arg-type]
+        return last
 
     @property
     def gains(self) -> Gains:
@@ -180,6 +205,8 @@ class ComputedTorqueController:
             np.empty(C.NV),
         )
         self._stance_memo.clear()
+        self._site_buf = np.empty((C.N_LEGS, 3))
+        self._layouts = [stance_layout(tuple(bool(m >> i & 1) for i in range(C.N_LEGS))) for m in range(16)]
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any = None) -> None:
         """Bind to ``model``, restart the reference clock at ``data.time``, keep ``terrain`` for normals."""
@@ -193,7 +220,14 @@ class ComputedTorqueController:
         """Joint torques (12, N m, clipped to the motor limits) at ``data``'s state (after mj_step1)."""
         if model is not self._model:
             self._bind(model)
-        ref = self.reference(float(data.time) - self.t0)
+        t = float(data.time) - self.t0
+        if self.reference_row is not None and self.backend == "mujoco":
+            packed = self.reference_row(t)
+            if packed is not None:
+                tau = self._fast_step(data, t, *packed)
+                if tau is not None:
+                    return tau
+        ref = self.reference(t)
         meas = K.foot_contact_mask(data.contact.geom, self.foot_of_geom, self.terrain_geom) if data.ncon else 0
         try:
             stance = self._stance_memo[(ref.stance, meas, self.stance_mode)]
@@ -216,7 +250,42 @@ class ComputedTorqueController:
         else:
             terms = self.dynamics.terms(qpos, qvel)
             result = self.id.solve_terms(terms, beta_ddot.copy(), stance, normals)
-        self.last, self.last_reference = result, ref
+        self.last, self._last_reference = result, ref
+        tau = np.empty(C.N_JOINTS)
+        K.clip_into(result.tau, self.torque_limit, tau)
+        return tau
+
+    def _fast_step(self, data: mujoco.MjData, t: float, row: np.ndarray, planned: int) -> np.ndarray | None:
+        """:meth:`__call__` from a packed reference row by one compiled call (:mod:`agents.control_fast`);
+        None where the general path is needed (1-2 stance feet, a failed Cholesky, a malformed row)."""
+        M, J, Jdd, G = self._terms_buf
+        ws = self.id._ws
+        normals = self._normal_buf if self.distribution == "qp" else None
+        hf = getattr(self.terrain, "heightfield", None)
+        hf_args = hf.kernel_args if normals is not None and hasattr(hf, "kernel_args") else _NO_TERRAIN
+        if hf_args is _NO_TERRAIN:
+            normals = None
+        try:
+            code = FK.control_step(
+                row, planned, STANCE_MODES.index(self.stance_mode),
+                data.contact.geom, self.foot_of_geom, self.terrain_geom,
+                data.qpos, data.qvel, self._gains, self._bdd, *self.dynamics.data_views(data)[1:],
+                M, J, Jdd, G, data.qfrc_bias, 1.0 / SINGULAR_SIGMA, DAMPING, *ws,
+                *hf_args, self._foot_sites, self._site_buf, self._normal_buf,
+            )  # fmt: skip
+        except TypeError:  # arrays the kernel does not take (numba dispatch): the general path
+            return None
+        if code < 0 or not (code >> 4) & K.DONE:
+            return None
+        lay = self._layouts[code & 15]
+        status = code >> 4
+        result = IDResult(
+            ws[0].copy(), ws[1].copy(), ws[2].copy(), lay.stance, "pinv",
+            exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
+        )  # fmt: skip
+        if self.distribution == "qp" and lay.n_stance:
+            self.id._distribute_qp(lay, J, ws[3], result, normals)
+        self.last, self._last_reference = result, (t, row, planned)
         tau = np.empty(C.N_JOINTS)
         K.clip_into(result.tau, self.torque_limit, tau)
         return tau

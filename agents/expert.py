@@ -108,6 +108,7 @@ class ExpertPolicy:
         self._foot_sensor_adr = [int(a) for a in self.env.idx.foot_sensor_adr]
         self.controller = ComputedTorqueController(
             reference=self._reference,
+            reference_row=self._reference_row,
             backend=self.config.backend,
             distribution=self.config.distribution,
             gains=self.config.gains,
@@ -154,6 +155,26 @@ class ExpertPolicy:
 
     # -------------------------------------------------------------- planning
     def _reference(self, t: float) -> ReferenceSample:
+        self._advance(t)
+        ref = self._current_ref.sample(t - self._t_start)
+        return self._push_late_touchdowns(ref, t - self._t_start)
+
+    def _reference_row(self, t: float) -> tuple[np.ndarray, int] | None:
+        """The controller's fast form of :meth:`_reference`: the packed plan row and its stance
+        bitmask, or None (hold, off the grid, or a late touch-down to push: use :meth:`_reference`)."""
+        self._advance(t)
+        row_of = getattr(self._current_ref, "row", None)
+        packed = None if row_of is None else row_of(t - self._t_start)
+        if packed is None:
+            return None
+        sd, planned = self._data.sensordata, packed[1]
+        for i, a in enumerate(self._foot_sensor_adr):
+            if planned >> i & 1 and sd[a] <= 0:
+                return None
+        return packed
+
+    def _advance(self, t: float) -> None:
+        """Plan the next gait cycle once ``t`` (s) reaches the end of the current one."""
         if t >= self._t_end:
             goal = None
             if hasattr(self._current, "cog"):
@@ -164,8 +185,6 @@ class ExpertPolicy:
                     "acc": self._current.cog.acceleration(np.array([tc]))[0],
                 }
             self._start_cycle(self._t_end, cog_start=goal)
-        ref = self._current_ref.sample(t - self._t_start)
-        return self._push_late_touchdowns(ref, t - self._t_start)
 
     def _push_late_touchdowns(self, ref: ReferenceSample, tc: float) -> ReferenceSample:
         """Aim a planned-stance foot that has not touched down ``touchdown_depth`` below its foothold.

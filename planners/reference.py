@@ -58,6 +58,21 @@ class Reference:
         quat = np.broadcast_to(_IDENTITY, (n_grid, 4))
         zero = np.zeros((n_grid, 3))
         self._packed = np.concatenate([p, quat, pd, zero, pdd, zero, q, qd, qdd], axis=1)
+        self._grid_mask = (self._grid[6].astype(np.int64) << np.arange(4)).sum(axis=1)
+
+    def row(self, t: float) -> tuple[np.ndarray, int] | None:
+        """The packed reference at grid time ``t`` (s from the cycle start, clipped to the cycle), or None off the grid.
+
+        Returns a view (55,) into the grid (not to be written) laid out as
+        :data:`planners.types.PACKED_FIELDS` and the
+        planned stance as a bitmask (bit i: leg i of LF, RF, LH, RH), for the controller's compiled
+        path; :meth:`sample` is the same data as a :class:`ReferenceSample`.
+        """
+        tc = min(max(t, 0.0), self.t_end)
+        k = round(tc / self._grid_dt)
+        if k < len(self._grid_t) and abs(self._grid_t[k] - tc) < 1e-9:
+            return self._packed[k], int(self._grid_mask[k])
+        return None
 
     def feet(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Planned foot-site positions, velocities, accelerations (T, 4, 3) (m, m/s, m/s^2) at times ``t`` (s)."""

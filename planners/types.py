@@ -53,3 +53,10 @@ class ReferenceSample:
     def qacc(self) -> np.ndarray:
         """(18,) d/dt of the canonical qvel."""
         return np.concatenate([self.a_base_W, self.domega_base_B, self.qdd_joints])
+
+
+PACKED_FIELDS: tuple[tuple[str, int], ...] = (
+    ("p_base_W", 3), ("quat_WB", 4), ("v_base_W", 3), ("omega_base_B", 3), ("a_base_W", 3),
+    ("domega_base_B", 3), ("q_joints", 12), ("qd_joints", 12), ("qdd_joints", 12),
+)  # fmt: skip
+"""Layout of a packed reference row (55 floats): the :class:`ReferenceSample` arrays in this order."""

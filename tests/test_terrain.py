@@ -129,6 +129,22 @@ def test_patch_stats_on_a_plane_and_a_step():
     assert slope_max == pytest.approx(s.max_slope[1]) and rough == pytest.approx(s.roughness[1])
 
 
+@pytest.mark.parametrize("radius", [0.013, 0.05, 0.11])
+def test_patch_stats_compiled_matches_numpy_twin(radius):
+    rng = np.random.default_rng(3)
+    heights = np.cumsum(rng.normal(0.0, 0.01, (35, 50)), axis=1)
+    heights[:, 25:] += 0.08  # a step, so the edge statistics are exercised
+    hf = HeightField(heights, 0.02, origin=(-0.3, 0.1))
+    (x0, x1), (y0, y1) = hf.extent
+    # inside, on the border and beyond it (clamped nodes), in a 2-D broadcast shape
+    x = rng.uniform(x0 - 0.1, x1 + 0.1, (6, 7))
+    y = rng.uniform(y0 - 0.1, y1 + 0.1, (6, 7))
+    fast, ref = hf.patch_stats(x, y, radius), hf.patch_stats_numpy(x, y, radius)
+    for name, a, b in zip(ref._fields, fast, ref, strict=True):
+        assert a.shape == b.shape, name
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12, err_msg=name)
+
+
 @pytest.mark.parametrize(
     "heights, cell, field",
     [
@@ -504,7 +520,10 @@ def test_compiled_height_and_normal_points_equal_numpy():
     (x0, x1), (y0, y1) = hf.extent
     x = rng.uniform(x0 - 0.5, x1 + 0.5, 5000)  # includes points outside the grid (clamped)
     y = rng.uniform(y0 - 0.5, y1 + 0.5, 5000)
-    np.testing.assert_allclose(hf.height_points(x, y), hf.height(x, y), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(hf.height_points(x, y), hf.height_numpy(x, y), rtol=0, atol=1e-12)
+    xb, yb = x[:12].reshape(3, 4, 1), y[:5]  # broadcast shapes go through the same kernel
+    np.testing.assert_allclose(hf.height(xb, yb), hf.height_numpy(xb, yb), rtol=0, atol=1e-12)
+    assert hf.height(xb, yb).shape == (3, 4, 5) and np.ndim(hf.height(np.float64(0.3), 0.2)) == 0
     normals = hf.normal_points(np.column_stack([x, y, np.zeros_like(x)]))
     np.testing.assert_allclose(normals, hf.normal(x, y), rtol=0, atol=1e-12)
     assert (normals[:, 2] < 0.999).mean() > 0.05  # the stones' edges: tilted triangles were sampled

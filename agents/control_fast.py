@@ -1,0 +1,78 @@
+"""One compiled call for the controller's per-step work on the MuJoCo backend (the expert's hot path).
+
+:func:`control_step` does in one numba call what :meth:`agents.control.ComputedTorqueController.__call__`
+otherwise does in a dozen (each ~1-3 µs of Python and dispatch): the measured foot contacts and
+the stance set, the PD command from a packed reference row (:data:`planners.types.PACKED_FIELDS`),
+the dynamics terms from ``mj_step1``'s results, the pinv inverse dynamics, and the terrain normals
+under the feet. It calls the same kernels as the general path (:mod:`agents.control_kernels`,
+:mod:`quad_uneven_env.robot.dynamics_kernels`, the height field's normal kernel), so the two
+paths give the same torques (tested); the "qp" distribution and every rare case (1-2 stance
+feet, a failed Cholesky) stay in Python.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+
+from agents import control_kernels as K
+from quad_uneven_env.robot import dynamics_kernels as DK
+from quad_uneven_env.terrain.heightfield import _normal_kernel
+
+STANCE_BOTH, STANCE_PLANNED, STANCE_MEASURED = 0, 1, 2
+"""``stance_mode`` codes of :func:`control_step` (``ComputedTorqueController.stance_mode``)."""
+
+
+@nb.njit(nb.int64(nb.int64), cache=False, nogil=True)
+def _popcount4(mask):  # pragma: no cover - compiled
+    return (mask & 1) + (mask >> 1 & 1) + (mask >> 2 & 1) + (mask >> 3 & 1)
+
+
+@nb.njit(nb.int64(nb.int64, nb.int64, nb.int64), cache=False, nogil=True)
+def select_stance_mask(planned, measured, mode):  # pragma: no cover - compiled
+    """Stance bitmask from the planned and measured ones (``ComputedTorqueController.select_stance``)."""
+    if mode == STANCE_PLANNED:
+        return planned
+    if mode == STANCE_MEASURED:
+        return measured
+    chosen = planned & measured
+    if _popcount4(chosen) < min(3, _popcount4(planned)):
+        return planned
+    return chosen
+
+
+@nb.njit(cache=False, nogil=True)
+def control_step(
+    row, planned, stance_mode, contact_geom, foot_of_geom, terrain_geom,
+    qpos, qvel, gains, bdd,
+    M_csr, rowadr, rownnz, colind, xpos, xmat, xanchor, xaxis, site_xpos, subtree_com, idx, par,
+    M, J, Jdd, G, h, inv_sigma, damping, tau, F, qacc, r, Jinv, S,
+    hf_flat, nrow, ncol, ox, oy, inv_cell, foot_sites, site_pos, normals,
+):  # fmt: skip  # pragma: no cover - compiled
+    """Stance, PD command, dynamics terms, pinv inverse dynamics and foot normals at one physics step.
+
+    Inputs as the kernels it calls: ``row`` a packed reference (55,), ``planned`` its stance
+    bitmask, ``stance_mode`` a ``STANCE_*`` code; MuJoCo arrays after ``mj_step1``; ``tau, F,
+    qacc, r, Jinv, S`` the inverse-dynamics outputs; ``normals`` (4, 3) is written when
+    ``hf_flat`` is not empty. Returns ``stance_mask | status << 4 | n_beta << 8`` with
+    ``status`` the bits of :func:`agents.control_kernels.id_pinv`; a negative value when an input
+    has the wrong size (the caller then takes the general path, which names it).
+    """
+    meas = K.foot_contact_mask(contact_geom, foot_of_geom, terrain_geom)
+    mask = select_stance_mask(planned, meas, stance_mode)
+    n_beta = K.beta_command(
+        qpos, qvel, row[0:3], row[3:7], row[7:10], row[10:13], row[13:16], row[16:19],
+        row[19:31], row[31:43], row[43:55], gains, mask, bdd,
+    )  # fmt: skip
+    if n_beta < 0 or row.shape[0] != 55:
+        return -1
+    DK.mujoco_terms(qvel, M_csr, rowadr, rownnz, colind, xpos, xmat, xanchor, xaxis, site_xpos, subtree_com, idx, par,
+                    M, J, Jdd, G)  # fmt: skip
+    status = K.id_pinv(M, h, J, Jdd, mask, bdd[:n_beta], inv_sigma, damping, tau, F, qacc, r, Jinv, S)
+    if status < 0:
+        return -1
+    if hf_flat.shape[0] > 0:
+        for i in range(foot_sites.shape[0]):
+            for k in range(3):
+                site_pos[i, k] = site_xpos[foot_sites[i], k]
+        _normal_kernel(hf_flat, nrow, ncol, ox, oy, inv_cell, site_pos, normals)
+    return mask | status << 4 | n_beta << 8
