@@ -206,6 +206,7 @@ class ComputedTorqueController:
         )
         self._stance_memo.clear()
         self._site_buf = np.empty((C.N_LEGS, 3))
+        self._fast_cache: tuple | None = None
         self._layouts = [stance_layout(tuple(bool(m >> i & 1) for i in range(C.N_LEGS))) for m in range(16)]
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any = None) -> None:
@@ -258,37 +259,45 @@ class ComputedTorqueController:
     def _fast_step(self, data: mujoco.MjData, t: float, row: np.ndarray, planned: int) -> np.ndarray | None:
         """:meth:`__call__` from a packed reference row by one compiled call (:mod:`agents.control_fast`);
         None where the general path is needed (1-2 stance feet, a failed Cholesky, a malformed row)."""
-        M, J, Jdd, G = self._terms_buf
-        ws = self.id._ws
-        normals = self._normal_buf if self.distribution == "qp" else None
-        hf = getattr(self.terrain, "heightfield", None)
-        hf_args = hf.kernel_args if normals is not None and hasattr(hf, "kernel_args") else _NO_TERRAIN
-        if hf_args is _NO_TERRAIN:
-            normals = None
+        tail, normals = self._fast_arguments(data)
         try:
             code = FK.control_step(
                 row, planned, STANCE_MODES.index(self.stance_mode),
-                data.contact.geom, self.foot_of_geom, self.terrain_geom,
-                data.qpos, data.qvel, self._gains, self._bdd, *self.dynamics.data_views(data)[1:],
-                M, J, Jdd, G, data.qfrc_bias, 1.0 / SINGULAR_SIGMA, DAMPING, *ws,
-                *hf_args, self._foot_sites, self._site_buf, self._normal_buf,
+                data.contact.geom, self.foot_of_geom, self.terrain_geom, *tail,
             )  # fmt: skip
         except TypeError:  # arrays the kernel does not take (numba dispatch): the general path
             return None
         if code < 0 or not (code >> 4) & K.DONE:
             return None
         lay = self._layouts[code & 15]
-        status = code >> 4
+        status, ws = code >> 4, self.id._ws
         result = IDResult(
             ws[0].copy(), ws[1].copy(), ws[2].copy(), lay.stance, "pinv",
             exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
         )  # fmt: skip
         if self.distribution == "qp" and lay.n_stance:
-            self.id._distribute_qp(lay, J, ws[3], result, normals)
+            self.id._distribute_qp(lay, self._terms_buf[1], ws[3], result, normals)
         self.last, self._last_reference = result, (t, row, planned)
         tau = np.empty(C.N_JOINTS)
         K.clip_into(result.tau, self.torque_limit, tau)
         return tau
+
+    def _fast_arguments(self, data: mujoco.MjData) -> tuple[tuple, np.ndarray | None]:
+        """The arguments of ``control_step`` after the contacts (views and buffers that outlive a step),
+        and the normals buffer (None without "qp" or a height field); rebuilt when an input object changes."""
+        hf = getattr(self.terrain, "heightfield", None)
+        c = self._fast_cache
+        if c is not None and c[0] is data and c[1] is hf and c[2] is self._gains and c[3] == self.distribution:
+            return c[4], c[5]
+        normals = self._normal_buf if self.distribution == "qp" and hasattr(hf, "kernel_args") else None
+        hf_args = _NO_TERRAIN if normals is None else hf.kernel_args
+        tail = (
+            data.qpos, data.qvel, self._gains, self._bdd, *self.dynamics.data_views(data)[1:],
+            *self._terms_buf, data.qfrc_bias, 1.0 / SINGULAR_SIGMA, DAMPING, *self.id._ws,
+            *hf_args, self._foot_sites, self._site_buf, self._normal_buf,
+        )  # fmt: skip
+        self._fast_cache = (data, hf, self._gains, self.distribution, tail, normals)
+        return tail, normals
 
     def select_stance(self, planned, measured: np.ndarray) -> tuple[bool, bool, bool, bool]:
         """Stance set from the plan and the measured contacts (rule in the module docstring)."""

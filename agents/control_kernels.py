@@ -453,3 +453,17 @@ def stance_pyramids_into(normals, mask, mu, out):  # pragma: no cover - compiled
                 stance[k, e] = normals[leg, e]
             k += 1
     friction_pyramid_into(stance, mu, out)
+
+
+@nb.njit(
+    nb.boolean(_f2, nb.float64, _f3, nb.int64, _f1, _f2, _f3, _f1, _f2, _f1, _f2, _f1, _f2, _f1),
+    cache=False,
+    nogil=True,
+)
+def qp_fill_with_cones(normals, mu, J, mask, r, F0, cones, lower, H, g, A, b, C, l):  # pragma: no cover - compiled
+    """:func:`stance_pyramids_into` (``normals`` -> ``cones``) then :func:`qp_fill`, in one call."""
+    stance_pyramids_into(normals, mask, mu, cones)
+    p = 0
+    for leg in range(N_LEGS):
+        p += (mask >> leg) & 1
+    return qp_fill(J, mask, r, F0, cones[:p], lower, H, g, A, b, C, l)

@@ -58,7 +58,10 @@ class Reference:
         quat = np.broadcast_to(_IDENTITY, (n_grid, 4))
         zero = np.zeros((n_grid, 3))
         self._packed = np.concatenate([p, quat, pd, zero, pdd, zero, q, qd, qdd], axis=1)
-        self._grid_mask = (self._grid[6].astype(np.int64) << np.arange(4)).sum(axis=1)
+        # Python lists: the controller looks one up every physics step, and list indexing is cheaper.
+        self._rows = list(self._packed)
+        self._grid_t_list = self._grid_t.tolist()
+        self._grid_mask = (self._grid[6].astype(np.int64) << np.arange(4)).sum(axis=1).tolist()
 
     def row(self, t: float) -> tuple[np.ndarray, int] | None:
         """The packed reference at grid time ``t`` (s from the cycle start, clipped to the cycle), or None off the grid.
@@ -70,8 +73,8 @@ class Reference:
         """
         tc = min(max(t, 0.0), self.t_end)
         k = round(tc / self._grid_dt)
-        if k < len(self._grid_t) and abs(self._grid_t[k] - tc) < 1e-9:
-            return self._packed[k], int(self._grid_mask[k])
+        if k < len(self._rows) and abs(self._grid_t_list[k] - tc) < 1e-9:
+            return self._rows[k], self._grid_mask[k]
         return None
 
     def feet(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

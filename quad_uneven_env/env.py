@@ -158,6 +158,7 @@ class QuadUnevenEnv(gym.Env):
         # Divergence must end the episode visibly, not be hidden by MuJoCo's automatic reset.
         self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
         self.data = mujoco.MjData(self.model)
+        self._warning_counts = self.data.warning.number  # live view of MuJoCo's warning counters
         self._dt = float(self.model.opt.timestep) * self.frame_skip
         self.idx = RobotIndex.from_model(self.model)
         self._mass = self.idx.total_mass
@@ -245,7 +246,7 @@ class QuadUnevenEnv(gym.Env):
         if self.action_mode == "joint_pd":
             self.data.ctrl[:] = self._home_joints
         mujoco.mj_forward(self.model, self.data)
-        self._warnings_at_reset = instability_warnings(self.data)
+        self._warnings_at_reset = instability_warnings(self._warning_counts)
         if self._controller is not None and hasattr(self._controller, "reset"):
             self._controller.reset(self.model, self.data, self.terrain)
 
@@ -288,10 +289,10 @@ class QuadUnevenEnv(gym.Env):
 
         reason = None
         if self._controller is not None:
-            lim, ctrl = self.idx.torque_limit, d.ctrl
+            lim, ctrl, warnings = self.idx.torque_limit, d.ctrl, self._warning_counts
             for _ in range(self.frame_skip):
                 mujoco.mj_step1(m, d)
-                if instability_warnings(d) > self._warnings_at_reset:
+                if instability_warnings(warnings) > self._warnings_at_reset:
                     break  # reported below; the controller must not see a garbage state
                 try:
                     tau = np.asarray(self._controller(m, d, a), dtype=np.float64)
@@ -311,7 +312,7 @@ class QuadUnevenEnv(gym.Env):
 
         # MuJoCo's own checks (mj_checkPos/Vel/Acc) flag NaN, Inf and huge values in qpos, qvel
         # and qacc; with auto-reset disabled the bad state stays for us to see.
-        if reason is None and instability_warnings(d) > self._warnings_at_reset:
+        if reason is None and instability_warnings(self._warning_counts) > self._warnings_at_reset:
             reason = "diverged: MuJoCo reported a bad (NaN, Inf or huge) qpos/qvel/qacc"
         diverged = reason is not None
 
