@@ -37,12 +37,8 @@ def _rollout(env: gym.Env, actions: np.ndarray, seed: int) -> dict[str, np.ndarr
 
 @pytest.mark.parametrize("distribution", ["pinv", "qp"])
 def test_zero_residual_reproduces_the_expert(distribution):
-    """Zero action: the residual env's trajectory equals the plain expert's.
-
-    With the paper's pinv force distribution the two are bit-identical. The default QP distribution
-    (ProxQP) is reproducible only to the last bits (its results depend on memory alignment, even for
-    the plain expert reset twice with one seed), so there the comparison allows 1e-9.
-    """
+    """Zero action: the residual env's trajectory equals the plain expert's, bit for bit (both force
+    distributions: the QP's solver, DAQP, is deterministic)."""
     cfg = ExpertConfig(distribution=distribution)
     plain = gym.make("QuadUneven-v0", terrain="rough", max_episode_steps=STEPS + 1)
     ExpertPolicy(plain, cfg)
@@ -51,10 +47,7 @@ def test_zero_residual_reproduces_the_expert(distribution):
     a, b = _rollout(plain, zeros, seed=0), _rollout(residual, zeros, seed=0)
     assert len(a["reward"]) == STEPS and a["qpos"][-1, 0] - a["qpos"][0, 0] > 0.15  # the expert walked
     for key in a:
-        if distribution == "pinv":
-            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
-        else:
-            np.testing.assert_allclose(a[key], b[key], rtol=0, atol=1e-9, err_msg=key)
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
 
 
 def test_a_residual_changes_the_trajectory():
@@ -121,14 +114,10 @@ def test_env_applies_expert_plus_residual_torques():
 
 @pytest.mark.filterwarnings("ignore:.*different from the unwrapped")  # the wrapper is what we check
 def test_gymnasium_env_checker():
-    """Gymnasium's checker (spaces, seeding, determinism of a seeded reset + step).
-
-    Uses the pinv force distribution: with the default QP, ProxQP's last-bit differences between two
-    seeded resets fail the checker's exact reward comparison (see the zero-residual test).
-    """
+    """Gymnasium's checker (spaces, seeding, exact determinism of a seeded reset + step), default expert."""
     from gymnasium.utils.env_checker import check_env
 
-    env = make_residual_env(expert_config=ExpertConfig(distribution="pinv"), terrain="rough")
+    env = make_residual_env(terrain="rough")
     check_env(env, skip_render_check=True)
 
 
