@@ -1,10 +1,12 @@
 """The scripted expert: the paper's planner and inverse-dynamics controller in the loop.
 
 :class:`ExpertPolicy` replans every gait cycle from the measured state (receding horizon:
-footholds, COG path, swing paths) heading +x, and runs the computed-torque controller
-(:class:`agents.control.ComputedTorqueController`) at physics rate through the env's control
-hook. It has **privileged access**: the terrain's height field (``env.unwrapped.terrain``) and
-the full MuJoCo state (COG, foot positions), as a scripted expert in simulation may.
+footholds, COG path, swing paths) heading +x, with the body pitched along the slope of the
+footholds (``ExpertConfig.body_pitch``; the paper keeps it level), and runs the computed-torque
+controller (:class:`agents.control.ComputedTorqueController`) at physics rate through the env's
+control hook. It has **privileged access**: the terrain's height field
+(``env.unwrapped.terrain``) and the full MuJoCo state (COG, foot positions), as a scripted
+expert in simulation may.
 
 It follows SB3's ``predict`` protocol so the evaluation code runs it like a learned agent;
 ``predict`` returns the zero action because the work is done in the physics-rate hook (the
@@ -29,7 +31,9 @@ from threadpoolctl import ThreadpoolController
 
 from agents.control import ComputedTorqueController, Gains
 from planners import PlanningError, Scenario, plan_gait_cycle
+from planners.pitch import pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
+from planners.scenario import BODY_PITCH_MODES
 from planners.types import ReferenceSample
 
 
@@ -51,6 +55,10 @@ class ExpertConfig:
     """m: swing clearance of the foot sphere above the terrain."""
     touchdown_depth: float = 0.015
     """m: how far below its foothold a late foot (planned stance, no contact yet) is aimed."""
+    body_pitch: str = "terrain"
+    """base orientation of the plans: "terrain" (pitch with the slope of the footholds, so the legs on
+    the higher steps of a stair are not folded until their shanks rest on the nosing) or "level"
+    (identity, the paper); see :mod:`planners.pitch`."""
     distribution: str = "qp"
     """inverse-dynamics torque distribution: "pinv" (paper) or "qp" (friction cones)."""
     backend: str = "mujoco"
@@ -103,6 +111,8 @@ class ExpertPolicy:
 
     def __init__(self, env: gym.Env, config: ExpertConfig | None = None) -> None:
         self.config = config or ExpertConfig()
+        if self.config.body_pitch not in BODY_PITCH_MODES:
+            raise ValueError(f"body_pitch must be one of {list(BODY_PITCH_MODES)}, got {self.config.body_pitch!r}")
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
         self._foot_sensor_adr = [int(a) for a in self.env.idx.foot_sensor_adr]
@@ -210,9 +220,12 @@ class ExpertPolicy:
     def _start_cycle(self, t0: float, cog_start: dict | None) -> None:
         d, cfgx = self._data, self.config
         feet = self._measured_footholds()
+        previous = getattr(self._current, "pitch", None)
+        pitch_start = previous.end if previous is not None else pitch_of_quaternion(d.qpos[3:7])
         if cog_start is None or np.linalg.norm(cog_start["pos"] - d.subtree_com[self.env.idx.trunk_body]) > 0.05:
-            # First cycle, after a hold, or drifted: start from the measured COG at rest.
+            # First cycle, after a hold, or drifted: start from the measured COG (and pitch) at rest.
             cog_start = {"pos": d.subtree_com[self.env.idx.trunk_body].copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
+            pitch_start = pitch_of_quaternion(d.qpos[3:7])
         plan = None
         for stride in (cfgx.stride, 0.5 * cfgx.stride, 0.0):
             scenario = Scenario(
@@ -225,6 +238,8 @@ class ExpertPolicy:
                 cog_height=cfgx.cog_height,
                 stride=(stride, 0.0),
                 robot=self.cfg,
+                body_pitch=cfgx.body_pitch,
+                pitch_start=pitch_start,
             )
             tic = time.perf_counter()
             try:

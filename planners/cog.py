@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from functools import lru_cache
 
 import numpy as np
@@ -72,9 +72,13 @@ class CogProblem:
     reach_sites: Sequence[np.ndarray] | None = None
     """optional, per phase: stance foot sites (n_k x 3, m, same order as ``supports``) that must stay in reach."""
     reach_offsets: Sequence[np.ndarray] | None = None
-    """per phase: hip position minus COG (n_k x 3, m) of those legs (nominal whole-body COM offset)."""
+    """per phase: hip position minus COG (n_k x 3, m) of those legs (nominal whole-body COM offset),
+    in the base frame (the world frame when ``reach_rotation`` is None)."""
     max_reach: float = np.inf
     """largest hip-to-foot-site distance (m) of a stance leg (keeps the knees off the stretched singularity)."""
+    reach_rotation: Callable[[np.ndarray], np.ndarray] | None = None
+    """optional base orientation ``R_WB(t)`` (S, 3, 3) at absolute times ``t`` (S,) (s) that turns
+    ``reach_offsets`` into the world frame (a pitching body); None: identity."""
 
 
 @dataclasses.dataclass
@@ -188,6 +192,17 @@ class _Reduced:
             self.rows.append(
                 (basis_rows(s, 0) @ Nk, basis_rows(s, 2) @ Nk / T**2, basis_rows(s, 0), basis_rows(s, 2) / T**2)
             )
+        if self.reach:
+            self.offsets_W = [self._world_offsets(k, s) for k, s in enumerate(samples)]
+
+    def _world_offsets(self, k: int, s: np.ndarray) -> np.ndarray:
+        """(S or 1, n_k, 3) hip-minus-COG offsets (m, world) of phase ``k`` at local times ``s``."""
+        off = np.asarray(self.prob.reach_offsets[k], dtype=float)
+        rot = self.prob.reach_rotation
+        if rot is None:
+            return off[None]
+        t = self.prob.t_knots[k] + np.asarray(s) * self.durations[k]
+        return np.einsum("sij,lj->sli", rot(t), off)
 
     def constraints(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Tumbling moments h (n_con,) at the samples and their Jacobian dh/dz (n_con x 3m), exact."""
@@ -209,7 +224,7 @@ class _Reduced:
             hs.append(h.ravel())
             Js.append(J.reshape(-1, N_AXES * self.m))
             if self.reach:
-                d = P[:, None, :] + self.prob.reach_offsets[k][None] - self.prob.reach_sites[k][None]  # (S, L, 3)
+                d = P[:, None, :] + self.offsets_W[k] - self.prob.reach_sites[k][None]  # (S, L, 3)
                 dist = np.linalg.norm(d, axis=-1)
                 n = d / dist[..., None]
                 # bound + scale (max_reach - |d|) >= bound  <=>  |d| <= max_reach

@@ -12,6 +12,7 @@ from planners.cog import CogProblem, CogStats, plan_cog
 from planners.footholds import choose_footholds
 from planners.gait import Phase, phase_index, walk_cycle
 from planners.geometry import clip_convex, convex_hull_ccw, polygon_centroid
+from planners.pitch import BodyPitch, terrain_pitch
 from planners.polynomial import PiecewisePolynomial
 from planners.scenario import Scenario
 from planners.swing import SwingPath, plan_swing
@@ -59,6 +60,8 @@ class GaitCyclePlan:
     min_stability (N m), min_clearance (m), method."""
     robot: RobotConfig | None = None
     """the robot planned for (the reference's default)."""
+    pitch: BodyPitch | None = None
+    """the base pitch over the cycle; None: level (identity orientation, the paper)."""
 
     @property
     def duration(self) -> float:
@@ -132,11 +135,23 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
     q_nom = standing_joint_angles(cfg, min(scenario.cog_height, 0.95 * cfg.leg_length)).reshape(4, 3)
     com_to_base = -wb.com_offset(q_nom)  # base minus whole-body COM (m), nominal pose
     cog0 = scenario.start_boundary()
+    follow = scenario.body_pitch == "terrain"
     if scenario.footholds is not None:
         target = np.asarray(scenario.footholds, dtype=float)
     else:
         goal_xy = cog0[0, :2] + np.asarray(scenario.stride)
-        target = choose_footholds(terrain, cfg, start, cog0[0], goal_xy, scenario.cog_height)
+        target = choose_footholds(
+            terrain, cfg, start, cog0[0], goal_xy, scenario.cog_height,
+            pitch_start=scenario.pitch_start if follow else None,
+        )  # fmt: skip
+    pitch = BodyPitch(scenario.pitch_start, terrain_pitch(target), phases[-1].t_end) if follow else None
+    rotation = None if pitch is None else pitch.rotation
+    hip_offsets = wb.hips + com_to_base  # hips minus whole-body COM (m, base frame), nominal pose
+
+    def hips_at(t: float) -> np.ndarray:
+        """(4, 3) hips minus COG (m, world) at plan time ``t`` (s)."""
+        return hip_offsets if rotation is None else hip_offsets @ rotation(np.array(t)).T
+
     goal = scenario.goal_boundary()
     if goal is None:
         goal = np.zeros((3, 3))
@@ -144,7 +159,7 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         goal[0, 2] = target[:, 2].mean() + scenario.cog_height
         # ... but low enough for every leg to reach its foothold (stairs: the hind feet a step lower).
         sites_end = foot_site_on(terrain, target, cfg.foot_radius)
-        hips_end = wb.hips + com_to_base
+        hips_end = hips_at(phases[-1].t_end)
         horiz = np.linalg.norm(goal[0, :2] + hips_end[:, :2] - sites_end[:, :2], axis=1)
         reach_end = STANCE_REACH * cfg.leg_length - 0.005
         z_max = sites_end[:, 2] - hips_end[:, 2] + np.sqrt(np.maximum(reach_end**2 - horiz**2, 0.0))
@@ -156,17 +171,18 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
     t_knots = np.array([phases[0].t_start] + [p.t_end for p in phases])
     r = cfg.foot_radius
     sites = [foot_site_on(terrain, s, r) for s in supports]
-    offsets = [(wb.hips + com_to_base)[np.asarray(p.stance)] for p in phases]
+    offsets = [hip_offsets[np.asarray(p.stance)] for p in phases]
     # The given start and goal COGs may already ask for more reach (e.g. a measured state): never
     # let the reach limit make the boundary itself infeasible.
     reach = STANCE_REACH * cfg.leg_length
-    for k, c in ((0, cog0[0]), (len(phases) - 1, goal[0])):
-        reach = max(reach, float(np.linalg.norm(c + offsets[k] - sites[k], axis=1).max()) + 1e-3)
+    for k, c, t in ((0, cog0[0], 0.0), (len(phases) - 1, goal[0], phases[-1].t_end)):
+        hips_k = hips_at(t)[np.asarray(phases[k].stance)]
+        reach = max(reach, float(np.linalg.norm(c + hips_k - sites[k], axis=1).max()) + 1e-3)
     reach = min(reach, REACH_MARGIN * cfg.leg_length)
     problem = CogProblem(
         t_knots, supports, names, targets, cog0, goal, mass, scenario.epsilon,
         tuple(scenario.weights), scenario.smoothing, [p.name() for p in phases],
-        sites, offsets, reach,
+        sites, offsets, reach, rotation,
     )  # fmt: skip
     cog, cstats = plan_cog(problem, method=scenario.method)
     t_sw = time.perf_counter()
@@ -175,10 +191,10 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         if ph.swing_leg is None:
             continue
         i = LEG_NAMES.index(ph.swing_leg)
-        hip = wb.hips[i] + com_to_base
+        hip = hip_offsets[i]
 
         def hip_path(t, hip=hip):
-            return cog.position(t) + hip
+            return cog.position(t) + (hip if rotation is None else rotation(np.asarray(t)) @ hip)
 
         swings[ph.swing_leg] = plan_swing(
             ph.swing_leg, foot_site_on(terrain, start[i], r), foot_site_on(terrain, target[i], r),
@@ -187,7 +203,9 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         )  # fmt: skip
     t_end = time.perf_counter()
     stats = _stats(cstats, t_end - t_sw, t_end - t_all, swings)
-    return GaitCyclePlan(phases, cog, swings, start, target, targets, terrain, mass, scenario.epsilon, r, stats, cfg)
+    return GaitCyclePlan(
+        phases, cog, swings, start, target, targets, terrain, mass, scenario.epsilon, r, stats, cfg, pitch
+    )  # fmt: skip
 
 
 def _stats(c: CogStats, swing_time: float, total: float, swings: dict[str, SwingPath]) -> dict[str, Any]:

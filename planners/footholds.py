@@ -4,8 +4,10 @@ Each leg's nominal foothold is under its hip at the end of the cycle (body moved
 stride). Candidates on a grid in a window around it are kept when the terrain is locally flat
 (plane slope and roughness limits), away from step edges and holes (small height range in a
 disc larger than the foot), not at the bottom of a hole (deep below its neighbourhood), and reachable from the hip at
-touch-down and at the end of the cycle along the (straight-line) body path; the kept candidate
-nearest the nominal point wins. Returns 3-D points on the terrain surface.
+touch-down and at the end of the cycle along the (straight-line) body path, with the hips
+level or pitched (see ``pitch_start``), with the shank clear of the terrain in both poses (a
+foot just past a step edge would rest its shank on the nosing); the kept candidate nearest
+the nominal point wins. Returns 3-D points on the terrain surface.
 """
 
 from __future__ import annotations
@@ -16,10 +18,14 @@ import numpy as np
 
 from planners.errors import PlanningError
 from planners.gait import PAPER_DURATIONS, walk_cycle
-from planners.terrain_query import HeightMap, max_height_in_disk
+from planners.pitch import BodyPitch, terrain_pitch
+from planners.terrain_query import HeightMap, capsule_clearance, max_height_in_disk
 from quad_uneven_env.config import RobotConfig
-from quad_uneven_env.constants import LEG_NAMES
-from quad_uneven_env.robot.kinematics import hip_positions_B
+from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
+from quad_uneven_env.robot.kinematics import hip_positions_B, leg_fk_hip, leg_ik_hip
+
+SHANK_RADIUS_SCALE = 0.7
+"""shank capsule radius / ``RobotConfig.link_radius`` (as built by :mod:`quad_uneven_env.robot.model`)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,6 +51,10 @@ class FootholdLimits:
     """radius (m) of the neighbourhood of the hole test."""
     reach: float = 0.97
     """fraction of the stretched leg length allowed from hip to foot site."""
+    shank_clearance: float = 0.005
+    """smallest gap (m) between the stance leg's shank capsule and the terrain at touch-down and at
+    the end of the cycle: a foot just past a step edge (or a knee folded below its foot) would rest
+    the shank on the nosing and unload the foot."""
 
 
 def _patch(terrain: HeightMap, x: np.ndarray, y: np.ndarray, radius: float):
@@ -66,6 +76,53 @@ def _patch(terrain: HeightMap, x: np.ndarray, y: np.ndarray, radius: float):
     return slope, np.abs(h - plane).max(axis=-1), h.max(axis=-1) - h.min(axis=-1)
 
 
+def shank_clearance(
+    terrain: HeightMap, cfg: RobotConfig, leg: str, site: np.ndarray, hip: np.ndarray, R: np.ndarray
+) -> np.ndarray:
+    """Lower bound (m) of the gap between the shank capsule of ``leg`` and the terrain.
+
+    :param site: (N, 3) foot-site positions (m, world).
+    :param hip: (3,) or (N, 3) hip position (m, world).
+    :param R: (3, 3) base orientation R_WB.
+    :return: (N,) gap (m); the knee comes from the leg's IK (its knee branch) for that hip and site.
+    """
+    site = np.asarray(site, dtype=float).reshape(-1, 3)
+    hip = np.asarray(hip, dtype=float)
+    l1, l2 = cfg.thigh.length, cfg.shank.length
+    q = leg_ik_hip((site - hip) @ R, l1, l2, KNEE_SIGN[leg])
+    knee = hip + leg_fk_hip(q, l1, 0.0) @ R.T
+    low_end = site + (knee - site) * (cfg.foot_radius / l2)  # the capsule stops short of the foot sphere
+    return capsule_clearance(terrain, low_end, knee, SHANK_RADIUS_SCALE * cfg.link_radius)
+
+
+def _best_clear_candidate(
+    terrain: HeightMap,
+    cfg: RobotConfig,
+    leg: str,
+    site: np.ndarray,
+    candidates: np.ndarray,
+    cost: np.ndarray,
+    poses: list[tuple[np.ndarray, np.ndarray]],
+    min_gap: float,
+    batch: int = 16,
+) -> int | None:
+    """The cheapest of ``candidates`` whose shank clears the terrain by ``min_gap`` (m) in every pose, or None.
+
+    Candidates are checked in order of cost, ``batch`` at a time (the clearance is the costly test).
+
+    :param poses: (hip position (3,) m, R_WB (3, 3)) at touch-down and at the end of the cycle.
+    """
+    order = candidates[np.argsort(cost[candidates], kind="stable")]
+    for start in range(0, len(order), batch):
+        idx = order[start : start + batch]
+        clear = np.ones(len(idx), dtype=bool)
+        for hip, R in poses:
+            clear &= shank_clearance(terrain, cfg, leg, site[idx], hip, R) >= min_gap
+        if np.any(clear):
+            return int(idx[np.argmax(clear)])
+    return None
+
+
 def choose_footholds(
     terrain: HeightMap,
     cfg: RobotConfig,
@@ -75,6 +132,7 @@ def choose_footholds(
     cog_height: float,
     durations: tuple[float, ...] = PAPER_DURATIONS,
     limits: FootholdLimits | None = None,
+    pitch_start: float | None = None,
 ) -> np.ndarray:
     """Target footholds (4, 3) on the terrain surface for one walk cycle (m, world, leg order).
 
@@ -82,6 +140,8 @@ def choose_footholds(
     :param cog_start: (3,) COG at the cycle start (m).
     :param goal_xy: (2,) planned COG (x, y) at the cycle end (m).
     :param cog_height: nominal COG height above the footholds (m).
+    :param pitch_start: None: the body stays level (the paper); else its pitch (rad) at the start,
+        going to the slope of the nominal footholds by the end (:class:`planners.pitch.BodyPitch`).
     :raises PlanningError: naming the leg when no candidate in the window is acceptable.
     """
     lim = limits or FootholdLimits()
@@ -94,6 +154,9 @@ def choose_footholds(
     z_goal = float(min(np.mean(h_nom), np.min(h_nom) + 0.02)) + cog_height
     phases = walk_cycle(durations)
     total = phases[-1].t_end
+    pitch = None
+    if pitch_start is not None:
+        pitch = BodyPitch(pitch_start, terrain_pitch(np.column_stack([nominal, h_nom])), total)
     offs = np.arange(-lim.window, lim.window + 1e-9, lim.step)
     gx, gy = np.meshgrid(offs, offs, indexing="ij")
     gx, gy = gx.ravel(), gy.ravel()
@@ -112,19 +175,22 @@ def choose_footholds(
         # Reach from the hip at touch-down and at the end of the cycle (straight-line body path).
         t_touch = next(p.t_end for p in phases if p.swing_leg == leg)
         site = np.column_stack([x, y, h + cfg.foot_radius])
+        poses = []
         for frac in (t_touch / total, 1.0):
             # Height: the COG optimiser may lower the body early (stairs down), so no higher than the goal.
             z_body = min(cog_start[2] + frac * (z_goal - cog_start[2]), z_goal)
             body = np.append(cog_start[:2] + frac * (goal_xy - cog_start[:2]), z_body)
-            dist = np.linalg.norm(site - (body + hips[i]), axis=1)
-            ok &= dist <= lim.reach * cfg.leg_length
-        if not np.any(ok):
+            R = np.eye(3) if pitch is None else pitch.rotation(np.array(frac * total))
+            poses.append((body + R @ hips[i], R))
+            ok &= np.linalg.norm(site - poses[-1][0], axis=1) <= lim.reach * cfg.leg_length
+        cost = gx**2 + gy**2 + 0.01 * slope + 0.5 * rough
+        k = _best_clear_candidate(terrain, cfg, leg, site, np.flatnonzero(ok), cost, poses, lim.shank_clearance)
+        if k is None:
             raise PlanningError(
                 f"footholds: no acceptable foothold for {leg} within {lim.window} m of the nominal "
-                f"{nominal[i].round(3).tolist()} (flat, edge-free, reachable); {int(np.sum(slope <= lim.max_slope))} "
-                f"candidates pass the slope limit, {int(np.sum(rng_h <= lim.max_step))} the edge limit"
+                f"{nominal[i].round(3).tolist()} (flat, edge-free, reachable, shank clear of the terrain); "
+                f"{int(np.sum(slope <= lim.max_slope))} candidates pass the slope limit, "
+                f"{int(np.sum(rng_h <= lim.max_step))} the edge limit, {int(np.sum(ok))} all but the shank clearance"
             )
-        cost = gx**2 + gy**2 + 0.01 * slope + 0.5 * rough
-        k = int(np.argmin(np.where(ok, cost, np.inf)))
         out[i] = (x[k], y[k], h[k])
     return out

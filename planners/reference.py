@@ -1,11 +1,12 @@
 """Joint references for the controller (paper §5 -> §2.3): beta_ref(t) and its exact derivatives.
 
 From a :class:`~planners.cycle.GaitCyclePlan`: the base is placed so the whole-robot COG (legs
-included) follows the planned COG path, with the base orientation fixed at identity (the
-paper); swing-leg joints follow the swing paths by closed-form IK; stance-leg joints hold the
-feet on their footholds (IK against the planned base), so the controller can use them as a
-fallback. Velocities and accelerations come from the analytic leg Jacobians and their time
-derivatives (:mod:`planners.wholebody`), not from finite differences.
+included) follows the planned COG path, with the plan's base orientation: identity (the paper)
+or the plan's pitch profile (:class:`planners.pitch.BodyPitch`); swing-leg joints follow the
+swing paths by closed-form IK; stance-leg joints hold the feet on their footholds (IK against
+the planned base), so the controller can use them as a fallback. Velocities and accelerations
+come from the analytic leg Jacobians and their time derivatives (:mod:`planners.wholebody`),
+not from finite differences.
 """
 
 from __future__ import annotations
@@ -15,16 +16,16 @@ import dataclasses
 import numpy as np
 
 from planners.gait import phase_index
+from planners.pitch import LEVEL
 from planners.terrain_query import foot_site_on
 from planners.types import ReferenceSample
-from planners.wholebody import WholeBody
+from planners.wholebody import WholeBody, from_rotating_frame, to_rotating_frame
 from quad_uneven_env.config import RobotConfig, load_robot_config
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
 from quad_uneven_env.robot.conventions import quat_wxyz_to_matrix
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 
 _IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
-_ZERO3 = np.zeros(3)
 
 
 class Reference:
@@ -45,6 +46,7 @@ class Reference:
         self.sites_start = foot_site_on(plan.terrain, plan.feet_start, r)
         self.sites_target = foot_site_on(plan.terrain, plan.footholds, r)
         self.t_end = plan.duration
+        self.pitch = getattr(plan, "pitch", None) or LEVEL
         self._swing_end = np.array([plan.swing[leg].t_end if leg in plan.swing else -np.inf for leg in LEG_NAMES])
         self._stance = np.array([p.stance for p in plan.phases])
         self._grid_dt = float(grid_dt)
@@ -53,11 +55,9 @@ class Reference:
         self._grid_p = self._grid[0]
         self._grid_stance = [tuple(row) for row in self._grid[6].tolist()]
         # One packed row per grid time, so that a sample is one copy plus views of it.
-        n_grid = len(self._grid_t)
         p, pd, pdd, q, qd, qdd, _ = self._grid
-        quat = np.broadcast_to(_IDENTITY, (n_grid, 4))
-        zero = np.zeros((n_grid, 3))
-        self._packed = np.concatenate([p, quat, pd, zero, pdd, zero, q, qd, qdd], axis=1)
+        quat, w, dw = self._orientation(self._grid_t)
+        self._packed = np.concatenate([p, quat, pd, w, pdd, dw, q, qd, qdd], axis=1)
         # Python lists: the controller looks one up every physics step, and list indexing is cheaper.
         self._rows = list(self._packed)
         self._grid_t_list = self._grid_t.tolist()
@@ -106,13 +106,29 @@ class Reference:
         c, cd, cdd = cog.position(t), cog.velocity(t), cog.acceleration(t)
         x, xd, xdd = self.feet(t)
         n = len(t)
+        if not self.pitch.level:  # solve in the frame rotating with the base (planners.wholebody)
+            R = self.pitch.rotation(t)
+            w, a = self.pitch.omega(t)
+            c, cd, cdd = to_rotating_frame(R, w, a, c, cd, cdd)
+            x, xd, xdd = to_rotating_frame(R[:, None], w[:, None], a[:, None], x, xd, xdd)
+            p_guess = None if p_guess is None else np.einsum("tji,tj->ti", R, p_guess)
         if p_guess is None:
             p, pd, pdd, q, qd, qdd = self.wb.place_base_compiled(c, cd, cdd, x, xd, xdd, newton_steps)
         else:
             p, pd, pdd, q, qd, qdd = self.wb.place_base(c, cd, cdd, x, xd, xdd, p_guess, newton_steps)
             q, qd, qdd = q.reshape(n, 12), qd.reshape(n, 12), qdd.reshape(n, 12)
+        if not self.pitch.level:
+            p, pd, pdd = from_rotating_frame(R, w, a, p, pd, pdd)
         stance = self._stance[phase_index(self.plan.phases, t)]
         return p, pd, pdd, q, qd, qdd, stance
+
+    def _orientation(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Base quaternion (T, 4), angular velocity (T, 3) (rad/s) and acceleration (T, 3) (rad/s^2), base frame."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        if self.pitch.level:
+            return np.tile(_IDENTITY, (len(t), 1)), np.zeros((len(t), 3)), np.zeros((len(t), 3))
+        w, dw = self.pitch.omega(t)  # about y: the same vectors in the world and the base frame
+        return self.pitch.quaternion(t), w, dw
 
     def sample(self, t: float) -> ReferenceSample:
         """The planned whole-robot state at time ``t`` (s from the cycle start; clipped to the cycle)."""
@@ -128,14 +144,15 @@ class Reference:
             guess = np.array([np.interp(tc, self._grid_t, self._grid_p[:, j]) for j in range(3)])[None]
             p, pd, pdd, q, qd, qdd, stance = (a[0] for a in self.evaluate(np.array([tc]), 2, guess))
             stance = tuple(bool(s) for s in stance)
+            quat, w, dw = (a[0] for a in self._orientation(tc))
         return ReferenceSample(
             t=float(t),
             p_base_W=p.copy(),
-            quat_WB=_IDENTITY.copy(),
+            quat_WB=quat,
             v_base_W=pd.copy(),
-            omega_base_B=_ZERO3.copy(),
+            omega_base_B=w,
             a_base_W=pdd.copy(),
-            domega_base_B=_ZERO3.copy(),
+            domega_base_B=dw,
             q_joints=q.copy(),
             qd_joints=qd.copy(),
             qdd_joints=qdd.copy(),

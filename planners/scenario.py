@@ -41,6 +41,10 @@ def _feet(value: Any, field: str) -> np.ndarray:
     return a
 
 
+BODY_PITCH_MODES: tuple[str, ...] = ("level", "terrain")
+"""Allowed values of ``Scenario.body_pitch``."""
+
+
 @dataclasses.dataclass(frozen=True)
 class Scenario:
     """One gait cycle to plan (SI units, world frame = MuJoCo's, legs LF, RF, LH, RH).
@@ -81,6 +85,11 @@ class Scenario:
     """robot parameters; None: the paper's Table 1 (configs/robot/paper.yaml)."""
     method: str = "sqp"
     """COG solver: 'sqp', 'slsqp' or 'slsqp-fd'."""
+    body_pitch: str = "level"
+    """base orientation: 'level' (identity, the paper) or 'terrain' (pitch from ``pitch_start`` to the
+    slope of the target footholds, :mod:`planners.pitch`)."""
+    pitch_start: float = 0.0
+    """base pitch (rad, about world y, positive nose down) at the start; used with ``body_pitch='terrain'``."""
 
     def __post_init__(self) -> None:
         _feet(self.feet_start, "feet_start")
@@ -97,6 +106,10 @@ class Scenario:
             raise ValueError(f"clearance must be a finite number >= 0 (m), got {self.clearance}")
         if not 0.0 < self.cog_height < 1.0:
             raise ValueError(f"cog_height must be in (0, 1) m, got {self.cog_height}")
+        if self.body_pitch not in BODY_PITCH_MODES:
+            raise ValueError(f"body_pitch must be one of {list(BODY_PITCH_MODES)}, got {self.body_pitch!r}")
+        if not (np.isfinite(self.pitch_start) and abs(self.pitch_start) < 0.5 * np.pi):
+            raise ValueError(f"pitch_start must be a finite angle in (-pi/2, pi/2) rad, got {self.pitch_start}")
 
     def robot_config(self) -> RobotConfig:
         """The robot parameters (Table 1 unless given)."""

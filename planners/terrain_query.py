@@ -59,6 +59,35 @@ def sphere_clearance(terrain: HeightMap, centres: np.ndarray, radius: float) -> 
     return centres[:, 2] - radius - max_height_in_disk(terrain, centres[:, :2], radius)
 
 
+def capsule_clearance(
+    terrain: HeightMap, a: np.ndarray, b: np.ndarray, radius: float, spacing: float = 0.005
+) -> np.ndarray:
+    """Gap (m) between the terrain and capsules: segments ``a`` -> ``b`` (N, 3) (m) of radius ``radius`` (m).
+
+    The terrain is sampled every ``spacing`` (m) on the capsule's footprint (the strip within
+    ``radius`` of the segment's ground projection, the only terrain that can come closer than
+    ``radius`` to the axis); the gap is the smallest distance from a sample to the segment minus
+    the radius: exact at the samples, so on a plane or a slope it is the true gap, and next to an
+    edge it is at most about ``spacing / 2`` too large.
+    """
+    a = np.asarray(a, dtype=float).reshape(-1, 3)
+    b = np.asarray(b, dtype=float).reshape(-1, 3)
+    d = b - a
+    horiz = np.hypot(d[:, 0], d[:, 1])
+    along = np.where(horiz[:, None] > 1e-12, d[:, :2] / np.maximum(horiz, 1e-12)[:, None], [1.0, 0.0])
+    across = np.column_stack([-along[:, 1], along[:, 0]])
+    n_u = int(np.ceil((horiz.max(initial=0.0) + 2.0 * radius) / spacing)) + 1
+    n_v = int(np.ceil(2.0 * radius / spacing)) + 1
+    u = np.linspace(0.0, 1.0, n_u)[None, :, None] * (horiz[:, None, None] + 2.0 * radius) - radius  # (N, U, 1)
+    v = np.linspace(-radius, radius, n_v)[None, None, :]  # (1, 1, V)
+    xy = a[:, None, None, :2] + u[..., None] * along[:, None, None] + v[..., None] * across[:, None, None]
+    z = terrain.height(xy[..., 0], xy[..., 1])
+    p = np.concatenate([xy, z[..., None]], axis=-1) - a[:, None, None]  # samples relative to a
+    s = np.clip(np.einsum("nuvk,nk->nuv", p, d) / np.maximum((d * d).sum(axis=1), 1e-12)[:, None, None], 0.0, 1.0)
+    dist = np.linalg.norm(p - s[..., None] * d[:, None, None], axis=-1)
+    return dist.reshape(len(a), -1).min(axis=1) - radius
+
+
 def surface_point(terrain: HeightMap, xy: np.ndarray) -> np.ndarray:
     """Points on the terrain surface (..., 3) above world ``xy`` (..., 2) (m)."""
     xy = np.asarray(xy, dtype=float)

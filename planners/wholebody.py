@@ -16,6 +16,13 @@ Newton's method; velocities and accelerations follow from the analytic Jacobians
     K p_ddot = c_ddot - (1/M) sum [A_i x_ddot_i - A_i Jd_i qd_i + Fd_i qd_i]
     qd_i = J_i^-1 (x_dot_i - p_dot),  qdd_i = J_i^-1 (x_ddot_i - p_ddot - Jd_i qd_i)
 
+With a time-varying base orientation ``R(t)`` (angular velocity ``omega``, acceleration
+``alpha``, world frame) the same equations hold in the base-aligned rotating frame: every world
+vector ``v`` becomes ``v_B = R^T v`` with ``v_B' = R^T (v' - omega x v)`` and
+``v_B'' = R^T (v'' - 2 omega x v' - alpha x v + omega x (omega x v))``
+(:func:`to_rotating_frame`); the base motion found there maps back with
+:func:`from_rotating_frame` (:meth:`WholeBody.place_base_rotated`).
+
 All functions are vectorised over leading axes (time, leg).
 """
 
@@ -88,7 +95,7 @@ def _solve3(A: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 class WholeBody:
-    """Mass distribution of the Table-1 robot for COM placement (fixed base orientation)."""
+    """Mass distribution of the Table-1 robot for COM placement (identity or a given base orientation)."""
 
     def __init__(self, cfg: RobotConfig) -> None:
         self.cfg = cfg
@@ -183,3 +190,58 @@ class WholeBody:
             self._hip_moment, self.mass, int(newton_steps), p, pd, pdd, q, qd, qdd,
         )  # fmt: skip
         return p, pd, pdd, q, qd, qdd
+
+    def place_base_rotated(
+        self,
+        c: np.ndarray,
+        c_d: np.ndarray,
+        c_dd: np.ndarray,
+        x: np.ndarray,
+        x_d: np.ndarray,
+        x_dd: np.ndarray,
+        R: np.ndarray,
+        omega: np.ndarray,
+        alpha: np.ndarray,
+        p_guess: np.ndarray | None = None,
+        newton_steps: int = 4,
+    ) -> tuple[np.ndarray, ...]:
+        """:meth:`place_base` for a base with orientation ``R`` (..., 3, 3) (R_WB) instead of identity.
+
+        :param omega, alpha: (..., 3) base angular velocity (rad/s) and acceleration (rad/s^2), world frame.
+        :param p_guess: optional (..., 3) initial base position (m, world).
+        :return: as :meth:`place_base`, base motion in the world frame.
+        """
+        cb = to_rotating_frame(R, omega, alpha, c, c_d, c_dd)
+        xb = to_rotating_frame(R[..., None, :, :], omega[..., None, :], alpha[..., None, :], x, x_d, x_dd)
+        gb = None if p_guess is None else np.einsum("...ji,...j->...i", R, p_guess)
+        pb, pb_d, pb_dd, q, qd, qdd = self.place_base(*cb, *xb, gb, newton_steps)
+        return (*from_rotating_frame(R, omega, alpha, pb, pb_d, pb_dd), q, qd, qdd)
+
+
+def to_rotating_frame(
+    R: np.ndarray, omega: np.ndarray, alpha: np.ndarray, v: np.ndarray, v_d: np.ndarray, v_dd: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World vector ``v`` (..., 3) (m) and its time derivatives seen in the frame rotating with ``R`` (..., 3, 3).
+
+    :param omega, alpha: (..., 3) angular velocity (rad/s) and acceleration (rad/s^2) of the frame, world frame.
+    :return: ``(R^T v, d/dt, d2/dt2)`` (see the module doc).
+    """
+    R, w, a = (np.asarray(z, dtype=float) for z in (R, omega, alpha))
+    wv = np.cross(w, v)
+    vb = np.einsum("...ji,...j->...i", R, v)
+    vb_d = np.einsum("...ji,...j->...i", R, v_d - wv)
+    vb_dd = np.einsum("...ji,...j->...i", R, v_dd - 2.0 * np.cross(w, v_d) - np.cross(a, v) + np.cross(w, wv))
+    return vb, vb_d, vb_dd
+
+
+def from_rotating_frame(
+    R: np.ndarray, omega: np.ndarray, alpha: np.ndarray, vb: np.ndarray, vb_d: np.ndarray, vb_dd: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inverse of :func:`to_rotating_frame`: world vector (..., 3) (m) and its time derivatives."""
+    R, w, a = (np.asarray(z, dtype=float) for z in (R, omega, alpha))
+    v = np.einsum("...ij,...j->...i", R, vb)
+    rel = np.einsum("...ij,...j->...i", R, vb_d)
+    v_d = rel + np.cross(w, v)
+    v_dd = np.einsum("...ij,...j->...i", R, vb_dd) + 2.0 * np.cross(w, rel) + np.cross(a, v)
+    v_dd = v_dd + np.cross(w, np.cross(w, v))
+    return v, v_d, v_dd

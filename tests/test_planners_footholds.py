@@ -1,4 +1,4 @@
-"""Foothold selection: flat, edge-free, reachable spots; stepping stones, not holes."""
+"""Foothold selection: flat, edge-free, reachable spots with the shank clear; stepping stones, not holes."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from planners.errors import PlanningError
-from planners.footholds import FootholdLimits, choose_footholds
-from planners.terrain_query import BlockTerrain
+from planners.footholds import SHANK_RADIUS_SCALE, FootholdLimits, choose_footholds, shank_clearance
+from planners.terrain_query import BlockTerrain, capsule_clearance
 from quad_uneven_env.robot.kinematics import hip_positions_B
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec
 
@@ -53,3 +53,51 @@ def test_no_foothold_raises_naming_leg(robot_cfg):
         choose_footholds(
             BlockTerrain(0.0, blocks=blocks), robot_cfg, FEET, np.array([0, 0, 0.4]), np.array([0.2, 0.0]), 0.36
         )
+
+
+def test_shank_clearance_flat_stance_versus_shank_on_a_nosing(robot_cfg):
+    flat = BlockTerrain(0.0)
+    r = robot_cfg.foot_radius
+    for leg, hip_x in (("LF", 0.25), ("LH", -0.25)):
+        hip = np.array([hip_x, 0.185, 0.33])  # nominal stance: the foot under the hip
+        gap = shank_clearance(flat, robot_cfg, leg, np.array([[hip_x, 0.185, r]]), hip, np.eye(3))
+        assert gap[0] > 0.01
+    # The stairs-down failure: hind foot 2.5 cm behind a 8 cm drop, hip only 0.13 m above the foot
+    # and 0.1 m ahead: the forward knee dips below the foot and the shank rests on the nosing.
+    stair = BlockTerrain(-0.08, blocks=np.array([[-2.0, 0.6, -1.0, 1.0, 0.0]]))
+    site = np.array([[0.575, 0.198, r]])
+    low = shank_clearance(stair, robot_cfg, "LH", site, np.array([0.679, 0.198, 0.15]), np.eye(3))
+    high = shank_clearance(stair, robot_cfg, "LH", site, np.array([0.679, 0.198, 0.30]), np.eye(3))
+    assert low[0] < -0.001 and FootholdLimits().shank_clearance < high[0]
+    # On a plane the gap is exact: a shank parallel to a 15 deg slope, its axis 3 cm above it.
+    slope = BlockTerrain(0.0, slope=(np.tan(np.deg2rad(15.0)), 0.0))
+    axis = np.array([np.cos(np.deg2rad(15.0)), 0.0, np.sin(np.deg2rad(15.0))])
+    n = np.array([-axis[2], 0.0, axis[0]])
+    a = 0.03 * n
+    assert capsule_clearance(slope, a, a + 0.2 * axis, 0.0175)[0] == pytest.approx(0.0125, abs=1e-6)
+
+
+@pytest.mark.parametrize("pitch_start", [None, 0.0])
+def test_front_foot_kept_off_the_nosing_when_stepping_down(robot_cfg, pitch_start):
+    # 8 cm drop at x = 0.5, the front nominal footholds 8 cm past it: the backward-bent front
+    # shank would rest on the edge above the foot; the chosen footholds keep it clear.
+    terrain = BlockTerrain(-0.08, blocks=np.array([[-2.0, 0.5, -1.0, 1.0, 0.0]]))
+    args = (terrain, robot_cfg, FEET, np.array([0.0, 0.0, 0.33]), np.array([0.33, 0.0]), 0.33)
+    free = choose_footholds(*args, pitch_start=pitch_start, limits=FootholdLimits(shank_clearance=-np.inf))
+    out = choose_footholds(*args, pitch_start=pitch_start)
+    np.testing.assert_allclose(free[:2, 0], 0.58)  # nominal: under the hips at the end of the cycle
+    assert np.all(out[:2, 2] == -0.08) and np.all(out[:2, 0] > free[:2, 0] + 0.01)  # further from the edge
+    np.testing.assert_allclose(out[2:], free[2:])  # hind feet on the flat upper level: unchanged
+
+
+def test_shank_geometry_matches_the_mujoco_model(robot_cfg):
+    import mujoco
+
+    from quad_uneven_env.robot import robot_mjcf
+
+    m = mujoco.MjModel.from_xml_string(robot_mjcf(robot_cfg))
+    for leg in ("LF", "RH"):
+        radius, half_length = m.geom(f"{leg}_shank_geom").size[:2]
+        assert radius == pytest.approx(SHANK_RADIUS_SCALE * robot_cfg.link_radius)
+        # The capsule runs from the knee to foot_radius short of the foot point (where shank_clearance starts it).
+        assert 2 * half_length == pytest.approx(robot_cfg.shank.length - robot_cfg.foot_radius)
