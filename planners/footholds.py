@@ -104,7 +104,7 @@ def _best_clear_candidate(
     cost: np.ndarray,
     poses: list[tuple[np.ndarray, np.ndarray]],
     min_gap: float,
-    batch: int = 16,
+    batch: int = 4,
 ) -> int | None:
     """The cheapest of ``candidates`` whose shank clears the terrain by ``min_gap`` (m) in every pose, or None.
 

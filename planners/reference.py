@@ -26,6 +26,8 @@ from quad_uneven_env.robot.conventions import quat_wxyz_to_matrix
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 
 _IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
+_STANCE_OF_MASK = [tuple(bool(m >> i & 1) for i in range(4)) for m in range(16)]
+"""stance tuple (LF, RF, LH, RH) of each 4-bit mask."""
 
 
 class Reference:
@@ -53,7 +55,9 @@ class Reference:
         self._grid_t = np.arange(0.0, self.t_end + 0.5 * grid_dt, grid_dt)
         self._grid = self.evaluate(self._grid_t, newton_steps=3)  # converged to ~1e-14 (tests)
         self._grid_p = self._grid[0]
-        self._grid_stance = [tuple(row) for row in self._grid[6].tolist()]
+        self._grid_mask = (self._grid[6].astype(np.int64) << np.arange(4)).sum(axis=1).tolist()
+        # Shared tuples: thousands of new ones per plan would wake Python's cyclic GC (~10 ms a plan).
+        self._grid_stance = [_STANCE_OF_MASK[m] for m in self._grid_mask]
         # One packed row per grid time, so that a sample is one copy plus views of it.
         p, pd, pdd, q, qd, qdd, _ = self._grid
         quat, w, dw = self._orientation(self._grid_t)
@@ -61,7 +65,6 @@ class Reference:
         # Python lists: the controller looks one up every physics step, and list indexing is cheaper.
         self._rows = list(self._packed)
         self._grid_t_list = self._grid_t.tolist()
-        self._grid_mask = (self._grid[6].astype(np.int64) << np.arange(4)).sum(axis=1).tolist()
 
     def row(self, t: float) -> tuple[np.ndarray, int] | None:
         """The packed reference at grid time ``t`` (s from the cycle start, clipped to the cycle), or None off the grid.

@@ -227,10 +227,11 @@ def to_rotating_frame(
     :return: ``(R^T v, d/dt, d2/dt2)`` (see the module doc).
     """
     R, w, a = (np.asarray(z, dtype=float) for z in (R, omega, alpha))
-    wv = np.cross(w, v)
-    vb = np.einsum("...ji,...j->...i", R, v)
-    vb_d = np.einsum("...ji,...j->...i", R, v_d - wv)
-    vb_dd = np.einsum("...ji,...j->...i", R, v_dd - 2.0 * np.cross(w, v_d) - np.cross(a, v) + np.cross(w, wv))
+    wv = _cross(w, v)
+    Rt = np.swapaxes(R, -1, -2)
+    vb = _apply(Rt, v)
+    vb_d = _apply(Rt, v_d - wv)
+    vb_dd = _apply(Rt, v_dd - 2.0 * _cross(w, v_d) - _cross(a, v) + _cross(w, wv))
     return vb, vb_d, vb_dd
 
 
@@ -239,9 +240,23 @@ def from_rotating_frame(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Inverse of :func:`to_rotating_frame`: world vector (..., 3) (m) and its time derivatives."""
     R, w, a = (np.asarray(z, dtype=float) for z in (R, omega, alpha))
-    v = np.einsum("...ij,...j->...i", R, vb)
-    rel = np.einsum("...ij,...j->...i", R, vb_d)
-    v_d = rel + np.cross(w, v)
-    v_dd = np.einsum("...ij,...j->...i", R, vb_dd) + 2.0 * np.cross(w, rel) + np.cross(a, v)
-    v_dd = v_dd + np.cross(w, np.cross(w, v))
+    v = _apply(R, vb)
+    rel = _apply(R, vb_d)
+    v_d = rel + _cross(w, v)
+    v_dd = _apply(R, vb_dd) + 2.0 * _cross(w, rel) + _cross(a, v) + _cross(w, _cross(w, v))
     return v, v_d, v_dd
+
+
+def _apply(R: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``R @ v`` for stacks R (..., 3, 3) and v (..., 3), broadcast (matmul: ~5 x faster than einsum here)."""
+    return (R @ np.asarray(v, dtype=float)[..., None])[..., 0]
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` along the last axis (3), broadcast; componentwise (np.cross is slow on small stacks)."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+    out = np.empty(a.shape)
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
