@@ -276,7 +276,10 @@ class ComputedTorqueController:
             exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
         )  # fmt: skip
         if self.distribution == "qp" and lay.n_stance:
-            self.id._distribute_qp(lay, self._terms_buf[1], ws[3], result, normals)
+            if code & FK.INSIDE_CONES:  # the pinv forces are the QP's optimum (control_step checked)
+                result.distribution = "qp"
+            else:
+                self.id._distribute_qp(lay, self._terms_buf[1], ws[3], result, normals)
         self.last, self._last_reference = result, (t, row, planned)
         tau = np.empty(C.N_JOINTS)
         K.clip_into(result.tau, self.torque_limit, tau)
@@ -295,6 +298,7 @@ class ComputedTorqueController:
             data.qpos, data.qvel, self._gains, self._bdd, *self.dynamics.data_views(data)[1:],
             *self._terms_buf, data.qfrc_bias, 1.0 / SINGULAR_SIGMA, DAMPING, *self.id._ws,
             *hf_args, self._foot_sites, self._site_buf, self._normal_buf,
+            self.id.mu if normals is not None else 0.0, self.id._cone_lower, self.id._cone_buf,
         )  # fmt: skip
         self._fast_cache = (data, hf, self._gains, self.distribution, tail, normals)
         return tail, normals

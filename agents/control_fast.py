@@ -18,6 +18,9 @@ from agents import control_kernels as K
 from quad_uneven_env.robot import dynamics_kernels as DK
 from quad_uneven_env.terrain.heightfield import _normal_kernel
 
+INSIDE_CONES = 1 << 16
+"""bit of :func:`control_step`'s result: the pinv forces lie in every stance friction pyramid."""
+
 STANCE_BOTH, STANCE_PLANNED, STANCE_MEASURED = 0, 1, 2
 """``stance_mode`` codes of :func:`control_step` (``ComputedTorqueController.stance_mode``)."""
 
@@ -47,15 +50,20 @@ def control_step(
     M_csr, rowadr, rownnz, colind, xpos, xmat, xanchor, xaxis, site_xpos, subtree_com, idx, par,
     M, J, Jdd, G, h, inv_sigma, damping, tau, F, qacc, r, Jinv, S,
     hf_flat, nrow, ncol, ox, oy, inv_cell, foot_sites, site_pos, normals,
+    mu, cone_lower, cones,
 ):  # fmt: skip  # pragma: no cover - compiled
     """Stance, PD command, dynamics terms, pinv inverse dynamics and foot normals at one physics step.
 
     Inputs as the kernels it calls: ``row`` a packed reference (55,), ``planned`` its stance
     bitmask, ``stance_mode`` a ``STANCE_*`` code; MuJoCo arrays after ``mj_step1``; ``tau, F,
     qacc, r, Jinv, S`` the inverse-dynamics outputs; ``normals`` (4, 3) is written when
-    ``hf_flat`` is not empty. Returns ``stance_mask | status << 4 | n_beta << 8`` with
-    ``status`` the bits of :func:`agents.control_kernels.id_pinv`; a negative value when an input
-    has the wrong size (the caller then takes the general path, which names it).
+    ``hf_flat`` is not empty. With normals and ``mu > 0`` the pinv forces are also checked
+    against the stance legs' friction pyramids (written into ``cones``, (4, 5, 3)) with the
+    lower bounds ``cone_lower`` (5,), as :func:`agents.control_kernels.qp_fill` does: inside,
+    they are the "qp" optimum and no QP is needed. Returns
+    ``stance_mask | status << 4 | n_beta << 8 | INSIDE_CONES`` with ``status`` the bits of
+    :func:`agents.control_kernels.id_pinv`; a negative value when an input has the wrong size
+    (the caller then takes the general path, which names it).
     """
     meas = K.foot_contact_mask(contact_geom, foot_of_geom, terrain_geom)
     mask = select_stance_mask(planned, meas, stance_mode)
@@ -75,4 +83,18 @@ def control_step(
             for k in range(3):
                 site_pos[i, k] = site_xpos[foot_sites[i], k]
         _normal_kernel(hf_flat, nrow, ncol, ox, oy, inv_cell, site_pos, normals)
+        if mu > 0.0 and status > 0 and mask != 0:
+            K.stance_pyramids_into(normals, mask, mu, cones)
+            inside = True
+            k = 0
+            for leg in range(4):
+                if not (mask >> leg) & 1:
+                    continue
+                for a in range(5):
+                    s = cones[k, a, 0] * F[leg, 0] + cones[k, a, 1] * F[leg, 1] + cones[k, a, 2] * F[leg, 2]
+                    if s < cone_lower[a]:
+                        inside = False
+                k += 1
+            if inside:
+                return mask | status << 4 | n_beta << 8 | INSIDE_CONES
     return mask | status << 4 | n_beta << 8
