@@ -115,7 +115,7 @@ class ExpertPolicy:
             raise ValueError(f"body_pitch must be one of {list(BODY_PITCH_MODES)}, got {self.config.body_pitch!r}")
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
-        self._foot_sensor_adr = [int(a) for a in self.env.idx.foot_sensor_adr]
+        self._foot_sensor_adr = np.array([int(a) for a in self.env.idx.foot_sensor_adr])
         self.controller = ComputedTorqueController(
             reference=self._reference,
             reference_row=self._reference_row,
@@ -130,6 +130,7 @@ class ExpertPolicy:
         self.plans: list[Any] = []
         """(t_start, plan or hold reference) of every cycle of the current episode."""
         self._current: Any = None
+        self._row_of: Any = None
         self._t_start = 0.0
         self._t_end = 0.0
         self._data: mujoco.MjData | None = None
@@ -172,14 +173,16 @@ class ExpertPolicy:
     def _reference_row(self, t: float) -> tuple[np.ndarray, int] | None:
         """The controller's fast form of :meth:`_reference`: the packed plan row and its stance
         bitmask, or None (hold, off the grid, or a late touch-down to push: use :meth:`_reference`)."""
-        self._advance(t)
-        row_of = getattr(self._current_ref, "row", None)
+        if t >= self._t_end:
+            self._advance(t)
+        row_of = self._row_of
         packed = None if row_of is None else row_of(t - self._t_start)
         if packed is None:
             return None
-        sd, planned = self._data.sensordata, packed[1]
-        for i, a in enumerate(self._foot_sensor_adr):
-            if planned >> i & 1 and sd[a] <= 0:
+        planned = packed[1]
+        touch = self._data.sensordata[self._foot_sensor_adr].tolist()
+        for i in range(4):
+            if planned >> i & 1 and touch[i] <= 0:
                 return None
         return packed
 
@@ -262,6 +265,7 @@ class ExpertPolicy:
         else:
             self._current, self._current_ref = plan, plan.reference(self.cfg)
             duration = plan.duration
+        self._row_of = getattr(self._current_ref, "row", None)
         self.plans.append((t0, self._current))
         self._t_start, self._t_end = t0, t0 + duration
 
