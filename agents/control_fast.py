@@ -6,8 +6,9 @@ the stance set, the PD command from a packed reference row (:data:`planners.type
 the dynamics terms from ``mj_step1``'s results, the pinv inverse dynamics, and the terrain normals
 under the feet. It calls the same kernels as the general path (:mod:`agents.control_kernels`,
 :mod:`quad_uneven_env.robot.dynamics_kernels`, the height field's normal kernel), so the two
-paths give the same torques (tested); the "qp" distribution and every rare case (1-2 stance
-feet, a failed Cholesky) stay in Python.
+paths give the same torques (tested); the QP solve itself (when the pinv forces leave a
+friction cone) and every rare case (1-2 stance feet, a failed Cholesky) stay in Python.
+:func:`control_step` compiles on its first call (a few seconds per process), the others at import.
 """
 
 from __future__ import annotations
