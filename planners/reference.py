@@ -19,7 +19,7 @@ from planners.gait import phase_index
 from planners.pitch import LEVEL
 from planners.terrain_query import foot_site_on
 from planners.types import ReferenceSample
-from planners.wholebody import WholeBody, from_rotating_frame, to_rotating_frame
+from planners.wholebody import WholeBody
 from quad_uneven_env.config import RobotConfig, load_robot_config
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
 from quad_uneven_env.robot.conventions import quat_wxyz_to_matrix
@@ -108,20 +108,18 @@ class Reference:
         cog = self.plan.cog
         c, cd, cdd = cog.position(t), cog.velocity(t), cog.acceleration(t)
         x, xd, xdd = self.feet(t)
-        n = len(t)
+        n, compiled = len(t), p_guess is None
         if not self.pitch.level:  # solve in the frame rotating with the base (planners.wholebody)
-            R = self.pitch.rotation(t)
             w, a = self.pitch.omega(t)
-            c, cd, cdd = to_rotating_frame(R, w, a, c, cd, cdd)
-            x, xd, xdd = to_rotating_frame(R[:, None], w[:, None], a[:, None], x, xd, xdd)
-            p_guess = None if p_guess is None else np.einsum("tji,tj->ti", R, p_guess)
-        if p_guess is None:
+            p, pd, pdd, q, qd, qdd = self.wb.place_base_rotated(
+                c, cd, cdd, x, xd, xdd, self.pitch.rotation(t), w, a, p_guess, newton_steps, compiled
+            )
+        elif compiled:
             p, pd, pdd, q, qd, qdd = self.wb.place_base_compiled(c, cd, cdd, x, xd, xdd, newton_steps)
         else:
             p, pd, pdd, q, qd, qdd = self.wb.place_base(c, cd, cdd, x, xd, xdd, p_guess, newton_steps)
+        if not compiled:
             q, qd, qdd = q.reshape(n, 12), qd.reshape(n, 12), qdd.reshape(n, 12)
-        if not self.pitch.level:
-            p, pd, pdd = from_rotating_frame(R, w, a, p, pd, pdd)
         stance = self._stance[phase_index(self.plan.phases, t)]
         return p, pd, pdd, q, qd, qdd, stance
 

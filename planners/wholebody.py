@@ -204,17 +204,25 @@ class WholeBody:
         alpha: np.ndarray,
         p_guess: np.ndarray | None = None,
         newton_steps: int = 4,
+        compiled: bool = False,
     ) -> tuple[np.ndarray, ...]:
         """:meth:`place_base` for a base with orientation ``R`` (..., 3, 3) (R_WB) instead of identity.
 
         :param omega, alpha: (..., 3) base angular velocity (rad/s) and acceleration (rad/s^2), world frame.
         :param p_guess: optional (..., 3) initial base position (m, world).
+        :param compiled: solve with :meth:`place_base_compiled` (inputs (T, ...), no ``p_guess``; joints
+            then come as (T, 12)).
         :return: as :meth:`place_base`, base motion in the world frame.
         """
         cb = to_rotating_frame(R, omega, alpha, c, c_d, c_dd)
         xb = to_rotating_frame(R[..., None, :, :], omega[..., None, :], alpha[..., None, :], x, x_d, x_dd)
-        gb = None if p_guess is None else np.einsum("...ji,...j->...i", R, p_guess)
-        pb, pb_d, pb_dd, q, qd, qdd = self.place_base(*cb, *xb, gb, newton_steps)
+        if compiled:
+            if p_guess is not None:
+                raise ValueError("place_base_rotated: compiled=True takes no p_guess")
+            pb, pb_d, pb_dd, q, qd, qdd = self.place_base_compiled(*cb, *xb, newton_steps)
+        else:
+            gb = None if p_guess is None else _apply(np.swapaxes(R, -1, -2), p_guess)
+            pb, pb_d, pb_dd, q, qd, qdd = self.place_base(*cb, *xb, gb, newton_steps)
         return (*from_rotating_frame(R, omega, alpha, pb, pb_d, pb_dd), q, qd, qdd)
 
 
