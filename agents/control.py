@@ -153,11 +153,28 @@ class ComputedTorqueController:
         self.t0 = 0.0
         self.terrain: Any = None
         self._model: mujoco.MjModel | None = None
-        self.last: IDResult | None = None
-        """the last inverse-dynamics result (diagnostics)."""
+        self._last: IDResult | tuple[int, Any] | None = None
         self._last_reference: ReferenceSample | tuple[float, np.ndarray, int] | None = None
         self._bdd = np.empty(C.NV)
         self._stance_memo: dict = {}
+
+    @property
+    def last(self) -> IDResult | None:
+        """The inverse-dynamics result of the last call (diagnostics)."""
+        last = self._last
+        if isinstance(last, tuple):  # fast path, pinv forces inside the cones: built on demand
+            status, lay, version = last
+            if version != self.id.ws_version:
+                raise RuntimeError(
+                    "controller.last: the inverse-dynamics buffers were reused since; read it right after the call"
+                )
+            ws = self.id._ws
+            last = self._last = IDResult(
+                ws[0].copy(), ws[1].copy(), ws[2].copy(), lay.stance,
+                "qp" if self.distribution == "qp" and lay.n_stance else "pinv",
+                exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
+            )  # fmt: skip
+        return last
 
     @property
     def last_reference(self) -> ReferenceSample | None:
@@ -214,7 +231,7 @@ class ComputedTorqueController:
         self._bind(model)
         self.t0 = float(data.time)
         self.terrain = terrain
-        self.last = None
+        self._last = None
 
     # ------------------------------------------------------------------ control law
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray | None = None) -> np.ndarray:
@@ -251,7 +268,7 @@ class ComputedTorqueController:
         else:
             terms = self.dynamics.terms(qpos, qvel)
             result = self.id.solve_terms(terms, beta_ddot.copy(), stance, normals)
-        self.last, self._last_reference = result, ref
+        self._last, self._last_reference = result, ref
         tau = np.empty(C.N_JOINTS)
         K.clip_into(result.tau, self.torque_limit, tau)
         return tau
@@ -260,6 +277,7 @@ class ComputedTorqueController:
         """:meth:`__call__` from a packed reference row by one compiled call (:mod:`agents.control_fast`);
         None where the general path is needed (1-2 stance feet, a failed Cholesky, a malformed row)."""
         tail, normals = self._fast_arguments(data)
+        self.id.ws_version += 1  # control_step rewrites the inverse-dynamics buffers
         try:
             code = FK.control_step(
                 row, planned, STANCE_MODES.index(self.stance_mode),
@@ -271,18 +289,19 @@ class ComputedTorqueController:
             return None
         lay = self._layouts[code & 15]
         status, ws = code >> 4, self.id._ws
-        result = IDResult(
-            ws[0].copy(), ws[1].copy(), ws[2].copy(), lay.stance, "pinv",
-            exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
-        )  # fmt: skip
-        if self.distribution == "qp" and lay.n_stance:
-            if code & FK.INSIDE_CONES:  # the pinv forces are the QP's optimum (control_step checked)
-                result.distribution = "qp"
-            else:
-                self.id._distribute_qp(lay, self._terms_buf[1], ws[3], result, normals)
-        self.last, self._last_reference = result, (t, row, planned)
+        self._last_reference = (t, row, planned)
         tau = np.empty(C.N_JOINTS)
-        K.clip_into(result.tau, self.torque_limit, tau)
+        if self.distribution == "qp" and lay.n_stance and not code & FK.INSIDE_CONES:
+            result = IDResult(
+                ws[0].copy(), ws[1].copy(), ws[2].copy(), lay.stance, "pinv",
+                exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
+            )  # fmt: skip
+            self.id._distribute_qp(lay, self._terms_buf[1], ws[3], result, normals)
+            self._last = result
+            K.clip_into(result.tau, self.torque_limit, tau)
+        else:  # the pinv torques (for "qp": its optimum, as control_step checked the cones)
+            self._last = (status, lay, self.id.ws_version)  # the IDResult is built from the buffers if asked for
+            K.clip_into(ws[0], self.torque_limit, tau)
         return tau
 
     def _fast_arguments(self, data: mujoco.MjData) -> tuple[tuple, np.ndarray | None]:

@@ -134,6 +134,8 @@ class InverseDynamics:
         self._qp: dict[int, _StanceQP] = {}
         self._cone_lower = np.array([0.0, 0.0, 0.0, 0.0, self.min_normal_force])
         self._cone_buf = np.empty((C.N_LEGS, 5, 3))
+        self.ws_version = 0
+        """incremented whenever the work buffers below are rewritten (lazy results check it)."""
         # kernel work buffers: tau, F, qacc, r = M qacc + h, J_L^-1, S stance blocks
         self._ws = (
             np.zeros(C.N_JOINTS), np.zeros((C.N_LEGS, 3)), np.zeros(C.NV), np.zeros(C.NV),
@@ -188,6 +190,7 @@ class InverseDynamics:
         (n_beta,) float64 ``beta_ddot``) by the compiled kernel; None when it does not apply (1 or 2
         stance feet, a degenerate stance, arrays it cannot take): then use :meth:`solve_terms`."""
         ws = self._ws
+        self.ws_version += 1
         try:
             status = K.id_pinv(
                 M, h, J_feet, Jdot_qdot_feet, lay.mask, beta_ddot,

@@ -58,3 +58,25 @@ def test_fast_path_gives_the_general_paths_torques(distribution, atol):
         assert ref_fast.stance == ref_general.stance
         compared += 1
     assert compared >= 10
+
+
+def test_lazy_last_result_refuses_overwritten_buffers():
+    env = gym.make("QuadUneven-v0", terrain="flat")
+    policy = ExpertPolicy(env, ExpertConfig(distribution="pinv"))
+    ctrl, u = policy.controller, env.unwrapped
+    obs, _ = env.reset(seed=0)
+    m, d = u.model, u.data
+    for _ in range(50):  # until a step takes the fast path (not at a late touch-down)
+        obs, *_ = env.step(policy.predict(obs)[0])
+        mujoco.mj_forward(m, d)
+        ctrl(m, d)
+        if isinstance(ctrl._last, tuple):
+            break
+    assert isinstance(ctrl._last, tuple), "the fast path did not leave a lazy result"
+    stance = (True, True, True, True)
+    ctrl.id.solve(d.qpos, d.qvel, np.zeros(6), stance)  # reuses the work buffers
+    with pytest.raises(RuntimeError, match="reused"):
+        _ = ctrl.last
+    ctrl(m, d)
+    tau = ctrl.last.tau  # read right after the call: fine
+    assert tau.shape == (12,) and np.isfinite(tau).all()
