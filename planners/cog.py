@@ -12,7 +12,7 @@ The small ``lambda`` term (not in the paper) makes the path unique between the j
 paper's cost only sees the six junction points. The equalities are eliminated exactly (null
 space of the 24 linear conditions per axis), so continuity holds to rounding error. The
 stability constraint is bilinear in the coefficients (P x P''); it is solved by sequential
-quadratic programming with analytic constraint Jacobians (ProxQP dense solver), or, as the
+quadratic programming with analytic constraint Jacobians (quadprog, a dual active-set solver), or, as the
 baseline, by ``scipy.optimize.minimize(method="SLSQP")`` with analytic or finite-difference
 gradients. After solving, the index is checked on a dense grid; sample times where it dips
 below ``epsilon`` are added and the problem re-solved. Infeasibility raises
@@ -27,12 +27,7 @@ from collections.abc import Callable, Sequence
 from functools import lru_cache
 
 import numpy as np
-import proxsuite
-
-try:
-    import quadprog
-except ImportError:  # optional: ProxQP is used instead
-    quadprog = None
+import quadprog
 import scipy.linalg
 import scipy.optimize
 
@@ -274,15 +269,13 @@ def _dense_index(red: _Reduced, coef: np.ndarray, n: int = 241) -> list[tuple[np
 
 
 def _solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lo: np.ndarray) -> np.ndarray | None:
-    """min 1/2 z'Hz + g'z s.t. C z >= lo; None when infeasible. quadprog (dual active set) if
-    installed: exact and ~4x faster than ProxQP on these small dense problems; else ProxQP."""
-    if quadprog is not None:
-        try:
-            return quadprog.solve_qp(H, -g, C.T, lo, 0)[0]
-        except ValueError:  # "constraints are inconsistent, no solution"
-            return None
-    res = proxsuite.proxqp.dense.solve(H, g, None, None, C, lo, np.full(lo.shape, 1e20), eps_abs=1e-9, eps_rel=0.0)
-    return res.x if res.info.status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED else None
+    """min 1/2 z'Hz + g'z s.t. C z >= lo; None when infeasible. quadprog (Goldfarb-Idnani dual
+    active set): exact, and on these ~120-variable problems ~4 x faster than ProxQP and ~2 x faster
+    than DAQP (both measured)."""
+    try:
+        return quadprog.solve_qp(H, -g, C.T, lo, 0)[0]
+    except ValueError:  # "constraints are inconsistent, no solution"
+        return None
 
 
 def _infeasible(red: _Reduced, z: np.ndarray, bound: float, what: str, rows: np.ndarray | None = None) -> PlanningError:
@@ -368,7 +361,7 @@ def plan_cog(
 ) -> tuple[PiecewisePolynomial, CogStats]:
     """Solve the COG problem; returns the path and solver statistics.
 
-    :param method: ``"sqp"`` (ProxQP sequential QP, default), ``"slsqp"`` (scipy, analytic
+    :param method: ``"sqp"`` (sequential QP on quadprog, default), ``"slsqp"`` (scipy, analytic
         gradients) or ``"slsqp-fd"`` (scipy with finite-difference gradients, the reference).
     :param samples_per_phase: initial stability sample times per phase (uniform in local time).
     :param margin: extra moment (N m) enforced at the samples above ``epsilon``; default
