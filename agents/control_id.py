@@ -265,21 +265,20 @@ class InverseDynamics:
         qp = self._qp.get(p)
         if qp is None:
             qp = self._qp[p] = _StanceQP(p)
-        F0, low = result.contact_forces, self._cone_lower
+
+        def fill(J_feet: np.ndarray, r: np.ndarray, normals_W: np.ndarray | None) -> bool:
+            F0, low = result.contact_forces, self._cone_lower
+            if normals_W is None:
+                return K.qp_fill(J_feet, lay.mask, r, F0, self._cone_up[:p], low, *qp.problem)
+            return K.qp_fill_with_cones(normals_W, self.mu, J_feet, lay.mask, r, F0, self._cone_buf, low, *qp.problem)
+
         try:
-            if normals_W is None:
-                inside = K.qp_fill(J_feet, lay.mask, r, F0, self._cone_up[:p], low, *qp.problem)
-            else:
-                cones = self._cone_buf
-                inside = K.qp_fill_with_cones(normals_W, self.mu, J_feet, lay.mask, r, F0, cones, low, *qp.problem)
+            inside = fill(J_feet, r, normals_W)
         except TypeError:  # arrays the kernels do not take (numba dispatch): convert once
-            J_feet, r = np.ascontiguousarray(J_feet, dtype=float), np.ascontiguousarray(r, dtype=float)
-            if normals_W is None:
-                cones = self._cone_up[:p]
-            else:
-                cones = self._cone_buf[:p]
-                K.stance_pyramids_into(np.ascontiguousarray(normals_W, dtype=float), lay.mask, self.mu, cones)
-            inside = K.qp_fill(J_feet, lay.mask, r, F0, cones, low, *qp.problem)
+            c = np.ascontiguousarray
+            inside = fill(
+                c(J_feet, dtype=float), c(r, dtype=float), None if normals_W is None else c(normals_W, dtype=float)
+            )
         _, _, A, b, C_in, lower = qp.problem
         # The QP's optimum is the torque closest to "pinv"; when the "pinv" forces already lie in
         # every cone with the minimum normal force, they are that optimum (zero cost): skip the solve.
