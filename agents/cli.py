@@ -1,15 +1,22 @@
-"""The ``quad-uneven`` command line: ``demo``, ``evaluate``, ``train``, ``paper`` (see ``--help`` of each)."""
+"""The ``quad-uneven`` command line: every argparse parser of the project, and the thin handlers behind them.
+
+Subcommands: ``demo``, ``evaluate``, ``train``, ``paper``, ``plan-paper`` (see ``--help`` of each). The
+library modules expose typed functions only; this module turns arguments into their calls and their
+errors into one line on stderr with exit code 2.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
-from agents.evaluate import add_evaluate_parser, evaluate
-from agents.paper_sim import add_paper_parser
-from agents.suites import suite_from_dict
-from agents.train_cli import add_train_parser
+from agents.evaluation.policies import SB3_ALGOS, PolicyError
+from agents.evaluation.run import evaluate
+from agents.evaluation.suites import SuiteError, load_suite, suite_from_dict, suite_names
+from agents.paper.simulation import DISTRIBUTIONS as PAPER_DISTRIBUTIONS
+from agents.rl.config import ALGOS, TrainConfigError, load_train_config
 
 
 def demo(out: Path, terrain: str, seed: int, distance: float, video: bool) -> dict:
@@ -30,39 +37,243 @@ def demo(out: Path, terrain: str, seed: int, distance: float, video: bool) -> di
     return results["episodes"][0]
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``quad-uneven``."""
+# ---------------------------------------------------------------------------------------------- demo
+def add_demo_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``demo`` subcommand on ``sub``."""
+    p = sub.add_parser("demo", help="the scripted expert walks the default rough terrain; writes a report")
+    p.add_argument("--out", type=Path, default=Path("out/demo"), help="output directory (default out/demo)")
+    p.add_argument("--terrain", default="rough", help="terrain kind with its defaults (default: rough)")
+    p.add_argument("--seed", type=int, default=0, help="terrain seed")
+    p.add_argument("--distance", type=float, default=2.0, help="goal distance along +x (m)")
+    p.add_argument("--no-video", action="store_true", help="skip the MP4 (rendering is the slow part)")
+    p.set_defaults(func=run_demo_command)
+    return p
+
+
+def run_demo_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven demo``."""
+    ep = demo(args.out, args.terrain, args.seed, args.distance, not args.no_video)
+    keys = ("terrain", "seed", "success", "distance", "sim_time", "mean_speed", "min_stability_index",
+            "mean_stability_index", "time_index_negative", "cost_of_transport", "fall_reason",
+            "planner_ms_median")  # fmt: skip
+    for k in keys:
+        print(f"{k:24s} {ep.get(k)}")
+    print(f"report: {(args.out / 'report.md').resolve()}")
+    for video in sorted((args.out / "videos").glob("*.mp4")):
+        print(f"video:  {video.resolve()}")
+    return 0
+
+
+# ------------------------------------------------------------------------------------------ evaluate
+def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``evaluate`` subcommand on ``sub`` (its handler is in ``func``)."""
+    p = sub.add_parser(
+        "evaluate",
+        help="run a policy over a terrain suite and write results.json, report.md, plots (and videos)",
+        description="Run a policy over every (terrain, seed) of a suite; write DIR/results.json, DIR/report.md, "
+        "PNG plots and per-episode traces (DIR/traces/*.npz). Exit code 2 on an invalid suite or policy.",
+    )
+    p.add_argument("--policy", required=True, help="'zero', 'expert', or the path of an SB3 model .zip")
+    p.add_argument("--suite", required=True, help=f"shipped suite name {suite_names()} or the path of a suite .yaml")
+    p.add_argument("--out", type=Path, required=True, help="output directory DIR")
+    p.add_argument("--episodes", type=int, default=None, help="at most N seeds per terrain entry (default: all)")
+    p.add_argument("--seed", type=int, default=0, help="offset added to every seed of the suite (default 0)")
+    p.add_argument("--workers", type=int, default=1, help="parallel episode processes (default 1)")
+    p.add_argument(
+        "--video",
+        action="store_true",
+        help="write an MP4 (DIR/videos/) for the first episode of each terrain entry only (MuJoCo offscreen)",
+    )
+    p.add_argument("--algo", choices=SB3_ALGOS, default="ppo", help="SB3 class of a model .zip (default ppo)")
+    p.add_argument(
+        "--env-kwargs", default="{}", help="JSON object of extra QuadUneven-v0 arguments, e.g. '{\"frame_skip\": 5}'"
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_evaluate_command)
+    return p
+
+
+def run_evaluate_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven evaluate``: 0 on success, 2 on an invalid suite, policy or argument."""
+    try:
+        env_kwargs = json.loads(args.env_kwargs)
+        if not isinstance(env_kwargs, dict):
+            raise ValueError(f"--env-kwargs must be a JSON object, got {args.env_kwargs!r}")
+        if args.episodes is not None and args.episodes < 1:
+            raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
+        if args.workers < 1:
+            raise ValueError(f"--workers must be >= 1, got {args.workers}")
+        suite = load_suite(args.suite)
+        results = evaluate(
+            suite,
+            args.policy,
+            args.out,
+            episodes=args.episodes,
+            seed=args.seed,
+            workers=args.workers,
+            video=args.video,
+            algo=args.algo,
+            env_kwargs=env_kwargs,
+            progress=not args.no_progress,
+        )
+    except SuiteError as e:
+        print(f"error: invalid suite {args.suite!r}: {e}", file=sys.stderr)
+        return 2
+    except (PolicyError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    for kind, g in results["summary"]["by_kind"].items():
+        speed = g["mean_speed"]
+        print(
+            f"{kind:16s} success {g['successes']}/{g['episodes']}  mean distance {g['mean_distance']:.2f} m  "
+            f"mean speed {speed if speed is None else round(speed, 3)} m/s"
+        )
+    for t in results["targets"]:
+        verdict = "PASS" if t["passed"] else f"FAIL ({t['why_not']})"
+        print(f"target {t['target']:18s} entry {t['entry']}: {verdict}")
+    print(f"report written to {Path(args.out).resolve()}/report.md")
+    return 0
+
+
+# --------------------------------------------------------------------------------------------- train
+def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``train`` subcommand on ``sub`` (its handler is in ``func``)."""
+    p = sub.add_parser(
+        "train",
+        help="train a residual RL agent (SB3 PPO or SAC) on top of the scripted expert",
+        description="Train a residual agent on QuadUnevenResidual-v0 (expert torques + residual_scale x action x "
+        "torque limit). Writes DIR/model.zip, DIR/rl_meta.json, DIR/learning_curve.png and more (docs/rl.md). "
+        "Options override single fields of the config (default configs/rl/ALGO_residual.yaml). Exit code 2 on "
+        "an invalid option or config.",
+    )
+    p.add_argument("--algo", choices=ALGOS, default=None, help="SB3 algorithm (default: the config's, else ppo)")
+    p.add_argument("--terrain", default=None, help="terrain kind, preset or YAML path (default: the config's)")
+    p.add_argument("--timesteps", type=int, default=None, help="total env steps over all envs")
+    p.add_argument("--out", type=Path, required=True, help="output directory DIR")
+    p.add_argument("--seed", type=int, default=None, help="seed of the model and envs (default: the config's)")
+    p.add_argument("--n-envs", type=int, default=None, help="parallel envs (default: the config's)")
+    p.add_argument("--residual-scale", type=float, default=None, help="residual torque per unit action / limit")
+    p.add_argument(
+        "--time-limit-min", type=float, default=None, help="stop (and save) after this many minutes of training"
+    )
+    p.add_argument("--config", default=None, help="training config YAML (default configs/rl/ALGO_residual.yaml)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_train_command)
+    return p
+
+
+def run_train_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven train``: 0 on success, 2 on an invalid option or config."""
+    overrides = {
+        "algo": args.algo,
+        "terrain": args.terrain,
+        "timesteps": args.timesteps,
+        "seed": args.seed,
+        "n_envs": args.n_envs,
+        "residual_scale": args.residual_scale,
+        "time_limit_min": args.time_limit_min,
+    }
+    try:
+        cfg = load_train_config(args.config, overrides)
+        from agents.rl.training import train  # deferred: SB3, torch and the expert's kernels
+
+        summary = train(cfg, args.out, progress=not args.no_progress)
+    except TrainConfigError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    for key in ("timesteps", "wall_time", "steps_per_s", "episodes", "mean_return", "mean_stability_index",
+                "mean_distance", "fall_rate"):  # fmt: skip
+        value = summary[key]
+        print(f"{key:22s} {round(value, 3) if isinstance(value, float) else value}")
+    print(f"model: {Path(summary['model']).resolve()}")
+    print(f"learning curve: {(Path(args.out) / 'learning_curve.png').resolve()}")
+    return 0
+
+
+# --------------------------------------------------------------------------------------------- paper
+def run_paper_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven paper``: 0 on success (also when the robot fell: see paper.json), 2 on bad input."""
+    try:
+        from agents.paper.simulation import PaperRunConfig
+
+        config = PaperRunConfig(
+            distribution=args.distribution,
+            epsilon=args.epsilon,
+            duration=args.duration,
+            hold=args.hold,
+            settle=args.settle,
+            seed=args.seed,
+        )
+    except ValueError as err:
+        print(f"quad-uneven paper: {err}")
+        return 2
+    from agents.paper.simulation import run_paper_sim, write_paper_outputs
+
+    run = run_paper_sim(config, progress=not args.no_progress)
+    info = write_paper_outputs(run, args.out, fps=args.fps)
+    keys = (
+        "fell", "min_stability_index_planned_Nm", "min_stability_index_measured_Nm", "time_without_support_s",
+        "min_normal_force_stance_N", "max_normal_force_swing_N", "cog_tracking_error_max_m",
+        "cog_tracking_error_rms_m", "torque_peak_max_Nm",
+    )  # fmt: skip
+    for k in keys:
+        print(f"{k:34s} {info[k]}")
+    print(f"outputs: {Path(args.out).resolve()}")
+    return 0
+
+
+def add_paper_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``paper`` subcommand on ``sub`` (its handler is in ``func``)."""
+    p = sub.add_parser(
+        "paper",
+        help="the paper's §6 cycle in the simulator: Figs 4-9 and paper.json",
+        description="Plan the paper's §6 gait cycle on the 'paper' terrain, track it with the computed-torque "
+        "controller in QuadUneven-v0, and write Figs 4-9 (PNG, GIF) and DIR/paper.json (key numbers).",
+    )
+    p.add_argument("--out", type=Path, required=True, help="output directory DIR (created if missing)")
+    p.add_argument("--distribution", choices=PAPER_DISTRIBUTIONS, default="qp", help="torque distribution (default qp)")
+    p.add_argument("--epsilon", type=float, default=10.0, help="planned stability margin, N m (default 10; paper: 0.1)")
+    p.add_argument("--duration", type=float, default=None, help="s of the cycle to run (default: all 6.1 s + hold)")
+    p.add_argument("--hold", type=float, default=0.5, help="s holding the final pose after the cycle (default 0.5)")
+    p.add_argument("--settle", type=float, default=0.1, help="s holding the start pose first (default 0.1)")
+    p.add_argument("--seed", type=int, default=0, help="env reset seed (terrain beyond x = 0.6 m)")
+    p.add_argument("--fps", type=float, default=20.0, help="frames per second of the stick animation (default 20)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_paper_command)
+    return p
+
+
+def add_plan_paper_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``plan-paper`` subcommand on ``sub``."""
+    p = sub.add_parser("plan-paper", help="plan the paper's §6 scenario (no simulator): Figs. 4-6, plan.json")
+    p.add_argument("--out", type=Path, required=True, help="output directory (created if missing)")
+    p.set_defaults(func=run_plan_paper_command)
+    return p
+
+
+def run_plan_paper_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven plan-paper``."""
+    from agents.paper.planned import write_planned_outputs
+
+    info = write_planned_outputs(args.out)
+    print(json.dumps({k: info[k] for k in ("min_stability_index_Nm", "junction_jump_max", "swing_min_clearance_m")}))
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------- main
+def build_parser() -> argparse.ArgumentParser:
+    """The ``quad-uneven`` parser with every subcommand."""
     parser = argparse.ArgumentParser(prog="quad-uneven", description="Quadruped locomotion on uneven terrain")
     sub = parser.add_subparsers(dest="command", required=True)
-    p_demo = sub.add_parser("demo", help="the scripted expert walks the default rough terrain; writes a report")
-    p_demo.add_argument("--out", type=Path, default=Path("out/demo"), help="output directory (default out/demo)")
-    p_demo.add_argument("--terrain", default="rough", help="terrain kind with its defaults (default: rough)")
-    p_demo.add_argument("--seed", type=int, default=0, help="terrain seed")
-    p_demo.add_argument("--distance", type=float, default=2.0, help="goal distance along +x (m)")
-    p_demo.add_argument("--no-video", action="store_true", help="skip the MP4 (rendering is the slow part)")
-    add_evaluate_parser(sub)
-    add_train_parser(sub)
-    add_paper_parser(sub)
-    p_plan = sub.add_parser("plan-paper", help="plan the paper's §6 scenario (no simulator): Figs. 4-6, plan.json")
-    p_plan.add_argument("--out", required=True, help="output directory (created if missing)")
-    args = parser.parse_args(argv)
-    if args.command == "plan-paper":
-        from planners.paper_figures import main as plan_paper
+    for add in (add_demo_parser, add_evaluate_parser, add_train_parser, add_paper_parser, add_plan_paper_parser):
+        add(sub)
+    return parser
 
-        return plan_paper(["--out", args.out])
-    if getattr(args, "func", None) is not None:
-        return args.func(args)
-    if args.command == "demo":
-        ep = demo(args.out, args.terrain, args.seed, args.distance, not args.no_video)
-        keys = ("terrain", "seed", "success", "distance", "sim_time", "mean_speed", "min_stability_index",
-                "mean_stability_index", "time_index_negative", "cost_of_transport", "fall_reason",
-                "planner_ms_median")  # fmt: skip
-        for k in keys:
-            print(f"{k:24s} {ep.get(k)}")
-        print(f"report: {(args.out / 'report.md').resolve()}")
-        for video in sorted((args.out / "videos").glob("*.mp4")):
-            print(f"video:  {video.resolve()}")
-    return 0
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``quad-uneven``."""
+    args = build_parser().parse_args(argv)
+    return args.func(args)
 
 
 if __name__ == "__main__":

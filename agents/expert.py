@@ -3,7 +3,7 @@
 :class:`ExpertPolicy` replans every gait cycle from the measured state (receding horizon:
 footholds, COG path, swing paths) heading +x, with the body pitched along the slope of the
 footholds (``ExpertConfig.body_pitch``; the paper keeps it level), and runs the computed-torque
-controller (:class:`agents.control.ComputedTorqueController`) at physics rate through the env's
+controller (:class:`agents.control.controller.ComputedTorqueController`) at physics rate through the env's
 control hook. It has **privileged access**: the terrain's height field
 (``env.unwrapped.terrain``) and the full MuJoCo state (COG, foot positions), as a scripted
 expert in simulation may.
@@ -29,7 +29,7 @@ import mujoco
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from agents.control import ComputedTorqueController, Gains
+from agents.control.controller import ComputedTorqueController, Gains
 from planners import PlanningError, Scenario, plan_gait_cycle
 from planners.pitch import pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
@@ -136,7 +136,6 @@ class ExpertPolicy:
         self._data: mujoco.MjData | None = None
         self._terrain: Any = None
         self._zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
-        self.env.set_controller(self)
 
     # -------------------------------------------------------------- SB3 protocol
     def predict(
@@ -271,3 +270,14 @@ class ExpertPolicy:
 
 
 __all__ = ["ExpertConfig", "ExpertPolicy"]
+
+
+def attach_expert(env: gym.Env, config: ExpertConfig | None = None) -> ExpertPolicy:
+    """Build an :class:`ExpertPolicy` for ``env`` and install it as the env's physics-rate controller.
+
+    Call it before ``env.reset`` (the reset plans the first cycle). This is the one way the expert
+    drives an env; ``ExpertPolicy(env, config)`` alone builds it without attaching it.
+    """
+    expert = ExpertPolicy(env, config)
+    expert.env.set_controller(expert)
+    return expert

@@ -21,12 +21,12 @@ import numpy as np
 import pinocchio as pin
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
-from agents.control import ComputedTorqueController, InverseDynamics
-from agents.control_references import track_in_env
+from agents.control.controller import ComputedTorqueController, InverseDynamics
+from agents.control.references import track_in_env
 from planners.types import ReferenceSample
 from quad_uneven_env.robot.conventions import qpos_mj_to_pin, qvel_mj_to_pin
-from quad_uneven_env.robot.dynamics import BACKENDS, make_dynamics
-from quad_uneven_env.robot.dynamics_pinocchio import build_pinocchio_model
+from quad_uneven_env.robot.dynamics.base import BACKENDS, make_dynamics
+from quad_uneven_env.robot.dynamics.pinocchio_backend import build_pinocchio_model
 
 
 def median_us(fn: Callable[[], object], repeats: int, inner: int = 20) -> float:

@@ -19,7 +19,7 @@ import mujoco
 import numpy as np
 
 import quad_uneven_env  # noqa: F401
-from agents.expert import ExpertPolicy
+from agents.expert import attach_expert
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -33,7 +33,7 @@ def main(argv: list[str] | None = None) -> None:
     from agents.expert import ExpertConfig
 
     env = gym.make("QuadUneven-v0", terrain=args.terrain, max_episode_steps=10**7)
-    policy = ExpertPolicy(env, ExpertConfig(distribution=args.distribution))
+    policy = attach_expert(env, ExpertConfig(distribution=args.distribution))
     # Warm-up: numba kernels compile on first use; keep that out of the timing.
     obs, _ = env.reset(seed=1)
     for _ in range(5):

@@ -10,13 +10,12 @@ Typical use::
 
 from planners.cog import CogProblem, CogStats, plan_cog
 from planners.cycle import GaitCyclePlan, plan_gait_cycle
-from planners.errors import PlanningError
 from planners.footholds import FootholdLimits, choose_footholds
 from planners.gait import PAPER_DURATIONS, SWING_ORDER, Phase, walk_cycle
 from planners.reference import Reference
 from planners.scenario import Scenario, paper_scenario
 from planners.swing import SwingPath, plan_swing
-from planners.types import ReferenceSample
+from planners.types import PlanningError, ReferenceSample
 from planners.wholebody import WholeBody
 
 __all__ = [

@@ -16,7 +16,7 @@ quadratic programming with analytic constraint Jacobians (quadprog, a dual activ
 baseline, by ``scipy.optimize.minimize(method="SLSQP")`` with analytic or finite-difference
 gradients. After solving, the index is checked on a dense grid; sample times where it dips
 below ``epsilon`` are added and the problem re-solved. Infeasibility raises
-:class:`~planners.errors.PlanningError` naming the phase, the edge and the violation.
+:class:`~planners.types.PlanningError` naming the phase, the edge and the violation.
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ import quadprog
 import scipy.linalg
 import scipy.optimize
 
-from planners.errors import PlanningError
 from planners.polynomial import N_COEF, PiecewisePolynomial, accel_gram, basis_rows
+from planners.types import PlanningError
 from quad_uneven_env.stability import GRAVITY, order_clockwise
 
 N_AXES = 3

@@ -16,7 +16,8 @@ from planners.pitch import BodyPitch, terrain_pitch
 from planners.polynomial import PiecewisePolynomial
 from planners.scenario import Scenario
 from planners.swing import SwingPath, plan_swing
-from planners.terrain_query import HeightMap, foot_site_on
+from planners.terrain_query import foot_site_on
+from planners.types import HeightMap
 from planners.wholebody import WholeBody
 from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import LEG_NAMES

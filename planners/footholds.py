@@ -16,10 +16,10 @@ import dataclasses
 
 import numpy as np
 
-from planners.errors import PlanningError
 from planners.gait import PAPER_DURATIONS, walk_cycle
 from planners.pitch import BodyPitch, terrain_pitch
-from planners.terrain_query import HeightMap, capsule_clearance, max_height_in_disk
+from planners.terrain_query import capsule_clearance, max_height_in_disk
+from planners.types import HeightMap, PlanningError
 from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_fk_hip, leg_ik_hip

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from planners.gait import PAPER_DURATIONS, validate_durations
-from planners.terrain_query import HeightMap
+from planners.types import HeightMap
 from quad_uneven_env.config import RobotConfig, load_robot_config
 
 

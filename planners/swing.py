@@ -16,9 +16,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from planners.errors import PlanningError
 from planners.spline import ClampedCubicSpline
-from planners.terrain_query import HeightMap, max_height_in_disk, sphere_clearance
+from planners.terrain_query import max_height_in_disk, sphere_clearance
+from planners.types import HeightMap, PlanningError
 
 KNOT_TIME = (0.0, 0.2, 0.5, 0.8, 1.0)
 """Default knot times as fractions of the swing duration (N = 5)."""

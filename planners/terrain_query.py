@@ -1,4 +1,4 @@
-"""What the planners need from a terrain map, and the conservative queries built on it.
+"""Conservative terrain queries for the planners (clearances, maxima over disks) on a :class:`HeightMap`.
 
 Planners take any object with vectorised ``height(x, y)`` (m, world frame) and ``normal(x, y)``
 (unit normals, (..., 3)): the environment's ``quad_uneven_env.terrain.HeightField`` (the
@@ -7,22 +7,9 @@ expert's privileged map) satisfies it.
 
 from __future__ import annotations
 
-from typing import Protocol
-
 import numpy as np
 
-
-class HeightMap(Protocol):
-    """Terrain surface ``z = height(x, y)`` in the world frame (m)."""
-
-    def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Surface height (m) at world (x, y) (m), vectorised."""
-        ...
-
-    def normal(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Unit upward surface normal (..., 3) at world (x, y) (m)."""
-        ...
-
+from planners.types import HeightMap
 
 _RING = np.stack(
     [np.cos(np.linspace(0, 2 * np.pi, 8, endpoint=False)), np.sin(np.linspace(0, 2 * np.pi, 8, endpoint=False))], 1

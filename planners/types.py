@@ -1,15 +1,40 @@
-"""Data passed from the planners to the controller (agents.control).
+"""Every type that crosses the planners' boundary: what they read, what they return, how they fail.
 
-A :class:`ReferenceSample` is the planned state of the whole robot at one instant in the
-canonical coordinates (MuJoCo's): the controller builds beta_ref, its derivatives and the
-stance set from it.
+- :class:`HeightMap`: what the planners need from a terrain map (the env's
+  ``quad_uneven_env.terrain.HeightField``, the expert's map, satisfies it);
+- :class:`ReferenceSample` (and its packed row layout :data:`PACKED_FIELDS`): the planned state of
+  the whole robot at one instant in the canonical coordinates (MuJoCo's), from which the controller
+  builds beta_ref, its derivatives and the stance set;
+- :class:`PlanningError`: the planners' one error type.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from typing import Protocol
 
 import numpy as np
+
+
+class PlanningError(RuntimeError):
+    """A planning problem has no acceptable solution.
+
+    The message names where it failed (phase, support polygon edge or leg) and by how much,
+    so a caller replanning from measured states can log it and react (stop, shorten the
+    stride, pick other footholds). Planners never return a silently bad path.
+    """
+
+
+class HeightMap(Protocol):
+    """Terrain surface ``z = height(x, y)`` in the world frame (m)."""
+
+    def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Surface height (m) at world (x, y) (m), vectorised."""
+        ...
+
+    def normal(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Unit upward surface normal (..., 3) at world (x, y) (m)."""
+        ...
 
 
 @dataclasses.dataclass(frozen=True)

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planners.wholebody_kernel import place_base_grid
+from planners.wholebody_kernels import place_base_grid
 from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip

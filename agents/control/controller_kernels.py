@@ -1,0 +1,101 @@
+"""One compiled call for the controller's per-step work on the MuJoCo backend (the expert's hot path).
+
+:func:`control_step` does in one numba call what :meth:`agents.control.controller.ComputedTorqueController.__call__`
+otherwise does in a dozen (each ~1-3 µs of Python and dispatch): the measured foot contacts and
+the stance set, the PD command from a packed reference row (:data:`planners.types.PACKED_FIELDS`),
+the dynamics terms from ``mj_step1``'s results, the pinv inverse dynamics, and the terrain normals
+under the feet. It calls the same kernels as the general path (:mod:`agents.control.inverse_dynamics_kernels`,
+:mod:`quad_uneven_env.robot.dynamics.mujoco_kernels`, the height field's normal kernel), so the two
+paths give the same torques (tested); the QP solve itself (when the pinv forces leave a
+friction cone) and every rare case (1-2 stance feet, a failed Cholesky) stay in Python.
+:func:`control_step` compiles on its first call (a few seconds per process), the others at import.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+
+from agents.control import inverse_dynamics_kernels as K
+from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
+from quad_uneven_env.terrain.heightfield import _normal_kernel
+
+INSIDE_CONES = 1 << 16
+"""bit of :func:`control_step`'s result: the pinv forces lie in every stance friction pyramid."""
+
+STANCE_BOTH, STANCE_PLANNED, STANCE_MEASURED = 0, 1, 2
+"""``stance_mode`` codes of :func:`control_step` (``ComputedTorqueController.stance_mode``)."""
+
+
+@nb.njit(nb.int64(nb.int64), cache=False, nogil=True)
+def _popcount4(mask):  # pragma: no cover - compiled
+    return (mask & 1) + (mask >> 1 & 1) + (mask >> 2 & 1) + (mask >> 3 & 1)
+
+
+@nb.njit(nb.int64(nb.int64, nb.int64, nb.int64), cache=False, nogil=True)
+def select_stance_mask(planned, measured, mode):  # pragma: no cover - compiled
+    """Stance bitmask from the planned and measured ones (``ComputedTorqueController.select_stance``)."""
+    if mode == STANCE_PLANNED:
+        return planned
+    if mode == STANCE_MEASURED:
+        return measured
+    chosen = planned & measured
+    if _popcount4(chosen) < min(3, _popcount4(planned)):
+        return planned
+    return chosen
+
+
+@nb.njit(cache=False, nogil=True)
+def control_step(
+    row, planned, stance_mode, contact_geom, foot_of_geom, terrain_geom,
+    qpos, qvel, gains, bdd,
+    M_csr, rowadr, rownnz, colind, xpos, xmat, xanchor, xaxis, site_xpos, subtree_com, idx, par,
+    M, J, Jdd, G, h, inv_sigma, damping, tau, F, qacc, r, Jinv, S,
+    hf_flat, nrow, ncol, ox, oy, inv_cell, foot_sites, site_pos, normals,
+    mu, cone_lower, cones,
+):  # fmt: skip  # pragma: no cover - compiled
+    """Stance, PD command, dynamics terms, pinv inverse dynamics and foot normals at one physics step.
+
+    Inputs as the kernels it calls: ``row`` a packed reference (55,), ``planned`` its stance
+    bitmask, ``stance_mode`` a ``STANCE_*`` code; MuJoCo arrays after ``mj_step1``; ``tau, F,
+    qacc, r, Jinv, S`` the inverse-dynamics outputs; ``normals`` (4, 3) is written when
+    ``hf_flat`` is not empty. With normals and ``mu > 0`` the pinv forces are also checked
+    against the stance legs' friction pyramids (written into ``cones``, (4, 5, 3)) with the
+    lower bounds ``cone_lower`` (5,), as :func:`agents.control.inverse_dynamics_kernels.qp_fill` does: inside,
+    they are the "qp" optimum and no QP is needed. Returns
+    ``stance_mask | status << 4 | n_beta << 8 | INSIDE_CONES`` with ``status`` the bits of
+    :func:`agents.control.inverse_dynamics_kernels.id_pinv`; a negative value when an input has the wrong size
+    (the caller then takes the general path, which names it).
+    """
+    meas = K.foot_contact_mask(contact_geom, foot_of_geom, terrain_geom)
+    mask = select_stance_mask(planned, meas, stance_mode)
+    n_beta = K.beta_command(
+        qpos, qvel, row[0:3], row[3:7], row[7:10], row[10:13], row[13:16], row[16:19],
+        row[19:31], row[31:43], row[43:55], gains, mask, bdd,
+    )  # fmt: skip
+    if n_beta < 0 or row.shape[0] != 55:
+        return -1
+    DK.mujoco_terms(qvel, M_csr, rowadr, rownnz, colind, xpos, xmat, xanchor, xaxis, site_xpos, subtree_com, idx, par,
+                    M, J, Jdd, G)  # fmt: skip
+    status = K.id_pinv(M, h, J, Jdd, mask, bdd[:n_beta], inv_sigma, damping, tau, F, qacc, r, Jinv, S)
+    if status < 0:
+        return -1
+    if hf_flat.shape[0] > 0:
+        for i in range(foot_sites.shape[0]):
+            for k in range(3):
+                site_pos[i, k] = site_xpos[foot_sites[i], k]
+        _normal_kernel(hf_flat, nrow, ncol, ox, oy, inv_cell, site_pos, normals)
+        if mu > 0.0 and status > 0 and mask != 0:
+            K.stance_pyramids_into(normals, mask, mu, cones)
+            inside = True
+            k = 0
+            for leg in range(4):
+                if not (mask >> leg) & 1:
+                    continue
+                for a in range(5):
+                    s = cones[k, a, 0] * F[leg, 0] + cones[k, a, 1] * F[leg, 1] + cones[k, a, 2] * F[leg, 2]
+                    if s < cone_lower[a]:
+                        inside = False
+                k += 1
+            if inside:
+                return mask | status << 4 | n_beta << 8 | INSIDE_CONES
+    return mask | status << 4 | n_beta << 8

@@ -1,0 +1,36 @@
+"""Evaluation: suites of terrains x seeds, one episode, metrics, targets, the run with workers, report.md.
+
+Typical use::
+
+    from agents.evaluation import evaluate, load_suite
+    results = evaluate(load_suite("rough"), "expert", "out/rough", workers=2)
+"""
+
+from agents.evaluation.episode import EpisodeResult, EvalConfig, run_task
+from agents.evaluation.policies import PolicyError, make_policy
+from agents.evaluation.run import evaluate
+from agents.evaluation.suites import (
+    EpisodeTask,
+    Suite,
+    SuiteError,
+    TerrainEntry,
+    load_suite,
+    suite_from_dict,
+    suite_names,
+)
+
+__all__ = [
+    "EpisodeResult",
+    "EpisodeTask",
+    "EvalConfig",
+    "PolicyError",
+    "Suite",
+    "SuiteError",
+    "TerrainEntry",
+    "evaluate",
+    "load_suite",
+    "make_policy",
+    "run_task",
+    "suite_from_dict",
+    "suite_names",
+]

@@ -1,0 +1,197 @@
+"""One evaluation episode: build the env and the policy, walk until goal, fall or time limit, measure.
+
+Runs in a worker process (``--workers``), so its inputs (:class:`EvalConfig`, an ``EpisodeTask``)
+and its output (:class:`EpisodeResult`) are plain picklable data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+import traceback
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.evaluation.metrics import cost_of_transport, stability_metrics, timing_metrics
+from agents.evaluation.policies import make_policy, policy_env_kwargs
+from agents.evaluation.suites import EpisodeTask
+from quad_uneven_env.constants import LEG_NAMES
+
+VIDEO_FPS = 25
+"""Frames per second of the MP4s (one frame every 1 / VIDEO_FPS s of simulated time: real-time playback)."""
+
+VIDEO_SIZE = (480, 360)
+"""Width and height (pixels) of the MP4s."""
+
+MAX_FAILURE_LOG = 200
+"""At most this many entries of the policy's ``failure_log`` go into an episode record."""
+
+
+@dataclasses.dataclass(frozen=True)
+class EvalConfig:
+    """What every episode of one evaluation shares."""
+
+    policy: str
+    """``"zero"``, ``"expert"`` or an SB3 model path (see :func:`agents.evaluation.policies.make_policy`)."""
+    goal_distance: float
+    """m of COG travel along +x that ends the episode as a success."""
+    time_limit: float
+    """s of simulated time per episode."""
+    algo: str = "ppo"
+    """SB3 class for a model path."""
+    env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
+    """extra QuadUneven-v0 arguments (override the policy's own)."""
+    video_dir: str | None = None
+    """directory for MP4s of the first episode of each terrain entry (None: no video)."""
+
+
+@dataclasses.dataclass
+class EpisodeResult:
+    """An episode's JSON record plus the arrays the report plots."""
+
+    record: dict[str, Any]
+    """the results.json episode record (JSON-safe)."""
+    trace: dict[str, np.ndarray]
+    """per control step: ``time`` (s), ``cog`` (N, 3, m, world), ``feet`` (N, 4, 3, m, world), ``index`` (N m),
+    ``contact`` (N, 4) foot contact flags."""
+    terrain: dict[str, Any] | None
+    """for an entry's first episode: ``heights`` (m), ``origin`` (m), ``cell_size`` (m) of its surface."""
+
+
+def make_env(task: EpisodeTask, cfg: EvalConfig, render: bool = False) -> gym.Env:
+    """The QuadUneven-v0 env of ``task`` with the policy's arguments and a time limit of ``cfg.time_limit``."""
+    kwargs = {**policy_env_kwargs(cfg.policy), **cfg.env_kwargs}
+    try:
+        dt = float(kwargs.get("timestep", 0.002)) * int(kwargs.get("frame_skip", 10))
+        steps = max(1, round(cfg.time_limit / dt))
+    except (TypeError, ValueError, ZeroDivisionError, OverflowError):
+        steps = 1  # invalid timestep or frame_skip: the env's own check below names the field
+    if render:
+        kwargs.update(render_mode="rgb_array", width=VIDEO_SIZE[0], height=VIDEO_SIZE[1])
+    return gym.make("QuadUneven-v0", terrain={"kind": task.kind, **task.params}, max_episode_steps=steps, **kwargs)
+
+
+def _end_reason(info: dict[str, Any]) -> str:
+    if info["diverged"]:
+        return "diverged"
+    reason = info["termination_reason"] or ""
+    return "left_terrain" if reason.startswith("left") else "fall"
+
+
+def _policy_phase(policy: Any) -> str | None:
+    for name in ("phase", "current_phase"):
+        value = getattr(policy, name, None)
+        if value is not None and not callable(value):
+            return str(value)
+    return None
+
+
+def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
+    """Run one episode; never raises for a policy or env error inside the episode (recorded as ``error``).
+
+    Success: the COG has travelled ``goal_distance`` along +x (``info["distance"]``) before any fall and
+    within the time limit. Energy for the cost of transport is |tau . qd| sampled once per control step.
+    """
+    wall0 = time.perf_counter()
+    video = cfg.video_dir is not None and task.first_of_entry
+    env = make_env(task, cfg, render=video)
+    u = env.unwrapped
+    policy = make_policy(cfg.policy, env, cfg.algo)
+    dt = u.dt
+    mass, g = float(u.idx.total_mass), float(-u.model.opt.gravity[2])
+    writer, video_path, frame_every = None, None, max(1, round(1.0 / (VIDEO_FPS * dt)))
+    if video:
+        import imageio.v2 as iio2
+
+        video_path = Path(cfg.video_dir) / f"ep{task.index:03d}_{task.kind}_seed{task.seed}.mp4"
+        video_path.parent.mkdir(parents=True, exist_ok=True)
+        writer = iio2.get_writer(
+            video_path, format="FFMPEG", fps=round(1.0 / (frame_every * dt)), codec="libx264", macro_block_size=8
+        )
+
+    obs, info = env.reset(seed=task.seed)
+    terrain = None
+    if task.first_of_entry:
+        hf = u.terrain.heightfield
+        terrain = {"heights": hf.heights.astype(np.float32), "origin": tuple(hf.origin), "cell_size": hf.cell_size}
+    times, cogs, feet, index = [0.0], [info["cog"]], [info["feet_pos"]], []
+    contact = [info["foot_contact"]]
+    index0 = float(info["stability_index"])
+    state, start = None, np.ones(1, dtype=bool)
+    work, success, end_reason, fall_reason, error = 0.0, False, "time_limit", None, None
+    step = 0
+    try:
+        if writer is not None:
+            writer.append_data(env.render())
+        while True:
+            action, state = policy.predict(obs, state=state, episode_start=start, deterministic=True)
+            start = np.zeros(1, dtype=bool)
+            obs, _, terminated, truncated, info = env.step(action)
+            step += 1
+            times.append(float(u.data.time))
+            cogs.append(info["cog"])
+            feet.append(info["feet_pos"])
+            contact.append(info["foot_contact"])
+            index.append(info["stability_index"])
+            if not info["diverged"]:
+                work += float(np.abs(u.data.actuator_force * u.data.qvel[6:]).sum()) * dt
+            if writer is not None and step % frame_every == 0:
+                writer.append_data(env.render())
+            if terminated:
+                end_reason, fall_reason = _end_reason(info), info["termination_reason"]
+                break
+            if info["distance"] >= cfg.goal_distance:
+                success, end_reason = True, "goal"
+                break
+            if truncated:
+                break
+    except Exception as e:  # a crashing policy must not lose the other episodes of a suite
+        end_reason, error = "error", f"{type(e).__name__}: {e}"
+        fall_reason = f"error: {error}"
+        traceback.print_exc()
+    finally:
+        if writer is not None:
+            writer.close()
+        env.close()
+
+    distance = float(info["distance"])
+    sim_time = float(u.data.time)
+    failure_log = getattr(policy, "failure_log", None)
+    record: dict[str, Any] = {
+        "index": task.index,
+        "entry": task.entry,
+        "terrain": task.kind,
+        "params": task.params,
+        "seed": task.seed,
+        "success": success,
+        "distance": distance,
+        "sim_time": sim_time,
+        "mean_speed": distance / sim_time if sim_time > 0 else None,
+        **stability_metrics(np.asarray(index, dtype=float), dt),
+        "cost_of_transport": cost_of_transport(work, mass, g, distance),
+        "mechanical_work": work,
+        "fall_reason": fall_reason,
+        "end_reason": end_reason,
+        "end_position": [float(v) for v in info["cog"]],
+        "end_phase": _policy_phase(policy),
+        "end_stance": [leg for leg, c in zip(LEG_NAMES, info["foot_contact"], strict=True) if c],
+        **timing_metrics(getattr(policy, "planner_times_ms", None)),
+        "failure_log": [str(s) for s in failure_log[:MAX_FAILURE_LOG]] if failure_log is not None else None,
+        "failure_count": len(failure_log) if failure_log is not None else None,
+        "error": error,
+        "video": video_path.name if video_path is not None else None,
+        "wall_time": time.perf_counter() - wall0,
+    }
+    record["realtime_factor"] = sim_time / record["wall_time"] if record["wall_time"] > 0 else None
+    trace = {
+        "time": np.asarray(times),
+        "cog": np.asarray(cogs, dtype=np.float32).reshape(-1, 3),
+        "feet": np.asarray(feet, dtype=np.float32).reshape(-1, 4, 3),
+        "index": np.asarray([index0, *index], dtype=np.float64),
+        "contact": np.asarray(contact, dtype=bool).reshape(-1, 4),
+    }
+    return EpisodeResult(record, trace, terrain)

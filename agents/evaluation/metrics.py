@@ -1,0 +1,149 @@
+"""Episode metrics and their per-terrain summary (pure functions of recorded arrays; JSON-safe output)."""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+INDEX_OK_FRACTION = 0.99
+"""A success 'keeps the index non-negative' when index >= 0 for at least this fraction of its time."""
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with numpy scalars/arrays turned into Python ones and NaN/Inf into None (valid strict JSON)."""
+    if isinstance(value, Mapping):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return [json_safe(v) for v in value.tolist()]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    return value
+
+
+def cost_of_transport(work: float, mass: float, g: float, distance: float) -> float | None:
+    """Mechanical cost of transport ``work / (m g distance)`` (dimensionless); None unless distance > 0.
+
+    :param work: sum over time of |tau . qd| dt (J), the absolute joint power integrated.
+    :param mass: kg. :param g: m/s^2. :param distance: m travelled along +x.
+    """
+    if not distance > 0.0 or not math.isfinite(work):
+        return None
+    return work / (mass * g * distance)
+
+
+def stability_metrics(index: np.ndarray, dt: float) -> dict[str, float | None]:
+    """Summary of the measured stability index (N m) sampled every ``dt`` s.
+
+    ``-inf`` (fewer than 3 feet in contact: no support polygon) counts as negative in
+    ``time_index_negative`` and is left out of the min and mean, which are over the steps with a
+    support polygon (None if there is none).
+    """
+    index = np.asarray(index, dtype=float)
+    finite = index[np.isfinite(index)]
+    negative = int(np.count_nonzero(~(index >= 0.0)))  # -inf and NaN count as negative
+    n = index.size
+    return {
+        "min_stability_index": float(finite.min()) if finite.size else None,
+        "mean_stability_index": float(finite.mean()) if finite.size else None,
+        "time_index_negative": negative * dt,
+        "time_fewer_than_3_feet": int(np.count_nonzero(np.isneginf(index))) * dt,
+        "fraction_index_nonnegative": (1.0 - negative / n) if n else None,
+    }
+
+
+def timing_metrics(times_ms: Sequence[float] | None) -> dict[str, float | None]:
+    """Median and 95th percentile (ms) of the policy's planner times; None if it exposes none."""
+    if times_ms is None or len(times_ms) == 0:
+        return {"planner_ms_median": None, "planner_ms_p95": None, "planner_calls": 0 if times_ms is not None else None}
+    t = np.asarray(times_ms, dtype=float)
+    return {
+        "planner_ms_median": float(np.median(t)),
+        "planner_ms_p95": float(np.percentile(t, 95)),
+        "planner_calls": int(t.size),
+    }
+
+
+def reason_category(reason: str | None) -> str | None:
+    """A fall reason with its numbers replaced by ``#``, so that like reasons count together."""
+    if reason is None:
+        return None
+    return re.sub(r"-?\d+(\.\d+)?(e-?\d+)?", "#", reason)
+
+
+def _mean(values: Iterable[float | None]) -> float | None:
+    v = [x for x in values if x is not None]
+    return float(np.mean(v)) if v else None
+
+
+def _min(values: Iterable[float | None]) -> float | None:
+    v = [x for x in values if x is not None]
+    return float(min(v)) if v else None
+
+
+def group_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Success rate and means over ``episodes`` (records of :func:`agents.evaluation.episode.run_task`).
+
+    ``min_stability_index`` is the minimum over episodes, the other ``mean_*`` the mean of the episodes'
+    values (episodes with None left out); ``mean_speed_success`` is over successes only;
+    ``successes_index_ok`` counts successes whose index was >= 0 for >= 99% of their time.
+    """
+    n = len(episodes)
+    successes = [e for e in episodes if e["success"]]
+    reasons: dict[str, int] = {}
+    for e in episodes:
+        key = reason_category(e["fall_reason"]) if e["fall_reason"] else None
+        if key is None and not e["success"]:
+            key = e.get("end_reason") or "unknown"
+        if key is not None:
+            reasons[key] = reasons.get(key, 0) + 1
+    ok = [e for e in successes if (e["fraction_index_nonnegative"] or 0.0) >= INDEX_OK_FRACTION]
+    return {
+        "episodes": n,
+        "successes": len(successes),
+        "success_rate": len(successes) / n if n else None,
+        "mean_distance": _mean(e["distance"] for e in episodes),
+        "mean_speed": _mean(e["mean_speed"] for e in episodes),
+        "mean_speed_success": _mean(e["mean_speed"] for e in successes),
+        "mean_sim_time": _mean(e["sim_time"] for e in episodes),
+        "min_stability_index": _min(e["min_stability_index"] for e in episodes),
+        "mean_stability_index": _mean(e["mean_stability_index"] for e in episodes),
+        "mean_time_index_negative": _mean(e["time_index_negative"] for e in episodes),
+        "mean_cost_of_transport": _mean(e["cost_of_transport"] for e in episodes),
+        "successes_index_ok": len(ok),
+        "planner_ms_median": _mean(e["planner_ms_median"] for e in episodes),
+        "planner_ms_p95": _max_or_none(e["planner_ms_p95"] for e in episodes),
+        "end_reasons": reasons,
+    }
+
+
+def _max_or_none(values: Iterable[float | None]) -> float | None:
+    v = [x for x in values if x is not None]
+    return float(max(v)) if v else None
+
+
+def summarize(episodes: Sequence[Mapping[str, Any]], entry_labels: Sequence[str]) -> dict[str, Any]:
+    """``{"by_kind": {kind: group}, "by_entry": [group + label], "overall": group}`` (see :func:`group_summary`)."""
+    kinds: dict[str, list[Mapping[str, Any]]] = {}
+    for e in episodes:
+        kinds.setdefault(e["terrain"], []).append(e)
+    by_entry = []
+    for i, label in enumerate(entry_labels):
+        group = [e for e in episodes if e["entry"] == i]
+        if group:
+            by_entry.append({"entry": i, "label": label, **group_summary(group)})
+    return {
+        "by_kind": {k: group_summary(v) for k, v in kinds.items()},
+        "by_entry": by_entry,
+        "overall": group_summary(episodes),
+    }

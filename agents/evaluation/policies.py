@@ -1,0 +1,93 @@
+"""Policies the evaluation can run, by name, and the environment arguments each one needs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+
+from agents.policy import Policy, ZeroActionPolicy
+
+POLICY_ENV_KWARGS: dict[str, dict[str, Any]] = {
+    # The zero action in joint_pd mode holds the standing pose.
+    "zero": {"action_mode": "joint_pd"},
+    # The expert installs its computed-torque controller as the env's physics-rate hook.
+    "expert": {"action_mode": "torque"},
+    # A learned agent: the env defaults plus the env_kwargs of its training run (rl_meta.json next to
+    # the model, see agents.rl.model_io), unless the user passes --env-kwargs.
+    "sb3": {},
+}
+"""Environment keyword arguments per policy kind (the one table; user env kwargs override it)."""
+
+NAMED_POLICIES = ("zero", "expert")
+"""Policy names; anything else must be the path of an SB3 model ``.zip``."""
+
+SB3_ALGOS = ("ppo", "sac")
+"""Algorithms an SB3 model file may be loaded with (``--algo``)."""
+
+
+class PolicyError(ValueError):
+    """A policy name, model file or algorithm that cannot be used."""
+
+
+def policy_kind(name: str) -> str:
+    """``"zero"``, ``"expert"`` or ``"sb3"`` (a path to a ``.zip`` model).
+
+    :raises PolicyError: for anything else.
+    """
+    if name in NAMED_POLICIES:
+        return name
+    if str(name).endswith(".zip"):
+        return "sb3"
+    raise PolicyError(f"policy must be one of {list(NAMED_POLICIES)} or the path of an SB3 model .zip, got {name!r}")
+
+
+def policy_env_kwargs(name: str) -> dict[str, Any]:
+    """Environment keyword arguments the policy ``name`` needs (a copy of its ``POLICY_ENV_KWARGS`` row).
+
+    For an SB3 model, the ``env_kwargs`` recorded by its training run (``rl_meta.json``) are added.
+    """
+    kind = policy_kind(name)
+    kwargs = dict(POLICY_ENV_KWARGS[kind])
+    if kind == "sb3":
+        from agents.rl.model_io import metadata_env_kwargs
+
+        kwargs.update(metadata_env_kwargs(name))
+    return kwargs
+
+
+def _expert(env: gym.Env) -> Policy:
+    from agents.expert import attach_expert  # deferred: compiling the controller's kernels takes seconds
+
+    return attach_expert(env)
+
+
+def _sb3(path: str, env: gym.Env, algo: str) -> Policy:
+    if algo not in SB3_ALGOS:
+        raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {algo!r}")
+    if not Path(path).is_file():
+        raise PolicyError(f"policy: SB3 model file {path!r} does not exist")
+    from agents.rl.model_io import ModelError, load_sb3_policy
+
+    try:
+        return load_sb3_policy(path, env, algo)
+    except ModelError as err:
+        raise PolicyError(str(err)) from None
+
+
+def make_policy(name: str, env: gym.Env, algo: str = "ppo") -> Policy:
+    """A policy with SB3's ``predict`` for ``env`` (built with :func:`policy_env_kwargs` of ``name``).
+
+    :param name: ``"zero"`` (the zero action), ``"expert"`` (``agents.expert.ExpertPolicy(env)``, which installs
+        its physics-rate controller into ``env.unwrapped``), or the path of an SB3 model ``.zip`` (a residual
+        model, per its ``rl_meta.json``, installs the expert plus residual: :mod:`agents.rl.model_io`).
+    :param algo: ``"ppo"`` or ``"sac"``: the class an SB3 model file is loaded with.
+    :raises PolicyError: on an unknown name, a missing model file or expert module, or an unknown algo.
+    """
+    kind = policy_kind(name)
+    if kind == "zero":
+        return ZeroActionPolicy(env.action_space)
+    if kind == "expert":
+        return _expert(env)
+    return _sb3(name, env, algo)

@@ -1,0 +1,98 @@
+"""Issue 5's targets (section 6), checked against an evaluation's per-entry summary where they apply."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from agents.evaluation.metrics import INDEX_OK_FRACTION
+from agents.evaluation.suites import TerrainEntry
+from quad_uneven_env.terrain import parse_terrain_spec
+
+MIN_SEEDS = 10
+"""A target is judged on at least this many seeds of its terrain."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Target:
+    """A success-rate (and optionally speed) target for the terrain entries that match ``kind`` and ``params``."""
+
+    name: str
+    """human-readable name."""
+    kind: str
+    """terrain kind."""
+    params: Mapping[str, Any]
+    """parameter values (after defaults are filled) an entry must have."""
+    success_rate: float
+    """minimum success rate."""
+    min_speed: float | None = None
+    """m/s: minimum mean speed over the successful episodes (None: no speed target)."""
+
+
+TARGETS: tuple[Target, ...] = (
+    Target("flat", "flat", {}, 1.0, 0.1),
+    Target("rough 4 cm", "rough", {"amplitude": 0.04}, 0.95, 0.1),
+    Target("slope 10°", "slope", {"angle_deg": 10}, 0.90),
+    Target("stairs 8 cm up", "stairs", {"riser": 0.08, "direction": "up"}, 0.90),
+    Target("stairs 8 cm down", "stairs", {"riser": 0.08, "direction": "down"}, 0.90),
+    Target("stepping stones", "stepping_stones", {}, 0.80),
+)
+"""Issue 5 section 6 (goal 5 m, >= 10 seeds); every target also asks that each success keeps the
+measured stability index >= 0 for >= 99% of its time."""
+
+
+def _matches(target: Target, entry: TerrainEntry) -> bool:
+    if entry.kind != target.kind:
+        return False
+    params = parse_terrain_spec(entry.spec).params
+    return all(params.get(k) == v for k, v in target.params.items())
+
+
+def check_targets(
+    entries: Sequence[TerrainEntry], by_entry: Sequence[Mapping[str, Any]], goal_distance: float
+) -> list[dict[str, Any]]:
+    """One row per (target, matching entry) with the measured values and ``passed``.
+
+    ``passed`` needs: goal_distance >= 5 m, >= ``MIN_SEEDS`` episodes, the success rate, the speed
+    (mean over successes) and every success with the index >= 0 for >= 99% of its time.
+    """
+    rows = []
+    groups = {g["entry"]: g for g in by_entry}
+    for target in TARGETS:
+        for i, entry in enumerate(entries):
+            if i not in groups or not _matches(target, entry):
+                continue
+            g = groups[i]
+            why = []
+            if goal_distance < 5.0:
+                why.append(f"goal {goal_distance} m < 5 m")
+            if g["episodes"] < MIN_SEEDS:
+                why.append(f"{g['episodes']} < {MIN_SEEDS} episodes")
+            rate = g["success_rate"] or 0.0
+            if rate < target.success_rate:
+                why.append(f"success rate {rate:.0%} < {target.success_rate:.0%}")
+            speed = g["mean_speed_success"]
+            if target.min_speed is not None and (speed is None or speed < target.min_speed):
+                why.append(f"mean speed {speed if speed is None else round(speed, 3)} m/s < {target.min_speed} m/s")
+            if g["successes_index_ok"] < g["successes"]:
+                why.append(
+                    f"{g['successes'] - g['successes_index_ok']} success(es) with the index < 0 for more than "
+                    f"{1 - INDEX_OK_FRACTION:.0%} of the time"
+                )
+            rows.append(
+                {
+                    "target": target.name,
+                    "entry": i,
+                    "episodes": g["episodes"],
+                    "success_rate": g["success_rate"],
+                    "required_success_rate": target.success_rate,
+                    "mean_speed_success": speed,
+                    "required_speed": target.min_speed,
+                    "successes_index_ok": g["successes_index_ok"],
+                    "successes": g["successes"],
+                    "passed": not why,
+                    "why_not": "; ".join(why) or None,
+                }
+            )
+    return rows

@@ -1,0 +1,173 @@
+"""Residual RL on top of the scripted expert: ``QuadUnevenResidual-v0``.
+
+The expert (:class:`agents.expert.ExpertPolicy`: planner + computed-torque controller) runs at
+physics rate through the env's controller hook; the RL action is added on top of its torques:
+
+    tau = clip(tau_expert + residual_scale * action * torque_limit, -torque_limit, torque_limit)   (N m)
+
+at every 2 ms physics step, with ``action`` in [-1, 1]^12 (joint order LF RF LH RH x HAA HFE KFE)
+held over the control step. With ``action = 0`` the env reproduces the expert exactly. The
+observation, reward, termination and info are those of ``QuadUneven-v0`` (the gait clock and the
+stability index are in the observation).
+
+``residual_scale`` (default 0.1: up to 12 N m on top of the expert, with 120 N m motors) bounds how
+far the learned agent can move away from the expert.
+
+Usage::
+
+    import gymnasium as gym
+    import agents.rl  # registers QuadUnevenResidual-v0
+
+    env = gym.make("QuadUnevenResidual-v0", residual_scale=0.1, terrain="rough")
+    # or, from a bare interpreter: gym.make("agents.rl:QuadUnevenResidual-v0")
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+from gymnasium.envs.registration import register, registry
+
+from agents.expert import ExpertConfig, ExpertPolicy
+from quad_uneven_env.env import QuadUnevenEnv
+
+RESIDUAL_ENV_ID = "QuadUnevenResidual-v0"
+"""Gymnasium id of the residual env (registered when this module is imported)."""
+
+DEFAULT_RESIDUAL_SCALE = 0.1
+"""Default residual torque as a fraction of the torque limit (0.1 x 120 N m = 12 N m per joint)."""
+
+DEFAULT_MAX_EPISODE_STEPS = 1000
+"""Control steps per episode of the registered env (20 s at the default 50 Hz)."""
+
+
+def check_residual_scale(residual_scale: Any) -> float:
+    """``residual_scale`` as a float in (0, 1].
+
+    :raises ValueError: naming ``residual_scale`` otherwise.
+    """
+    try:
+        value = float(residual_scale)
+    except (TypeError, ValueError):
+        value = float("nan")
+    if isinstance(residual_scale, bool) or not (0.0 < value <= 1.0):
+        raise ValueError(f"residual_scale must be a number in (0, 1] (of the torque limit), got {residual_scale!r}")
+    return value
+
+
+class ResidualController:
+    """Physics-rate controller: the expert's torques plus ``residual_scale`` x action x torque limit.
+
+    :param expert: a callable ``(model, data, action) -> (12,)`` torques (N m), e.g. :class:`ExpertPolicy`;
+        its ``reset(model, data, terrain)`` is forwarded.
+    :param torque_limit: (12,) motor limits (N m).
+    :param residual_scale: residual torque per unit action as a fraction of ``torque_limit``, in (0, 1].
+    """
+
+    def __init__(self, expert: Any, torque_limit: np.ndarray, residual_scale: float = DEFAULT_RESIDUAL_SCALE) -> None:
+        self.expert = expert
+        self.residual_scale = check_residual_scale(residual_scale)
+        self.torque_limit = np.asarray(torque_limit, dtype=np.float64).copy()
+        self._gain = self.residual_scale * self.torque_limit
+        self._tau = np.zeros_like(self.torque_limit)
+
+    def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any) -> None:
+        """Forwarded to the expert at every env reset."""
+        if hasattr(self.expert, "reset"):
+            self.expert.reset(model, data, terrain)
+
+    def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
+        """Joint torques (12, N m): expert + residual, clipped to the motor limits.
+
+        :param action: (12,) residual action in [-1, 1] (the env has clipped it).
+        """
+        tau_expert = self.expert(model, data, action)
+        np.multiply(action, self._gain, out=self._tau)
+        self._tau += tau_expert
+        np.clip(self._tau, -self.torque_limit, self.torque_limit, out=self._tau)
+        return self._tau
+
+
+def install_residual_controller(
+    env: gym.Env, residual_scale: float = DEFAULT_RESIDUAL_SCALE, expert_config: ExpertConfig | None = None
+) -> tuple[ExpertPolicy, ResidualController]:
+    """Put the expert plus a residual on ``env.unwrapped``'s physics-rate hook (call before ``reset``).
+
+    :param env: a ``QuadUneven-v0`` env (wrapped or not) in ``action_mode="torque"``.
+    :param residual_scale: see :class:`ResidualController`.
+    :return: the expert (planner times, failure log) and the installed controller.
+    :raises ValueError: on another action mode or a bad ``residual_scale``.
+    """
+    base = env.unwrapped
+    if not isinstance(base, QuadUnevenEnv):
+        raise ValueError(f"the residual controller needs a QuadUneven-v0 env, got {type(base).__name__}")
+    if base.action_mode != "torque":
+        raise ValueError(
+            f"action_mode must be 'torque' for the residual env (expert torques), got {base.action_mode!r}"
+        )
+    scale = check_residual_scale(residual_scale)
+    expert = ExpertPolicy(env, expert_config)
+    controller = ResidualController(expert, base.idx.torque_limit, scale)
+    base.set_controller(controller)
+    return expert, controller
+
+
+class ResidualExpertEnv(gym.Wrapper):
+    """``QuadUneven-v0`` with the expert in the loop; the action is a residual on the expert's torques.
+
+    Spaces, reward, termination and info are the wrapped env's. ``info["residual_scale"]`` is added.
+
+    :param env: a ``QuadUneven-v0`` env in torque mode, without a controller of its own.
+    :param residual_scale: residual torque per unit action as a fraction of the torque limit, in (0, 1].
+    :param expert_config: the expert's settings (default :class:`ExpertConfig`).
+    """
+
+    def __init__(
+        self, env: gym.Env, residual_scale: float = DEFAULT_RESIDUAL_SCALE, expert_config: ExpertConfig | None = None
+    ) -> None:
+        super().__init__(env)
+        self.expert, self.controller = install_residual_controller(env, residual_scale, expert_config)
+        self.residual_scale = self.controller.residual_scale
+
+    def step(self, action: np.ndarray):
+        """One control step of expert + residual ``action``; see :meth:`QuadUnevenEnv.step`."""
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        info["residual_scale"] = self.residual_scale
+        return obs, reward, terminated, truncated, info
+
+
+def make_residual_env(
+    residual_scale: float = DEFAULT_RESIDUAL_SCALE, expert_config: ExpertConfig | None = None, **env_kwargs: Any
+) -> ResidualExpertEnv:
+    """The residual env (entry point of ``QuadUnevenResidual-v0``).
+
+    :param residual_scale: residual torque per unit action as a fraction of the torque limit, in (0, 1]
+        (default 0.1 = 12 N m per joint).
+    :param expert_config: the expert's settings.
+    :param env_kwargs: ``QuadUnevenEnv`` arguments (``terrain``, ``reward_weights``, ...); ``action_mode`` must be
+        ``"torque"`` and ``controller`` is not accepted.
+    :raises ValueError: on a bad argument (named).
+    """
+    if "controller" in env_kwargs:
+        raise ValueError("controller is not accepted by the residual env: expert plus residual is its controller")
+    return ResidualExpertEnv(QuadUnevenEnv(**env_kwargs), residual_scale, expert_config)
+
+
+if RESIDUAL_ENV_ID not in registry:
+    register(
+        id=RESIDUAL_ENV_ID,
+        entry_point="agents.rl.residual_env:make_residual_env",
+        max_episode_steps=DEFAULT_MAX_EPISODE_STEPS,
+    )
+
+__all__ = [
+    "DEFAULT_RESIDUAL_SCALE",
+    "RESIDUAL_ENV_ID",
+    "ResidualController",
+    "ResidualExpertEnv",
+    "install_residual_controller",
+    "make_residual_env",
+]

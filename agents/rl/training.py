@@ -1,0 +1,238 @@
+"""``quad-uneven train``: a residual RL agent (PPO or SAC, Stable-Baselines3) on top of the scripted expert.
+
+Typical use::
+
+    quad-uneven train --algo ppo --terrain rough --timesteps 200000 --out runs/ppo_rough
+
+Writes to ``--out`` DIR: ``model.zip`` (+ ``model_vecnormalize.pkl``), ``rl_meta.json`` (what
+``quad-uneven evaluate`` needs to rebuild the residual env), ``train_config.json``,
+``learning_curve.png``, ``train_summary.json``, ``monitor/*.monitor.csv`` (one line per training
+episode), ``eval/evaluations.npz`` with ``best/best_model.zip``, and ``checkpoints/``. Details: docs/rl.md.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback, EvalCallback
+from tqdm.auto import tqdm
+
+from agents.rl.config import TrainConfig, TrainConfigError
+from agents.rl.learning_curve import plot_learning_curve
+from agents.rl.model_io import write_metadata
+from agents.rl.residual_env import RESIDUAL_ENV_ID
+from agents.rl.vec_env import EVAL_SEED_OFFSET, build_vec_env, normalize
+
+__all__ = ["ProgressCallback", "SaveVecNormalizeCallback", "WallClockLimitCallback", "train"]
+
+
+class ProgressCallback(BaseCallback):
+    """A tqdm bar over the env steps, with the mean return of the last 100 training episodes."""
+
+    def __init__(self, enabled: bool = True) -> None:
+        super().__init__()
+        self.enabled = enabled
+        self.bar: Any = None
+
+    def _on_training_start(self) -> None:
+        total = int(self.locals.get("total_timesteps", 0)) - self.model.num_timesteps
+        self.bar = tqdm(total=total, unit="step", desc="training", disable=not self.enabled, smoothing=0.05)
+
+    def _on_step(self) -> bool:
+        self.bar.update(self.training_env.num_envs)
+        buf = self.model.ep_info_buffer
+        if buf and self.n_calls % 50 == 0:
+            self.bar.set_postfix(ep_return=f"{np.mean([e['r'] for e in buf]):.1f}", episodes=len(buf), refresh=False)
+        return True
+
+    def _on_training_end(self) -> None:
+        self.bar.close()
+
+
+class WallClockLimitCallback(BaseCallback):
+    """Stops training once ``minutes`` of wall-clock time have passed since training started."""
+
+    def __init__(self, minutes: float) -> None:
+        super().__init__()
+        self.seconds = 60.0 * minutes
+        self.start = 0.0
+        self.reached = False
+
+    def _on_training_start(self) -> None:
+        self.start = time.perf_counter()
+
+    def _on_step(self) -> bool:
+        self.reached = time.perf_counter() - self.start >= self.seconds
+        return not self.reached
+
+
+class SaveVecNormalizeCallback(BaseCallback):
+    """Saves the VecNormalize statistics to ``path`` (run by EvalCallback on a new best model)."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__()
+        self.path = path
+
+    def _on_step(self) -> bool:
+        vn = self.model.get_vec_normalize_env()
+        if vn is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            vn.save(str(self.path))
+        return True
+
+
+def _metadata(cfg: TrainConfig) -> dict[str, Any]:
+    import stable_baselines3
+
+    return {
+        "algo": cfg.algo,
+        "residual": True,
+        "residual_scale": float(cfg.residual_scale),
+        "env_id": RESIDUAL_ENV_ID,
+        "env_kwargs": dict(cfg.env_kwargs),
+        "terrain": cfg.terrain,
+        "max_episode_steps": cfg.max_episode_steps,
+        "normalize_obs": cfg.normalize_obs,
+        "seed": cfg.seed,
+        "stable_baselines3": stable_baselines3.__version__,
+    }
+
+
+def _make_model(cfg: TrainConfig, venv: Any) -> Any:
+    import stable_baselines3
+
+    cls = getattr(stable_baselines3, cfg.algo.upper())
+    try:
+        model = cls(
+            "MlpPolicy",
+            venv,
+            seed=cfg.seed,
+            device="cpu",
+            verbose=0,
+            policy_kwargs=dict(cfg.policy_kwargs),
+            **cfg.hyperparams,
+        )
+    except TypeError as err:  # an unknown keyword of the algorithm or of its policy
+        raise TrainConfigError(f"hyperparams/policy_kwargs: {err}") from None
+    _zero_mean_action(model)
+    return model
+
+
+def _zero_mean_action(model: Any) -> None:
+    """Zero the layer that outputs the mean action (PPO ``action_net``, SAC ``actor.mu``).
+
+    The untrained deterministic agent is then exactly the expert (residual 0); the weights still get
+    gradients, since the layer's inputs are not zero.
+    """
+    import torch
+
+    head = getattr(model.policy, "action_net", None)
+    if head is None:
+        head = model.actor.mu
+    with torch.no_grad():
+        head.weight.zero_()
+        head.bias.zero_()
+
+
+def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCallback], Any]:
+    callbacks: list[BaseCallback] = [ProgressCallback(progress)]
+    if cfg.time_limit_min > 0:
+        callbacks.append(WallClockLimitCallback(cfg.time_limit_min))
+    eval_env = None
+    if cfg.eval_freq > 0:
+        eval_env = normalize(
+            build_vec_env(cfg, 1, cfg.seed + EVAL_SEED_OFFSET, None, vec_env="dummy"), cfg, training=False
+        )
+        callbacks.append(
+            EvalCallback(
+                eval_env,
+                n_eval_episodes=cfg.eval_episodes,
+                eval_freq=max(1, cfg.eval_freq // cfg.n_envs),
+                log_path=str(out / "eval"),
+                best_model_save_path=str(out / "best"),
+                deterministic=True,
+                callback_on_new_best=SaveVecNormalizeCallback(out / "best" / "best_model_vecnormalize.pkl"),
+                verbose=0,
+            )
+        )
+    if cfg.checkpoint_freq > 0:
+        callbacks.append(
+            CheckpointCallback(
+                save_freq=max(1, cfg.checkpoint_freq // cfg.n_envs),
+                save_path=str(out / "checkpoints"),
+                name_prefix="model",
+                save_vecnormalize=True,
+            )
+        )
+    return callbacks, eval_env
+
+
+def train(cfg: TrainConfig, out: str | Path, progress: bool = True) -> dict[str, Any]:
+    """Train a residual agent with ``cfg``; write the model, its metadata and the learning curve to ``out``.
+
+    Numerical divergence or a fall ends an episode (``info["diverged"]``), never the run. Ctrl-C or the
+    ``time_limit_min`` budget stops training early and still saves the model (``interrupted`` and
+    ``time_limit_reached`` in the summary).
+
+    :param cfg: a validated :class:`TrainConfig` (see :func:`load_train_config`).
+    :param out: output directory (created).
+    :param progress: show a progress bar.
+    :return: the ``train_summary.json`` content: ``timesteps`` done, ``wall_time`` (s), ``steps_per_s``,
+        ``episodes``, ``mean_return``, ``mean_stability_index`` (N m), ``mean_distance`` (m), ``fall_rate``
+        (last 20 training episodes), ``interrupted``, ``time_limit_reached``, ``model`` path.
+    :raises TrainConfigError: on hyperparameters the algorithm does not accept.
+    """
+    import torch
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(1)  # small networks: threads only contend with the env processes on 2 cores
+    (out / "train_config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
+    meta = _metadata(cfg)
+    for folder in (out, out / "checkpoints", out / "best"):
+        write_metadata(folder, meta)
+
+    venv = normalize(build_vec_env(cfg, cfg.n_envs, cfg.seed, out / "monitor"), cfg, training=True)
+    eval_env = None
+    try:
+        model = _make_model(cfg, venv)
+        callbacks, eval_env = _callbacks(cfg, out, progress)
+        wall0, interrupted = time.perf_counter(), False
+        try:
+            model.learn(total_timesteps=cfg.timesteps, callback=CallbackList(callbacks))
+        except KeyboardInterrupt:
+            interrupted = True
+            print("\ninterrupted: saving the model trained so far", file=sys.stderr)
+        wall = time.perf_counter() - wall0
+        model.save(out / "model.zip")
+        vn = model.get_vec_normalize_env()
+        if vn is not None:
+            vn.save(str(out / "model_vecnormalize.pkl"))
+    finally:
+        venv.close()
+        if eval_env is not None:
+            eval_env.close()
+
+    curve = plot_learning_curve(
+        out / "monitor",
+        out / "eval" / "evaluations.npz",
+        out / "learning_curve.png",
+        title=f"residual {cfg.algo.upper()} on {cfg.terrain} (scale {cfg.residual_scale})",
+    )
+    summary = {
+        "timesteps": int(model.num_timesteps),
+        "wall_time": wall,
+        "steps_per_s": model.num_timesteps / wall if wall > 0 else None,
+        **{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in curve.items()},
+        "interrupted": interrupted,
+        "time_limit_reached": any(getattr(c, "reached", False) for c in callbacks),
+        "model": str(out / "model.zip"),
+    }
+    (out / "train_summary.json").write_text(json.dumps(summary, indent=2))
+    return summary

@@ -1,0 +1,121 @@
+"""Environments of a training run: the residual env with per-episode statistics, vectorised the SB3 way."""
+
+from __future__ import annotations
+
+import functools
+import math
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
+
+from agents.rl.config import TrainConfig
+from agents.rl.residual_env import RESIDUAL_ENV_ID
+
+EPISODE_KEYS = ("ep_stability_mean", "ep_stability_min", "ep_distance", "ep_diverged", "ep_fell")
+"""Keys :class:`EpisodeStats` puts in the last info of an episode (and Monitor writes to its CSV)."""
+
+EVAL_SEED_OFFSET = 1000
+"""The evaluation env is seeded with ``seed + EVAL_SEED_OFFSET`` (terrains unseen in training)."""
+
+
+class EpisodeStats(gym.Wrapper):
+    """Adds per-episode figures to the info of the step that ends an episode.
+
+    ``ep_stability_mean`` and ``ep_stability_min`` (N m): mean and minimum of ``info["stability_index"]``
+    over the steps with >= 3 feet in contact (NaN if none); ``ep_distance`` (m): COG x travelled;
+    ``ep_diverged`` and ``ep_fell`` (0 or 1): the episode ended by numerical divergence / by a fall or
+    divergence (not by the time limit).
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self._sum, self._n, self._min = 0.0, 0, math.inf
+
+    def reset(self, **kwargs: Any):
+        """Reset the env and the episode statistics."""
+        self._sum, self._n, self._min = 0.0, 0, math.inf
+        return self.env.reset(**kwargs)
+
+    def step(self, action: np.ndarray):
+        """Step the env; on the last step of an episode add :data:`EPISODE_KEYS` to ``info``."""
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        index = float(info.get("stability_index", math.nan))
+        if math.isfinite(index):
+            self._sum += index
+            self._n += 1
+            self._min = min(self._min, index)
+        if terminated or truncated:
+            info["ep_stability_mean"] = self._sum / self._n if self._n else math.nan
+            info["ep_stability_min"] = self._min if self._n else math.nan
+            info["ep_distance"] = float(info.get("distance", math.nan))
+            info["ep_diverged"] = int(bool(info.get("diverged", False)))
+            info["ep_fell"] = int(bool(terminated))
+        return obs, reward, terminated, truncated, info
+
+
+def make_train_env(
+    terrain: str, residual_scale: float, max_episode_steps: int, env_kwargs: dict[str, Any] | None = None
+) -> gym.Env:
+    """One residual env (expert in the loop) with a time limit and :class:`EpisodeStats`.
+
+    :param terrain: terrain kind, preset or YAML path.
+    :param residual_scale: residual torque per unit action as a fraction of the torque limit.
+    :param max_episode_steps: control steps before truncation.
+    :param env_kwargs: extra QuadUneven-v0 arguments.
+    """
+    env = gym.make(
+        RESIDUAL_ENV_ID,
+        terrain=terrain,
+        residual_scale=residual_scale,
+        max_episode_steps=max_episode_steps,
+        **(env_kwargs or {}),
+    )
+    return EpisodeStats(env)
+
+
+def build_vec_env(
+    cfg: TrainConfig, n_envs: int, seed: int, monitor_dir: Path | None, vec_env: str | None = None
+) -> VecEnv:
+    """``n_envs`` monitored residual envs as an SB3 VecEnv (not normalised).
+
+    :param seed: env i is seeded with ``seed + i``.
+    :param monitor_dir: where Monitor writes ``N.monitor.csv`` (None: no file).
+    :param vec_env: ``dummy``, ``subproc`` or ``auto`` (default: ``cfg.vec_env``).
+    """
+    kind = vec_env or cfg.vec_env
+    if kind == "auto":
+        kind = "subproc" if n_envs > 1 else "dummy"
+    env_fn = functools.partial(
+        make_train_env, cfg.terrain, float(cfg.residual_scale), cfg.max_episode_steps, dict(cfg.env_kwargs)
+    )
+    return make_vec_env(
+        env_fn,
+        n_envs=n_envs,
+        seed=seed,
+        monitor_dir=str(monitor_dir) if monitor_dir is not None else None,
+        monitor_kwargs={"info_keywords": EPISODE_KEYS},
+        vec_env_cls=SubprocVecEnv if kind == "subproc" else DummyVecEnv,
+        # forkserver (SB3's default) re-imports the compiled kernels in every worker; fork is fine
+        # here because no GL context exists (training never renders).
+        vec_env_kwargs={"start_method": "fork"} if kind == "subproc" else None,
+    )
+
+
+def normalize(venv: VecEnv, cfg: TrainConfig, training: bool) -> VecEnv:
+    """Wrap ``venv`` in VecNormalize if the config asks for it (rewards only while training)."""
+    if not (cfg.normalize_obs or cfg.normalize_reward):
+        return venv
+    return VecNormalize(
+        venv,
+        training=training,
+        norm_obs=cfg.normalize_obs,
+        norm_reward=cfg.normalize_reward and training,
+        gamma=float(cfg.hyperparams.get("gamma", 0.99)),
+    )
+
+
+__all__ = ["EPISODE_KEYS", "EVAL_SEED_OFFSET", "EpisodeStats", "build_vec_env", "make_train_env", "normalize"]

@@ -1,0 +1,82 @@
+"""The controller's one-call compiled path (agents.control.controller_kernels) against its general path."""
+
+from __future__ import annotations
+
+import itertools
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.control.controller import STANCE_MODES, ComputedTorqueController
+from agents.control.controller_kernels import select_stance_mask
+from agents.expert import ExpertConfig, attach_expert
+from planners.types import PACKED_FIELDS
+
+
+def test_stance_mask_selection_matches_select_stance():
+    ctrl = ComputedTorqueController(reference=lambda t: None)
+    for mode, planned, measured in itertools.product(STANCE_MODES, range(16), range(16)):
+        ctrl.stance_mode = mode
+        bits = lambda m: tuple(bool(m >> i & 1) for i in range(4))  # noqa: E731
+        want = ctrl.select_stance(bits(planned), np.array(bits(measured)))
+        assert bits(select_stance_mask(planned, measured, STANCE_MODES.index(mode))) == want, (mode, planned, measured)
+
+
+@pytest.mark.parametrize("distribution, atol", [("pinv", 1e-12), ("qp", 1e-6)])
+def test_fast_path_gives_the_general_paths_torques(distribution, atol):
+    env = gym.make("QuadUneven-v0", terrain="rough")
+    policy = attach_expert(env, ExpertConfig(distribution=distribution))
+    ctrl, u = policy.controller, env.unwrapped
+    obs, _ = env.reset(seed=0)
+    compared = 0
+    for step in range(300):
+        obs, *_ = env.step(policy.predict(obs)[0])
+        if step % 7:
+            continue
+        m, d = u.model, u.data
+        mujoco.mj_forward(m, d)  # the derived quantities the hook sees after mj_step1
+        t = float(d.time) - ctrl.t0
+        if policy._reference_row(t) is None:
+            continue
+        tau_fast = ctrl(m, d)
+        assert isinstance(ctrl._last_reference, tuple), "the fast path was not taken"
+        fast, ref_fast = ctrl.last, ctrl.last_reference
+        row_fn, ctrl.reference_row = ctrl.reference_row, None
+        try:
+            tau_general = ctrl(m, d)
+        finally:
+            ctrl.reference_row = row_fn
+        general, ref_general = ctrl.last, ctrl.last_reference
+        np.testing.assert_allclose(tau_fast, tau_general, rtol=0, atol=atol)
+        np.testing.assert_allclose(fast.contact_forces, general.contact_forces, rtol=0, atol=1e3 * atol)
+        assert fast.stance == general.stance and fast.distribution == general.distribution
+        for name, _ in PACKED_FIELDS:
+            np.testing.assert_array_equal(getattr(ref_fast, name), getattr(ref_general, name), err_msg=name)
+        assert ref_fast.stance == ref_general.stance
+        compared += 1
+    assert compared >= 10
+
+
+def test_lazy_last_result_refuses_overwritten_buffers():
+    env = gym.make("QuadUneven-v0", terrain="flat")
+    policy = attach_expert(env, ExpertConfig(distribution="pinv"))
+    ctrl, u = policy.controller, env.unwrapped
+    obs, _ = env.reset(seed=0)
+    m, d = u.model, u.data
+    for _ in range(50):  # until a step takes the fast path (not at a late touch-down)
+        obs, *_ = env.step(policy.predict(obs)[0])
+        mujoco.mj_forward(m, d)
+        ctrl(m, d)
+        if isinstance(ctrl._last, tuple):
+            break
+    assert isinstance(ctrl._last, tuple), "the fast path did not leave a lazy result"
+    stance = (True, True, True, True)
+    ctrl.id.solve(d.qpos, d.qvel, np.zeros(6), stance)  # reuses the work buffers
+    with pytest.raises(RuntimeError, match="reused"):
+        _ = ctrl.last
+    ctrl(m, d)
+    tau = ctrl.last.tau  # read right after the call: fine
+    assert tau.shape == (12,) and np.isfinite(tau).all()

@@ -1,0 +1,155 @@
+"""QuadUnevenResidual-v0: zero residual == the expert, the residual law, env checkers, argument errors."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.expert import ExpertConfig, ExpertPolicy, attach_expert
+from agents.rl.residual_env import (
+    RESIDUAL_ENV_ID,
+    ResidualController,
+    ResidualExpertEnv,
+    install_residual_controller,
+    make_residual_env,
+)
+
+STEPS = 160
+"""Control steps of the trajectory comparisons (3.2 s: past the first replanning at 3.1 s)."""
+
+
+def _rollout(env: gym.Env, actions: np.ndarray, seed: int) -> dict[str, np.ndarray]:
+    obs, _ = env.reset(seed=seed)
+    traj = {"obs": [obs], "reward": [], "qpos": [env.unwrapped.data.qpos.copy()], "ctrl": [], "done": []}
+    for a in actions:
+        obs, reward, terminated, truncated, _ = env.step(a)
+        traj["obs"].append(obs)
+        traj["reward"].append(reward)
+        traj["qpos"].append(env.unwrapped.data.qpos.copy())
+        traj["ctrl"].append(env.unwrapped.data.ctrl.copy())
+        traj["done"].append(terminated or truncated)
+        if terminated or truncated:
+            break
+    return {k: np.asarray(v) for k, v in traj.items()}
+
+
+@pytest.mark.parametrize("distribution", ["pinv", "qp"])
+def test_zero_residual_reproduces_the_expert(distribution):
+    """Zero action: the residual env's trajectory equals the plain expert's, bit for bit (both force
+    distributions: the QP's solver, DAQP, is deterministic)."""
+    cfg = ExpertConfig(distribution=distribution)
+    plain = gym.make("QuadUneven-v0", terrain="rough", max_episode_steps=STEPS + 1)
+    attach_expert(plain, cfg)
+    residual = gym.make(RESIDUAL_ENV_ID, terrain="rough", expert_config=cfg, max_episode_steps=STEPS + 1)
+    zeros = np.zeros((STEPS, 12), dtype=np.float32)
+    a, b = _rollout(plain, zeros, seed=0), _rollout(residual, zeros, seed=0)
+    assert len(a["reward"]) == STEPS and a["qpos"][-1, 0] - a["qpos"][0, 0] > 0.15  # the expert walked
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+def test_a_residual_changes_the_trajectory():
+    """The comparison above can fail: a constant residual moves the robot away from the expert's path."""
+    cfg = ExpertConfig(distribution="pinv")
+    steps = 20
+    zero = gym.make(RESIDUAL_ENV_ID, terrain="flat", expert_config=cfg)
+    push = gym.make(RESIDUAL_ENV_ID, terrain="flat", expert_config=cfg)
+    a = _rollout(zero, np.zeros((steps, 12), dtype=np.float32), seed=0)
+    b = _rollout(push, np.full((steps, 12), 0.5, dtype=np.float32), seed=0)
+    assert np.abs(a["qpos"][-1] - b["qpos"][-1]).max() > 1e-3
+
+
+class _ConstantExpert:
+    """A stub expert: fixed torques, records its calls."""
+
+    def __init__(self, tau: np.ndarray) -> None:
+        self.tau = tau
+        self.resets = 0
+
+    def reset(self, model, data, terrain) -> None:
+        self.resets += 1
+
+    def __call__(self, model, data, action) -> np.ndarray:
+        return self.tau.copy()
+
+
+def test_residual_law_and_clipping():
+    limit = np.full(12, 120.0)
+    tau_expert = np.linspace(-115.0, 115.0, 12)
+    ctrl = ResidualController(_ConstantExpert(tau_expert), limit, residual_scale=0.2)
+    action = np.linspace(1.0, -1.0, 12)
+    expected = np.clip(tau_expert + 0.2 * action * limit, -limit, limit)
+    np.testing.assert_allclose(ctrl(None, None, action), expected, rtol=0, atol=1e-12)
+    assert np.abs(ctrl(None, None, np.ones(12))).max() == 120.0  # clipped to the motor limit
+    np.testing.assert_array_equal(ctrl(None, None, np.zeros(12)), tau_expert)
+    ctrl.reset(None, None, None)
+    assert ctrl.expert.resets == 1
+
+
+def test_env_applies_expert_plus_residual_torques():
+    """At every physics step the motors get clip(expert + scale x action x limit): checked on the last one."""
+    env = make_residual_env(residual_scale=0.15, terrain="flat")
+    seen = []
+
+    class Spy:
+        def reset(self, model, data, terrain):
+            env.expert.reset(model, data, terrain)
+
+        def __call__(self, model, data, action):
+            tau = env.expert(model, data, action)
+            seen.append(tau.copy())
+            return tau
+
+    env.controller.expert = Spy()
+    env.reset(seed=1)
+    action = np.linspace(-1.0, 1.0, 12).astype(np.float32)
+    env.step(action)
+    lim = env.unwrapped.idx.torque_limit
+    expected = np.clip(seen[-1] + 0.15 * action.astype(np.float64) * lim, -lim, lim)
+    np.testing.assert_allclose(env.unwrapped.data.ctrl, expected, rtol=0, atol=1e-9)
+    assert len(seen) == env.unwrapped.frame_skip
+
+
+@pytest.mark.filterwarnings("ignore:.*different from the unwrapped")  # the wrapper is what we check
+def test_gymnasium_env_checker():
+    """Gymnasium's checker (spaces, seeding, exact determinism of a seeded reset + step), default expert."""
+    from gymnasium.utils.env_checker import check_env
+
+    env = make_residual_env(terrain="rough")
+    check_env(env, skip_render_check=True)
+
+
+def test_sb3_env_checker():
+    from stable_baselines3.common.env_checker import check_env
+
+    check_env(gym.make(RESIDUAL_ENV_ID, terrain="rough"), warn=True)
+
+
+def test_registered_id_and_defaults():
+    env = gym.make("agents.rl:QuadUnevenResidual-v0", terrain="flat")
+    assert env.spec.max_episode_steps == 1000
+    inner = env.unwrapped
+    assert isinstance(inner.controller, ResidualController)
+    assert inner.controller.residual_scale == pytest.approx(0.1)
+    assert isinstance(env.get_wrapper_attr("expert"), ExpertPolicy)
+    env.reset(seed=0)
+    info = env.step(env.action_space.sample())[4]
+    assert info["residual_scale"] == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("scale", [0.0, -0.1, 1.5, float("nan"), "big", True])
+def test_bad_residual_scale_is_rejected_by_name(scale):
+    with pytest.raises(ValueError, match="residual_scale"):
+        make_residual_env(residual_scale=scale, terrain="flat")
+
+
+def test_residual_env_needs_torque_mode_and_no_controller():
+    with pytest.raises(ValueError, match="action_mode"):
+        make_residual_env(terrain="flat", action_mode="joint_pd")
+    with pytest.raises(ValueError, match="controller"):
+        make_residual_env(terrain="flat", controller=lambda m, d, a: np.zeros(12))
+    with pytest.raises(ValueError, match="QuadUneven-v0"):
+        install_residual_controller(gym.make("Pendulum-v1"))
+    assert issubclass(ResidualExpertEnv, gym.Wrapper)

@@ -1,0 +1,214 @@
+"""quad-uneven train: config validation, bad options named, a tiny PPO run that evaluate can load."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from agents.cli import main
+from agents.rl.config import TrainConfigError, default_config_path, load_train_config
+
+TINY = {
+    "timesteps": 64,
+    "n_envs": 1,
+    "max_episode_steps": 40,
+    "eval_freq": 32,
+    "eval_episodes": 1,
+    "checkpoint_freq": 32,
+    "hyperparams": {"n_steps": 32, "batch_size": 16, "n_epochs": 1},
+    "policy_kwargs": {"net_arch": [16], "log_std_init": -2.5},
+}
+"""Overrides of the shipped PPO config for a run of a few seconds (episodes of 40 steps = 0.8 s)."""
+
+
+def write_config(path: Path, **changes) -> Path:
+    raw = yaml.safe_load(default_config_path("ppo").read_text())
+    raw.update(TINY)
+    raw.update(changes)
+    path.write_text(yaml.safe_dump(raw))
+    return path
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_shipped_configs_are_valid(algo):
+    cfg = load_train_config(None, {"algo": algo})
+    assert cfg.algo == algo and 0 < cfg.residual_scale <= 0.2
+    assert load_train_config(default_config_path(algo)).to_dict() == cfg.to_dict()
+
+
+@pytest.mark.parametrize(
+    ("argv", "field"),
+    [
+        (["--timesteps", "0"], "timesteps"),
+        (["--n-envs", "0"], "n_envs"),
+        (["--seed", "-1"], "seed"),
+        (["--terrain", "lava"], "terrain"),
+        (["--residual-scale", "2"], "residual_scale"),
+        (["--time-limit-min", "-1"], "time_limit_min"),
+        (["--algo", "sac", "--config", str(default_config_path("ppo"))], "algo"),
+    ],
+)
+def test_bad_train_options_exit_2_naming_the_field(tmp_path, capsys, argv, field):
+    rc = main(["train", "--out", str(tmp_path / "run"), "--no-progress", *argv])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert err.startswith(f"error: {field}")
+    assert not (tmp_path / "run").exists()  # rejected before anything is written
+
+
+def test_argparse_rejects_unknown_algo_and_non_integer_timesteps(tmp_path, capsys):
+    for argv, name in ((["--algo", "dqn"], "--algo"), (["--timesteps", "many"], "--timesteps")):
+        with pytest.raises(SystemExit) as exc:
+            main(["train", "--out", str(tmp_path), *argv])
+        assert exc.value.code == 2
+        assert name in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("changes", "field"),
+    [
+        ({"bogus": 1}, "bogus"),
+        ({"env_kwargs": {"terrain": "flat"}}, "env_kwargs"),
+        ({"hyperparams": {"seed": 3}}, "hyperparams"),
+        ({"normalize_obs": "yes"}, "normalize_obs"),
+        ({"vec_env": "threads"}, "vec_env"),
+        ({"eval_episodes": 0}, "eval_episodes"),
+    ],
+)
+def test_bad_config_fields_are_named(tmp_path, changes, field):
+    with pytest.raises(TrainConfigError, match=f"^{field}"):
+        load_train_config(write_config(tmp_path / "c.yaml", **changes))
+
+
+def test_unknown_hyperparameter_is_named(tmp_path):
+    from agents.rl.training import train
+
+    cfg = load_train_config(write_config(tmp_path / "c.yaml", hyperparams={"n_stepz": 8}))
+    with pytest.raises(TrainConfigError, match=r"^hyperparams"):
+        train(cfg, tmp_path / "run", progress=False)
+
+
+def test_episode_stats_wrapper_on_a_stub_env():
+    import gymnasium as gym
+
+    from agents.rl.vec_env import EPISODE_KEYS, EpisodeStats
+
+    class Stub(gym.Env):
+        observation_space = gym.spaces.Box(-1, 1, (1,))
+        action_space = gym.spaces.Box(-1, 1, (1,))
+        index = (10.0, -math.inf, 20.0, -3.0)
+
+        def reset(self, *, seed=None, options=None):
+            self.t = 0
+            return np.zeros(1, np.float32), {}
+
+        def step(self, action):
+            i = self.index[self.t]
+            self.t += 1
+            end = self.t == len(self.index)
+            info = {"stability_index": i, "distance": 0.1 * self.t, "diverged": end}
+            return np.zeros(1, np.float32), 0.0, end, False, info
+
+    env = EpisodeStats(Stub())
+    for _ in range(2):  # statistics restart at every reset
+        env.reset()
+        infos = [env.step(np.zeros(1))[4] for _ in range(4)]
+        assert not any(k in infos[0] for k in EPISODE_KEYS)
+        last = infos[-1]
+        assert last["ep_stability_mean"] == pytest.approx(9.0)  # the -inf step (< 3 feet) is left out
+        assert last["ep_stability_min"] == -3.0
+        assert last["ep_distance"] == pytest.approx(0.4)
+        assert last["ep_diverged"] == 1 and last["ep_fell"] == 1
+
+
+def test_tiny_ppo_run_saves_a_model_that_evaluate_runs_with_the_expert(tmp_path, capsys):
+    from agents.evaluation.run import evaluate
+    from agents.evaluation.suites import suite_from_dict
+    from agents.rl.learning_curve import read_monitor
+
+    run = tmp_path / "run"
+    rc = main(["train", "--config", str(write_config(tmp_path / "c.yaml")), "--out", str(run), "--no-progress"])
+    assert rc == 0, capsys.readouterr().err
+    for name in ("model.zip", "model_vecnormalize.pkl", "rl_meta.json", "learning_curve.png", "train_config.json"):
+        assert (run / name).is_file(), name
+    assert (run / "eval" / "evaluations.npz").is_file()
+    assert sorted(p.name for p in (run / "checkpoints").glob("*.zip")) == ["model_32_steps.zip", "model_64_steps.zip"]
+    meta = json.loads((run / "rl_meta.json").read_text())
+    assert meta["residual"] is True and meta["algo"] == "ppo" and meta["residual_scale"] == 0.1
+    summary = json.loads((run / "train_summary.json").read_text())
+    assert summary["timesteps"] == 64 and summary["episodes"] == 1  # 64 steps: one 40-step episode ended
+    mon = read_monitor(run / "monitor")
+    assert mon["l"].tolist() == [40.0]
+    assert np.isfinite(mon["ep_stability_mean"]).all() and np.isfinite(mon["ep_distance"]).all()
+
+    suite = suite_from_dict(
+        {"name": "t", "goal_distance": 5.0, "time_limit": 0.4, "terrains": [{"kind": "rough", "seeds": [0]}]},
+        source="test",
+    )
+    for model in (run / "model.zip", run / "checkpoints" / "model_32_steps.zip", run / "best" / "best_model.zip"):
+        res = evaluate(suite, str(model), tmp_path / "eval", progress=False)
+        e = res["episodes"][0]
+        assert e["error"] is None and e["sim_time"] == pytest.approx(0.4)
+        assert e["planner_calls"] >= 1  # the expert is in the loop
+
+    rc = main(["evaluate", "--policy", str(run / "model.zip"), "--algo", "sac", "--suite", "smoke",
+               "--out", str(tmp_path / "e2"), "--no-progress"])  # fmt: skip
+    assert rc == 2 and "algo" in capsys.readouterr().err
+
+
+def test_residual_policy_installs_expert_and_normalizes(tmp_path):
+    """The loaded policy drives the env through the residual controller, on normalised observations."""
+    import gymnasium as gym
+
+    from agents.evaluation.policies import make_policy, policy_env_kwargs
+    from agents.rl.model_io import SB3Policy
+    from agents.rl.residual_env import ResidualController
+    from agents.rl.training import train
+
+    cfg = load_train_config(write_config(tmp_path / "c.yaml", timesteps=32, eval_freq=0, checkpoint_freq=0))
+    train(cfg, tmp_path / "run", progress=False)
+    path = str(tmp_path / "run" / "model.zip")
+    env = gym.make("QuadUneven-v0", terrain="flat", **policy_env_kwargs(path))
+    policy = make_policy(path, env)
+    assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
+    assert policy.obs_normalizer is not None and policy.expert is env.unwrapped.controller.expert
+    obs, _ = env.reset(seed=0)
+    action, _ = policy.predict(obs)
+    assert action.shape == (12,) and np.all(np.abs(action) <= 1)
+    (tmp_path / "run" / "model_vecnormalize.pkl").unlink()
+    from agents.evaluation.policies import PolicyError
+
+    with pytest.raises(PolicyError, match="vecnormalize"):
+        make_policy(path, gym.make("QuadUneven-v0", terrain="flat"))
+
+
+def test_wall_clock_limit_stops_training_and_still_saves(tmp_path):
+    from agents.rl.training import train
+
+    cfg = load_train_config(
+        write_config(tmp_path / "c.yaml", timesteps=10_000, time_limit_min=1e-9, eval_freq=0, checkpoint_freq=0)
+    )
+    summary = train(cfg, tmp_path / "run", progress=False)
+    assert summary["time_limit_reached"] is True and summary["timesteps"] < 10_000
+    assert (tmp_path / "run" / "model.zip").is_file()
+
+
+@pytest.mark.parametrize("algo", ["PPO", "SAC"])
+def test_untrained_agent_has_zero_residual(algo):
+    """The mean-action layer starts at zero: the untrained deterministic agent is the expert."""
+    import gymnasium as gym
+    import stable_baselines3
+
+    from agents.rl.training import _zero_mean_action
+
+    env = gym.make("Pendulum-v1")
+    model = getattr(stable_baselines3, algo)("MlpPolicy", env, policy_kwargs={"net_arch": [8]}, device="cpu", seed=0)
+    obs = np.stack([env.observation_space.sample() for _ in range(5)])
+    assert np.abs(model.predict(obs, deterministic=True)[0]).max() > 0  # not zero by SB3's own init
+    _zero_mean_action(model)
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], 0.0)

@@ -1,0 +1,123 @@
+"""COG path optimisation (paper §4): exact Jacobians, continuity, stability, solver agreement, infeasibility."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from planners.cog import CogProblem, _Reduced, plan_cog
+from planners.gait import PAPER_DURATIONS, walk_cycle
+from planners.polynomial import basis_rows
+from planners.types import PlanningError
+from quad_uneven_env.constants import LEG_NAMES
+from quad_uneven_env.stability import stability_index
+
+START = np.array([[0.25, 0.185, 0.0], [0.25, -0.185, 0.03], [-0.25, 0.185, 0.01], [-0.25, -0.185, 0.0]])
+
+
+def make_problem(epsilon=0.1, targets=None, step=0.2):
+    phases = walk_cycle(PAPER_DURATIONS)
+    target = START + np.array([step, 0.0, 0.02])
+    feet = [np.where(np.asarray(p.moved)[:, None], target, START) for p in phases]
+    sup = [f[np.asarray(p.stance)] for f, p in zip(feet, phases, strict=True)]
+    names = [[n for n, s in zip(LEG_NAMES, p.stance, strict=True) if s] for p in phases]
+    t_knots = np.array([0.0] + [p.t_end for p in phases])
+    if targets is None:
+        targets = np.array([[0.0, 0.0, 0.37]] * 6)
+    start = np.array([[0.0, 0.0, 0.36], [0, 0, 0], [0, 0, 0]])
+    end = np.array([[step, 0.0, 0.38], [0, 0, 0], [0, 0, 0]])
+    return CogProblem(t_knots, sup, names, targets, start, end, 50.0, epsilon, phase_names=[p.name() for p in phases])
+
+
+def dense_index(prob, path, n=4001):
+    t = np.linspace(0.0, prob.t_knots[-1], n)
+    k = np.clip(np.searchsorted(prob.t_knots[1:-1], t, side="right"), 0, 6)
+    p, a = path.position(t), path.acceleration(t)
+    out = np.empty(n)
+    for j in range(7):
+        sel = k == j
+        out[sel] = stability_index(p[sel], a[sel], prob.supports[j], prob.mass)[0]
+    return out
+
+
+def test_bernstein_rows_are_exact_derivatives(rng):
+    s = rng.uniform(0.05, 0.95, 7)
+    h = 1e-6
+    np.testing.assert_allclose((basis_rows(s + h) - basis_rows(s - h)) / (2 * h), basis_rows(s, 1), atol=1e-6)
+    np.testing.assert_allclose((basis_rows(s + h, 1) - basis_rows(s - h, 1)) / (2 * h), basis_rows(s, 2), atol=1e-5)
+    np.testing.assert_allclose(basis_rows(s).sum(axis=1), 1.0)
+
+
+def test_constraint_jacobian_matches_finite_differences(rng):
+    red = _Reduced(make_problem())
+    red.set_samples([np.linspace(0, 1, 5)] * 7)
+    z = rng.normal(scale=0.05, size=3 * red.m)
+    h, J = red.constraints(z)
+    # Moments agree with the independent stability module.
+    coef = red.coef(z)
+    P = basis_rows(red.samples[2]) @ coef[2]
+    A = basis_rows(red.samples[2], 2) @ coef[2] / red.durations[2] ** 2
+    _, mom = stability_index(P, A, red.prob.supports[2], 50.0)
+    off = sum(len(red.samples[k]) * len(red.edges[k][2]) for k in range(2))
+    np.testing.assert_allclose(np.sort(h[off : off + mom.size]), np.sort(mom.ravel()), rtol=1e-10, atol=1e-9)
+    fd = np.empty_like(J)
+    eps = 1e-6
+    for i in range(J.shape[1]):
+        dz = np.zeros_like(z)
+        dz[i] = eps
+        fd[:, i] = (red.constraints(z + dz)[0] - red.constraints(z - dz)[0]) / (2 * eps)
+    np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-4)
+
+
+@pytest.mark.parametrize("epsilon", [0.1, 40.0])
+def test_path_continuous_stable_and_on_boundary(epsilon):
+    prob = make_problem(epsilon)
+    path, stats = plan_cog(prob)
+    assert path.junction_jumps().max() <= 1e-9
+    t_end = prob.t_knots[-1]
+    np.testing.assert_allclose(path.position(np.array([0.0, t_end])), prob.start[:1].tolist() + prob.end[:1].tolist())
+    np.testing.assert_allclose(path.velocity(np.array([0.0, t_end])), 0.0, atol=1e-9)
+    np.testing.assert_allclose(path.acceleration(np.array([0.0, t_end])), 0.0, atol=1e-9)
+    assert dense_index(prob, path).min() >= epsilon - 1e-6
+    assert stats.min_stability >= epsilon - 1e-9
+    if epsilon > 1.0:
+        assert stats.iterations > 0  # the constraint was active
+
+
+def test_sqp_matches_slsqp_baseline():
+    prob = make_problem(40.0)
+    p1, _ = plan_cog(prob, method="sqp")
+    p2, _ = plan_cog(prob, method="slsqp")
+    t = np.linspace(0, prob.t_knots[-1], 301)
+    assert np.abs(p1.position(t) - p2.position(t)).max() < 2e-4
+
+
+def test_infeasible_names_phase_and_edge():
+    prob = make_problem(400.0)  # 0.8 m static margin: impossible
+    with pytest.raises(PlanningError, match=r"phase \d \(.*\).*edge [LR][FH]->[LR][FH].*N m"):
+        plan_cog(prob)
+
+
+def test_unconstrained_optimum_hits_reachable_targets():
+    # Targets well inside every polygon and a tiny epsilon: the junction points are (nearly) met.
+    prob = make_problem(0.1, targets=None)
+    prob = dataclasses.replace(
+        prob, targets=np.column_stack([np.linspace(0.03, 0.17, 6), np.zeros(6), np.full(6, 0.37)])
+    )
+    path, stats = plan_cog(prob)
+    err = np.abs(path.position(prob.t_knots[1:-1]) - prob.targets).max()
+    assert err < 0.02
+    assert stats.iterations == 0 or stats.min_stability >= 0.1
+
+
+def test_unstable_start_state_raises_naming_it():
+    prob = make_problem(0.1)
+    start = prob.start.copy()
+    start[0, 1] = 0.19  # outside the support polygon (left feet at y = 0.185): the given state is unstable
+    with pytest.raises(PlanningError, match=r"start or end state.*phase 0.*edge"):
+        plan_cog(dataclasses.replace(prob, start=start))
+    start[0, 1] = 0.12  # 6.5 cm inside: plannable
+    path, _ = plan_cog(dataclasses.replace(prob, start=start))
+    assert dense_index(dataclasses.replace(prob, start=start), path).min() >= 0.1 - 1e-6
