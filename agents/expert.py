@@ -30,11 +30,16 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from agents.control.controller import ComputedTorqueController, Gains
+from agents.control.inverse_dynamics import DISTRIBUTIONS
 from planners import PlanningError, Scenario, plan_gait_cycle
+from planners.gait import validate_durations
 from planners.pitch import pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
 from planners.scenario import BODY_PITCH_MODES
 from planners.types import ReferenceSample
+from quad_uneven_env import physics
+from quad_uneven_env.fields import check_fields, param
+from quad_uneven_env.robot.dynamics import BACKENDS
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,28 +48,34 @@ class ExpertConfig:
 
     durations: tuple[float, ...] = (0.5, 0.5, 0.5, 0.1, 0.5, 0.5, 0.5)
     """s: the 7 phases of the walk cycle (paper order; the paper uses 1, 1, 1, 0.1, 1, 1, 1)."""
-    stride: float = 0.33
-    """m: body advance per cycle along +x (0.33 m / 3.1 s = 0.106 m/s nominal)."""
-    cog_height: float = 0.33
-    """m: COG height above the mean foothold height."""
-    epsilon: float = 20.0
-    """N m: stability margin of the planned COG path (20 N m = 4 cm of static margin for 50 kg):
-    much more than the paper's 0.1 N m, because the measured index must stay positive under
+    stride: float = param(0.33, "m", lo=0.0, hi=1.0, lo_open=True)
+    """m, in (0, 1]: body advance per cycle along +x (0.33 m / 3.1 s = 0.106 m/s nominal)."""
+    cog_height: float = param(0.33, "m", lo=0.1, hi=0.5)
+    """m, in [0.1, 0.5]: COG height above the mean foothold height."""
+    epsilon: float = param(20.0, "N m", lo=0.0, hi=1000.0)
+    """N m, in [0, 1000]: stability margin of the planned COG path (20 N m = 4 cm of static margin for
+    50 kg): much more than the paper's 0.1 N m, because the measured index must stay positive under
     tracking errors and the QP needs room to keep every stance force inside its cone."""
-    clearance: float = 0.05
-    """m: swing clearance of the foot sphere above the terrain."""
-    touchdown_depth: float = 0.015
-    """m: how far below its foothold a late foot (planned stance, no contact yet) is aimed."""
-    body_pitch: str = "terrain"
+    clearance: float = param(0.05, "m", lo=0.0, hi=0.3)
+    """m, in [0, 0.3]: swing clearance of the foot sphere above the terrain."""
+    touchdown_depth: float = param(0.015, "m", lo=0.0, hi=0.1)
+    """m, in [0, 0.1]: how far below its foothold a late foot (planned stance, no contact yet) is aimed."""
+    body_pitch: str = param("terrain", kind="choice", choices=BODY_PITCH_MODES)
     """base orientation of the plans: "terrain" (pitch with the slope of the footholds, so the legs on
     the higher steps of a stair are not folded until their shanks rest on the nosing) or "level"
     (identity, the paper); see :mod:`planners.pitch`."""
-    distribution: str = "qp"
+    distribution: str = param("qp", kind="choice", choices=DISTRIBUTIONS)
     """inverse-dynamics torque distribution: "pinv" (paper) or "qp" (friction cones)."""
-    backend: str = "mujoco"
+    backend: str = param("mujoco", kind="choice", choices=BACKENDS)
     """dynamics backend of the controller."""
     gains: Gains = dataclasses.field(default_factory=Gains)
     """computed-torque gains."""
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        validate_durations(self.durations)
+        if not isinstance(self.gains, Gains):
+            raise ValueError(f"ExpertConfig.gains must be a Gains, got {self.gains!r}")
 
 
 _BLAS: list[ThreadpoolController] = []
@@ -111,8 +122,6 @@ class ExpertPolicy:
 
     def __init__(self, env: gym.Env, config: ExpertConfig | None = None) -> None:
         self.config = config or ExpertConfig()
-        if self.config.body_pitch not in BODY_PITCH_MODES:
-            raise ValueError(f"body_pitch must be one of {list(BODY_PITCH_MODES)}, got {self.config.body_pitch!r}")
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
         self._foot_sensor_adr = np.array([int(a) for a in self.env.idx.foot_sensor_adr])
@@ -215,7 +224,7 @@ class ExpertPolicy:
 
     def _measured_footholds(self) -> np.ndarray:
         """(4, 3) points on the terrain below the foot sites (m, world)."""
-        sites = self._data.site_xpos[self.env.idx.foot_sites]
+        sites = physics.feet_pos(self._data, self.env.idx)
         ground = self._terrain.heightfield.height(sites[:, 0], sites[:, 1])
         return np.column_stack([sites[:, :2], ground])
 
@@ -223,11 +232,11 @@ class ExpertPolicy:
         d, cfgx = self._data, self.config
         feet = self._measured_footholds()
         previous = getattr(self._current, "pitch", None)
-        pitch_start = previous.end if previous is not None else pitch_of_quaternion(d.qpos[3:7])
-        if cog_start is None or np.linalg.norm(cog_start["pos"] - d.subtree_com[self.env.idx.trunk_body]) > 0.05:
+        pitch_start = previous.end if previous is not None else pitch_of_quaternion(physics.base_quat(d))
+        if cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, self.env.idx)) > 0.05:
             # First cycle, after a hold, or drifted: start from the measured COG (and pitch) at rest.
-            cog_start = {"pos": d.subtree_com[self.env.idx.trunk_body].copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
-            pitch_start = pitch_of_quaternion(d.qpos[3:7])
+            cog_start = {"pos": physics.cog(d, self.env.idx).copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
+            pitch_start = pitch_of_quaternion(physics.base_quat(d))
         plan = None
         for stride in (cfgx.stride, 0.5 * cfgx.stride, 0.0):
             scenario = Scenario(

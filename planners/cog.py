@@ -33,6 +33,7 @@ import scipy.optimize
 
 from planners.polynomial import N_COEF, PiecewisePolynomial, accel_gram, basis_rows
 from planners.types import PlanningError
+from quad_uneven_env.spatial import cross
 from quad_uneven_env.stability import GRAVITY, order_clockwise
 
 N_AXES = 3
@@ -212,9 +213,9 @@ class _Reduced:
             F[:, 2] -= m * g
             p, kappa, _ = self.edges[k]
             r = P[:, None, :] - p[None]  # (S, E, 3)
-            h = (kappa[None] * _cross(r, F[:, None, :])).sum(axis=-1)
-            gP = _cross(F[:, None, :], kappa[None])  # d h / d P
-            ga = -m * _cross(kappa[None], r)  # d h / d P''
+            h = (kappa[None] * cross(r, F[:, None, :])).sum(axis=-1)
+            gP = cross(F[:, None, :], kappa[None])  # d h / d P
+            ga = -m * cross(kappa[None], r)  # d h / d P''
             J = gP[..., None] * Bv[:, None, None, :] + ga[..., None] * Ba[:, None, None, :]
             hs.append(h.ravel())
             Js.append(J.reshape(-1, N_AXES * self.m))
@@ -244,14 +245,6 @@ class _Reduced:
         raise IndexError(index)
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis with broadcasting; np.cross's axis handling costs more
-    than the arithmetic on these small arrays, and the COG solver calls it every iteration."""
-    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
-    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
-
-
 def _dense_index(red: _Reduced, coef: np.ndarray, n: int = 241) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per phase: dense local times and the tumbling moments (S, E) on them."""
     s = np.linspace(0.0, 1.0, n)
@@ -263,7 +256,7 @@ def _dense_index(red: _Reduced, coef: np.ndarray, n: int = 241) -> list[tuple[np
         F = -red.prob.mass * acc
         F[:, 2] -= red.prob.mass * GRAVITY
         p, kappa, _ = red.edges[k]
-        h = (kappa[None] * _cross(P[:, None, :] - p[None], F[:, None, :])).sum(axis=-1)
+        h = (kappa[None] * cross(P[:, None, :] - p[None], F[:, None, :])).sum(axis=-1)
         out.append((s, h))
     return out
 

@@ -22,8 +22,8 @@ from planners.types import ReferenceSample
 from planners.wholebody import WholeBody
 from quad_uneven_env.config import RobotConfig, load_robot_config
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
-from quad_uneven_env.robot.conventions import quat_wxyz_to_matrix
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
+from quad_uneven_env.spatial import quat_to_matrix
 
 _IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 _STANCE_OF_MASK = [tuple(bool(m >> i & 1) for i in range(4)) for m in range(16)]
@@ -175,7 +175,7 @@ def aim_feet_below_footholds(
         otherwise at its start foothold.
     """
     q, qd, qdd = sample.q_joints.copy(), sample.qd_joints.copy(), sample.qdd_joints.copy()
-    R = quat_wxyz_to_matrix(sample.quat_WB)
+    R = quat_to_matrix(sample.quat_WB)
     hips_B = hip_positions_B(cfg)
     for i in np.flatnonzero(legs):
         leg = LEG_NAMES[i]

@@ -34,6 +34,7 @@ from planners.wholebody_kernels import place_base_grid
 from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
+from quad_uneven_env.spatial import cross, inv3
 
 
 def leg_point(q: np.ndarray, a: float, b: float, qd: np.ndarray | None = None):
@@ -74,19 +75,6 @@ def leg_point(q: np.ndarray, a: float, b: float, qd: np.ndarray | None = None):
         axis=-1,
     )
     return p, J, jd
-
-
-def inv3(A: np.ndarray) -> np.ndarray:
-    """Inverse of (..., 3, 3) matrices by the adjugate (batched LAPACK is ~10 x slower on 3 x 3)."""
-    a, b, c = A[..., 0, 0], A[..., 0, 1], A[..., 0, 2]
-    d, e, f = A[..., 1, 0], A[..., 1, 1], A[..., 1, 2]
-    g, h, i = A[..., 2, 0], A[..., 2, 1], A[..., 2, 2]
-    co = np.empty(A.shape)
-    co[..., 0, 0], co[..., 0, 1], co[..., 0, 2] = e * i - f * h, c * h - b * i, b * f - c * e
-    co[..., 1, 0], co[..., 1, 1], co[..., 1, 2] = f * g - d * i, a * i - c * g, c * d - a * f
-    co[..., 2, 0], co[..., 2, 1], co[..., 2, 2] = d * h - e * g, b * g - a * h, a * e - b * d
-    det = a * co[..., 0, 0] + b * co[..., 1, 0] + c * co[..., 2, 0]
-    return co / det[..., None, None]
 
 
 def _solve3(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -235,11 +223,11 @@ def to_rotating_frame(
     :return: ``(R^T v, d/dt, d2/dt2)`` (see the module doc).
     """
     R, w, a = (np.asarray(z, dtype=float) for z in (R, omega, alpha))
-    wv = _cross(w, v)
+    wv = cross(w, v)
     Rt = np.swapaxes(R, -1, -2)
     vb = _apply(Rt, v)
     vb_d = _apply(Rt, v_d - wv)
-    vb_dd = _apply(Rt, v_dd - 2.0 * _cross(w, v_d) - _cross(a, v) + _cross(w, wv))
+    vb_dd = _apply(Rt, v_dd - 2.0 * cross(w, v_d) - cross(a, v) + cross(w, wv))
     return vb, vb_d, vb_dd
 
 
@@ -250,21 +238,11 @@ def from_rotating_frame(
     R, w, a = (np.asarray(z, dtype=float) for z in (R, omega, alpha))
     v = _apply(R, vb)
     rel = _apply(R, vb_d)
-    v_d = rel + _cross(w, v)
-    v_dd = _apply(R, vb_dd) + 2.0 * _cross(w, rel) + _cross(a, v) + _cross(w, _cross(w, v))
+    v_d = rel + cross(w, v)
+    v_dd = _apply(R, vb_dd) + 2.0 * cross(w, rel) + cross(a, v) + cross(w, cross(w, v))
     return v, v_d, v_dd
 
 
 def _apply(R: np.ndarray, v: np.ndarray) -> np.ndarray:
     """``R @ v`` for stacks R (..., 3, 3) and v (..., 3), broadcast (matmul: ~5 x faster than einsum here)."""
     return (R @ np.asarray(v, dtype=float)[..., None])[..., 0]
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a x b`` along the last axis (3), broadcast; componentwise (np.cross is slow on small stacks)."""
-    a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
-    out = np.empty(a.shape)
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out

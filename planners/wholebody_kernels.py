@@ -14,6 +14,8 @@ import math
 import numba as nb
 import numpy as np
 
+from quad_uneven_env.spatial_kernels import inv3_into
+
 
 @nb.njit(cache=False, nogil=True, inline="always")
 def _ik(ex, ey, ez, l1, l2, knee_sign):  # pragma: no cover - compiled
@@ -59,21 +61,6 @@ def _leg_jd(q1, q2, q3, d1, d2, d3, a, b, out):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=False, nogil=True)
-def _inv3(A, out):  # pragma: no cover - compiled
-    """Adjugate inverse of a 3 x 3 matrix (as :func:`planners.wholebody.inv3`)."""
-    a, b, c = A[0, 0], A[0, 1], A[0, 2]
-    d, e, f = A[1, 0], A[1, 1], A[1, 2]
-    g, h, i = A[2, 0], A[2, 1], A[2, 2]
-    out[0, 0], out[0, 1], out[0, 2] = e * i - f * h, c * h - b * i, b * f - c * e
-    out[1, 0], out[1, 1], out[1, 2] = f * g - d * i, a * i - c * g, c * d - a * f
-    out[2, 0], out[2, 1], out[2, 2] = d * h - e * g, b * g - a * h, a * e - b * d
-    det = a * out[0, 0] + b * out[1, 0] + c * out[2, 0]
-    for r in range(3):
-        for s in range(3):
-            out[r, s] /= det
-
-
-@nb.njit(cache=False, nogil=True)
 def _legs(x, p, hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A):  # pragma: no cover - compiled
     """IK of the four legs for base position p, then f, F (COM moment), J, J^-1 and A = F J^-1 per leg."""
     for leg in range(4):
@@ -90,7 +77,7 @@ def _legs(x, p, hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A):  # pragma
         s23, c23 = math.sin(q2 + q3), math.cos(q2 + q3)
         _point_jac(s1, c1, s2, c2, s23, c23, ma, mb, f[leg], F[leg])
         _point_jac(s1, c1, s2, c2, s23, c23, l1, l2, f[4], J[leg])  # f[4]: scratch for the foot point
-        _inv3(J[leg], Jinv[leg])
+        inv3_into(J[leg], Jinv[leg])
         for r in range(3):
             for s in range(3):
                 acc = 0.0
@@ -144,7 +131,7 @@ def place_base_grid(
                 res[r] = p[r] + (hip_moment[r] + f[0, r] + f[1, r] + f[2, r] + f[3, r]) / mass - c[t, r]
                 for s in range(3):
                     K[r, s] = (1.0 if r == s else 0.0) - (A[0, r, s] + A[1, r, s] + A[2, r, s] + A[3, r, s]) / mass
-            _inv3(K, Kinv)
+            inv3_into(K, Kinv)
             for r in range(3):
                 v[r] = Kinv[r, 0] * res[0] + Kinv[r, 1] * res[1] + Kinv[r, 2] * res[2]
             for r in range(3):
@@ -153,7 +140,7 @@ def place_base_grid(
         for r in range(3):
             for s in range(3):
                 K[r, s] = (1.0 if r == s else 0.0) - (A[0, r, s] + A[1, r, s] + A[2, r, s] + A[3, r, s]) / mass
-        _inv3(K, Kinv)
+        inv3_into(K, Kinv)
         # velocity
         for r in range(3):
             acc = cd[t, r]

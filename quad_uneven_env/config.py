@@ -16,6 +16,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from quad_uneven_env.fields import check_fields, from_mapping, param
+
 CONFIG_DIR = Path(os.environ.get("QUAD_UNEVEN_CONFIGS", Path(__file__).resolve().parents[1] / "configs"))
 """Directory of the shipped YAML configs (override with ``$QUAD_UNEVEN_CONFIGS``)."""
 
@@ -203,48 +205,72 @@ def _load_robot_config(name_or_path: str) -> RobotConfig:
 
 @dataclasses.dataclass(frozen=True)
 class RewardWeights:
-    """Weights of the named reward terms (see :mod:`quad_uneven_env.rewards`)."""
+    """Weights of the named reward terms (see :mod:`quad_uneven_env.rewards`); any finite number unless noted."""
 
-    forward_progress: float = 1.0
+    forward_progress: float = param(1.0, "1/(m/s)")
     """per m/s of whole-robot COG velocity along +x."""
-    stability: float = 0.5
+    stability: float = param(0.5)
     """per unit of the normalised stability index / ``stability_scale``, clipped to [-1, 1]."""
-    stability_scale: float = 0.1
-    """m: normalised index that earns the full stability term."""
-    torque: float = 0.05
+    stability_scale: float = param(0.1, "m", lo=0.0, hi=1.0, lo_open=True)
+    """m, in (0, 1]: normalised index that earns the full stability term."""
+    torque: float = param(0.05)
     """per mean squared torque fraction (tau / limit)^2 over the 12 joints."""
-    energy: float = 0.0
+    energy: float = param(0.0)
     """per W of absolute mechanical power sum |tau qd|, divided by m g (dimension m/s)."""
-    alive: float = 0.5
+    alive: float = param(0.5)
     """per control step not ended by a fall."""
-    fall: float = 10.0
+    fall: float = param(10.0)
     """penalty on the step that ends in a fall or divergence."""
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 @dataclasses.dataclass(frozen=True)
 class TerminationLimits:
     """When an episode ends in a fall."""
 
-    min_base_height: float = 0.12
-    """m: trunk origin above the terrain under it."""
-    max_base_height: float = 1.0
-    """m: trunk origin above the terrain under it (a jump or a launch)."""
-    max_tilt_deg: float = 60.0
-    """degrees between the trunk z axis and the world z axis."""
-    trunk_contact: bool = True
+    min_base_height: float = param(0.12, "m", lo=0.0, hi=2.0)
+    """m, in [0, 2]: trunk origin above the terrain under it."""
+    max_base_height: float = param(1.0, "m", lo=0.0, hi=10.0, lo_open=True)
+    """m, in (0, 10], above ``min_base_height``: trunk origin above the terrain under it (a jump or a launch)."""
+    max_tilt_deg: float = param(60.0, "deg", lo=0.0, hi=180.0, lo_open=True)
+    """degrees in (0, 180] between the trunk z axis and the world z axis (180: never)."""
+    trunk_contact: bool = param(True, kind="bool")
     """the trunk touching the terrain ends the episode."""
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if not self.min_base_height < self.max_base_height:
+            raise ValueError(
+                f"TerminationLimits.min_base_height must be < max_base_height={self.max_base_height}, "
+                f"got {self.min_base_height}"
+            )
+
+
+MAX_SCAN_POINTS = 10_000
+"""Upper bound on the height-scan grid size (points): the observation grows with it."""
 
 
 @dataclasses.dataclass(frozen=True)
 class HeightScanConfig:
     """Grid of terrain heights around the base, in the yaw-aligned base frame."""
 
-    size_x: float = 1.0
-    """m: extent along the heading (centred on the base)."""
-    size_y: float = 0.6
-    """m: extent across the heading."""
-    resolution: float = 0.1
-    """m: grid spacing."""
+    size_x: float = param(1.0, "m", lo=0.0, hi=10.0)
+    """m, in [0, 10]: extent along the heading (centred on the base)."""
+    size_y: float = param(0.6, "m", lo=0.0, hi=10.0)
+    """m, in [0, 10]: extent across the heading."""
+    resolution: float = param(0.1, "m", lo=0.005, hi=1.0)
+    """m, in [0.005, 1]: grid spacing."""
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        nx, ny = self.shape
+        if nx * ny > MAX_SCAN_POINTS:
+            raise ValueError(
+                f"HeightScanConfig.resolution must give at most {MAX_SCAN_POINTS} points, got {nx} x {ny} "
+                f"for size {self.size_x} x {self.size_y} m at {self.resolution} m"
+            )
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -253,25 +279,5 @@ class HeightScanConfig:
 
 
 def dataclass_from_mapping(cls: type, raw: Mapping[str, Any] | None, where: str) -> Any:
-    """Build a frozen config dataclass from a mapping, rejecting unknown fields by name."""
-    if raw is None:
-        return cls()
-    if isinstance(raw, cls):
-        return raw
-    if not isinstance(raw, Mapping):
-        raise ValueError(f"{where} must be a mapping of {sorted(f.name for f in dataclasses.fields(cls))}, got {raw!r}")
-    names = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = set(raw) - set(names)
-    if unknown:
-        raise ValueError(f"{where}: unknown field(s) {sorted(unknown)}; allowed: {sorted(names)}")
-    values = {}
-    for k, v in raw.items():
-        default = getattr(cls(), k)
-        if isinstance(default, bool):
-            values[k] = bool(v)
-            continue
-        x = float(v)
-        if not np.isfinite(x):
-            raise ValueError(f"{where}.{k} must be finite, got {v!r}")
-        values[k] = x
-    return cls(**values)
+    """Alias of :func:`quad_uneven_env.fields.from_mapping` (the env's ``reward_weights=``, ``termination=``, ...)."""
+    return from_mapping(cls, raw, where)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
@@ -20,7 +19,8 @@ from quad_uneven_env.config import (
     dataclass_from_mapping,
     load_robot_config,
 )
-from quad_uneven_env.measurement import StepMeasurement, clip_finite_into
+from quad_uneven_env.measurement import StepMeasurement
+from quad_uneven_env.measurement_kernels import clip_finite_into
 from quad_uneven_env.observations import (
     height_scan_points_B,
     observation_fields,
@@ -32,6 +32,7 @@ from quad_uneven_env.physics import RobotIndex, instability_warnings
 from quad_uneven_env.rewards import reward_terms
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT, PhysicsOptions, scene_mjcf
+from quad_uneven_env.termination import FallCheck
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec
 
 ACTION_MODES = ("torque", "joint_pd")
@@ -164,7 +165,7 @@ class QuadUnevenEnv(gym.Env):
         self._mass = self.idx.total_mass
         self._gravity = self.model.opt.gravity.copy()
         self._g = float(-self._gravity[2])
-        self._cos_max_tilt = math.cos(math.radians(self.termination.max_tilt_deg))
+        self._fall = FallCheck(self.termination)
         self._hips_B = hip_positions_B(self.robot_cfg)
         # Row 0 is the point under the base, the rest the height scan grid.
         self._scan_B = np.vstack([np.zeros((1, 2)), height_scan_points_B(self.height_scan)])
@@ -231,7 +232,7 @@ class QuadUnevenEnv(gym.Env):
         self.terrain.upload(self.model)
         (xmin, xmax), (ymin, ymax) = self.terrain.heightfield.extent
         margin = 0.3  # m: the robot has left the terrain before its trunk reaches the edge
-        self._inside_xy = (xmin + margin, xmax - margin, ymin + margin, ymax - margin)
+        self._fall.inside_xy = (xmin + margin, xmax - margin, ymin + margin, ymax - margin)
         self._upload_terrain_to_renderer()
 
         mujoco.mj_resetData(self.model, self.data)
@@ -322,7 +323,7 @@ class QuadUnevenEnv(gym.Env):
             index_norm = self._last_index_norm  # the buffers still hold the last good measurement
         else:
             self._measure()
-            reason = self._fall_reason(meas)
+            reason = self._fall.reason(meas.base, meas.ground, meas.R, meas.trunk_contact)
             index_norm = meas.index / (self._mass * self._g)
         fell = reason is not None
 
@@ -349,24 +350,6 @@ class QuadUnevenEnv(gym.Env):
         mujoco.mj_subtreeVel(self.model, self.data)
         self._meas.update(self.terrain.heightfield, self._prev_action, self.gait_period)
         return self._meas
-
-    def _fall_reason(self, meas: StepMeasurement) -> str | None:
-        lim = self.termination
-        height = meas.base[2] - meas.ground
-        if lim.trunk_contact and meas.trunk_contact:
-            return "fall: trunk touched the terrain"
-        if height < lim.min_base_height:
-            return f"fall: base height {height:.3f} m < {lim.min_base_height} m"
-        if height > lim.max_base_height:
-            return f"fall: base height {height:.3f} m > {lim.max_base_height} m"
-        if meas.R[2, 2] < self._cos_max_tilt:
-            tilt = np.rad2deg(np.arccos(np.clip(meas.R[2, 2], -1, 1)))
-            return f"fall: tilt {tilt:.1f} deg > {lim.max_tilt_deg} deg"
-        xmin, xmax, ymin, ymax = self._inside_xy
-        x, y = meas.base[0], meas.base[1]
-        if not (xmin < x < xmax and ymin < y < ymax):
-            return "left the terrain"
-        return None
 
     def _info(
         self, meas: StepMeasurement, terms: dict[str, float], diverged: bool, reason: str | None

@@ -16,14 +16,13 @@ from __future__ import annotations
 import math
 
 import mujoco
-import numba as nb
 import numpy as np
 
 from quad_uneven_env import constants as C
-from quad_uneven_env.observations import STABILITY_CLIP, ObsField, observation_structure
+from quad_uneven_env.measurement_kernels import measure_observe_into
+from quad_uneven_env.observations import ObsField, observation_structure
 from quad_uneven_env.physics import ContactMeasurement, RobotIndex
-from quad_uneven_env.stability import NO_SUPPORT, _moments_one
-from quad_uneven_env.terrain.heightfield import HeightField, _height_kernel
+from quad_uneven_env.terrain.heightfield import HeightField
 
 OBS_ORDER = (
     "base_height",
@@ -175,7 +174,7 @@ class StepMeasurement:
         :param gait_period: s, period of the observation's gait clock.
         """
         flat, nrow, ncol, ox, oy, inv_cell = heightfield.kernel_args
-        _measure_observe(
+        measure_observe_into(
             self._sensordata,
             self._site_xpos,
             self._subtree_com,
@@ -213,174 +212,3 @@ class StepMeasurement:
             self._scalars,
             self.obs,
         )
-
-
-@nb.njit(cache=False, nogil=True)
-def _quat_to_matrix(q, R):  # pragma: no cover - compiled
-    """mju_quat2Mat's arithmetic (unit quaternion w, x, y, z)."""
-    if q[0] == 1.0 and q[1] == 0.0 and q[2] == 0.0 and q[3] == 0.0:
-        for i in range(3):
-            for j in range(3):
-                R[i, j] = 1.0 if i == j else 0.0
-        return
-    q00, q01, q02, q03 = q[0] * q[0], q[0] * q[1], q[0] * q[2], q[0] * q[3]
-    q11, q12, q13 = q[1] * q[1], q[1] * q[2], q[1] * q[3]
-    q22, q23, q33 = q[2] * q[2], q[2] * q[3], q[3] * q[3]
-    R[0, 0] = q00 + q11 - q22 - q33
-    R[1, 1] = q00 - q11 + q22 - q33
-    R[2, 2] = q00 - q11 - q22 + q33
-    R[0, 1] = 2.0 * (q12 - q03)
-    R[0, 2] = 2.0 * (q13 + q02)
-    R[1, 0] = 2.0 * (q12 + q03)
-    R[1, 2] = 2.0 * (q23 - q01)
-    R[2, 0] = 2.0 * (q13 - q02)
-    R[2, 1] = 2.0 * (q23 + q01)
-
-
-@nb.njit(cache=False, nogil=True)
-def _measure_observe(  # pragma: no cover - compiled
-    sd,
-    site_xpos,
-    subtree_com,
-    subtree_linvel,
-    qpos,
-    qvel,
-    ints,
-    foot_radius,
-    mass,
-    gravity,
-    hf_flat,
-    nrow,
-    ncol,
-    ox,
-    oy,
-    inv_cell,
-    scan_B,
-    prev_action,
-    clock_phase,
-    obs_start,
-    obs_low,
-    obs_high,
-    foot_forces,
-    foot_contact,
-    foot_points,
-    total_force,
-    cog,
-    cog_vel,
-    cog_acc,
-    feet_pos,
-    moments,
-    R,
-    base,
-    heights,
-    scalars,
-    obs,
-):
-    trunk, robot_adr, trunk_adr = ints[0], ints[1], ints[2]
-    # Contacts: sensors report the force the robot exerts on the terrain; the terrain's is its negative.
-    n_feet_found = 0.0
-    n_stance = 0
-    for leg in range(4):
-        a = ints[3 + leg]
-        s = ints[7 + leg]
-        found = sd[a]
-        n_feet_found += found
-        foot_contact[leg] = found > 0
-        for k in range(3):
-            foot_forces[leg, k] = -sd[a + 1 + k]
-            feet_pos[leg, k] = site_xpos[s, k]
-        if found > 0:
-            n_stance += 1
-            for k in range(3):
-                foot_points[leg, k] = sd[a + 4 + k]
-        else:
-            foot_points[leg, 0] = site_xpos[s, 0]
-            foot_points[leg, 1] = site_xpos[s, 1]
-            foot_points[leg, 2] = site_xpos[s, 2] - foot_radius
-    for k in range(3):
-        total_force[k] = -sd[robot_adr + 1 + k]
-        cog[k] = subtree_com[trunk, k]
-        cog_vel[k] = subtree_linvel[trunk, k]
-        cog_acc[k] = total_force[k] / mass + gravity[k]
-    n_trunk = sd[trunk_adr]
-    scalars[3] = 1.0 if n_trunk > 0 else 0.0
-    scalars[4] = 1.0 if sd[robot_adr] - n_feet_found - n_trunk > 0 else 0.0
-
-    # Stability index of the feet in contact.
-    g = -gravity[2]
-    scalars[1] = n_stance
-    if n_stance < 3:
-        scalars[0] = NO_SUPPORT
-        for k in range(n_stance):
-            moments[k] = NO_SUPPORT
-    else:
-        stance = np.empty((n_stance, 3))
-        j = 0
-        for leg in range(4):
-            if foot_contact[leg]:
-                for k in range(3):
-                    stance[j, k] = foot_points[leg, k]
-                j += 1
-        _moments_one(cog, cog_acc, stance, mass, g, moments[:n_stance])
-        scalars[0] = moments[:n_stance].min()
-
-    # Base pose and the terrain scan in the yaw-aligned base frame.
-    _quat_to_matrix(qpos[3:7], R)
-    for k in range(3):
-        base[k] = qpos[k]
-    yaw = math.atan2(R[1, 0], R[0, 0])
-    c, s = math.cos(yaw), math.sin(yaw)
-    n_scan = scan_B.shape[0]
-    xs = np.empty(n_scan)
-    ys = np.empty(n_scan)
-    for i in range(n_scan):
-        sx, sy = scan_B[i, 0], scan_B[i, 1]
-        xs[i] = base[0] + (c * sx - s * sy)
-        ys[i] = base[1] + (s * sx + c * sy)
-    _height_kernel(hf_flat, nrow, ncol, ox, oy, inv_cell, xs, ys, heights)
-    scalars[2] = heights[0]
-
-    # Observation, in OBS_ORDER.
-    norm = mass * g
-    o = obs_start
-    obs[o[0]] = base[2] - heights[0]
-    for k in range(3):
-        obs[o[1] + k] = -R[2, k]
-        obs[o[2] + k] = R[0, k] * qvel[0] + R[1, k] * qvel[1] + R[2, k] * qvel[2]
-        obs[o[3] + k] = qvel[3 + k]
-    for j in range(12):
-        obs[o[4] + j] = qpos[7 + j]
-        obs[o[5] + j] = qvel[6 + j]
-        obs[o[11] + j] = prev_action[j]
-    for leg in range(4):
-        obs[o[6] + leg] = 1.0 if foot_contact[leg] else 0.0
-    index_norm = scalars[0] / norm
-    obs[o[7]] = index_norm if math.isfinite(index_norm) else -STABILITY_CLIP
-    all_finite = True
-    for k in range(n_stance):
-        if not math.isfinite(moments[k]):
-            all_finite = False
-    for k in range(4):
-        if k < n_stance and all_finite:
-            obs[o[8] + k] = moments[k] / norm
-        elif n_stance > 0 and not all_finite:
-            obs[o[8] + k] = -STABILITY_CLIP
-        else:
-            obs[o[8] + k] = 0.0
-    obs[o[9]] = math.sin(clock_phase)
-    obs[o[9] + 1] = math.cos(clock_phase)
-    for i in range(1, n_scan):
-        obs[o[10] + i - 1] = heights[i] - base[2]
-    for i in range(obs.shape[0]):
-        obs[i] = min(max(obs[i], obs_low[i]), obs_high[i])
-
-
-@nb.njit(cache=False, nogil=True)
-def clip_finite_into(x, limit, out):  # pragma: no cover - compiled
-    """out = clip(x, -limit, limit) if every x is finite (returns True); else False and out untouched."""
-    for i in range(x.shape[0]):
-        if not math.isfinite(x[i]):
-            return False
-    for i in range(x.shape[0]):
-        out[i] = min(max(x[i], -limit[i]), limit[i])
-    return True

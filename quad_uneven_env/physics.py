@@ -186,6 +186,50 @@ def _contact_frame_forces(
     return out
 
 
+# ---------------------------------------------------------------------------- named state accessors
+# Views into MjData (no copies): copy what must outlive the next physics step.
+
+
+def base_pos_W(data: mujoco.MjData) -> np.ndarray:
+    """(3,) trunk origin, world frame (m)."""
+    return data.qpos[0:3]
+
+
+def base_quat(data: mujoco.MjData) -> np.ndarray:
+    """(4,) trunk orientation R_WB as a unit quaternion (w, x, y, z)."""
+    return data.qpos[3:7]
+
+
+def base_lin_vel_W(data: mujoco.MjData) -> np.ndarray:
+    """(3,) trunk origin velocity, world frame (m/s)."""
+    return data.qvel[0:3]
+
+
+def base_ang_vel_B(data: mujoco.MjData) -> np.ndarray:
+    """(3,) trunk angular velocity, base frame (rad/s)."""
+    return data.qvel[3:6]
+
+
+def joint_pos(data: mujoco.MjData) -> np.ndarray:
+    """(12,) joint angles (rad), LF RF LH RH x HAA HFE KFE."""
+    return data.qpos[7:]
+
+
+def joint_vel(data: mujoco.MjData) -> np.ndarray:
+    """(12,) joint velocities (rad/s), same order."""
+    return data.qvel[6:]
+
+
+def cog(data: mujoco.MjData, idx: RobotIndex) -> np.ndarray:
+    """(3,) whole-robot centre of mass, world frame (m), as of the last position stage."""
+    return data.subtree_com[idx.trunk_body]
+
+
+def feet_pos(data: mujoco.MjData, idx: RobotIndex) -> np.ndarray:
+    """(4, 3) foot points (sphere centres), world frame (m), leg order; a copy (fancy indexing)."""
+    return data.site_xpos[idx.foot_sites]
+
+
 def quat_to_rotation(quat_wxyz: np.ndarray) -> np.ndarray:
     """R_WB (3 x 3) of a (w, x, y, z) quaternion, via MuJoCo."""
     R = np.empty(9)

@@ -42,6 +42,7 @@ from agents.control.inverse_dynamics import DISTRIBUTIONS, IDResult, InverseDyna
 from agents.control.verify import IDCheck, verify_inverse_dynamics
 from planners.types import PACKED_FIELDS, ReferenceSample
 from quad_uneven_env import constants as C
+from quad_uneven_env.fields import check_fields, param
 from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
 from quad_uneven_env.robot.dynamics.base import DynamicsTerms, make_dynamics
 
@@ -58,34 +59,31 @@ __all__ = [
 ]
 
 STANCE_MODES: tuple[str, ...] = ("both", "planned", "measured")
-"""Allowed values of ``ComputedTorqueController(stance_mode=...)``; index = ``agents.control.controller_kernels`` code."""
+"""Allowed values of ``ComputedTorqueController(stance_mode=...)``; the index is the kernels' code."""
 
 _NO_TERRAIN = (np.empty(0), 0, 0, 0.0, 0.0, 0.0)
-"""height-field kernel arguments that tell :func:`agents.control.controller_kernels.control_step` to skip the normals."""
+"""height-field kernel arguments that tell ``controller_kernels.control_step`` to skip the normals."""
 
 
 @dataclasses.dataclass(frozen=True)
 class Gains:
     """PD gains of the computed-torque law (per unit mass/inertia: they act on accelerations)."""
 
-    kp_pos: float = 400.0
+    kp_pos: float = param(400.0, "1/s^2", lo=0.0)
     """1/s^2, base position."""
-    kd_pos: float = 40.0
+    kd_pos: float = param(40.0, "1/s", lo=0.0)
     """1/s, base linear velocity."""
-    kp_rot: float = 400.0
+    kp_rot: float = param(400.0, "1/s^2", lo=0.0)
     """1/s^2, base orientation (rotation vector)."""
-    kd_rot: float = 40.0
+    kd_rot: float = param(40.0, "1/s", lo=0.0)
     """1/s, base angular velocity."""
-    kp_joint: float = 900.0
+    kp_joint: float = param(900.0, "1/s^2", lo=0.0)
     """1/s^2, swing-leg joints."""
-    kd_joint: float = 60.0
+    kd_joint: float = param(60.0, "1/s", lo=0.0)
     """1/s, swing-leg joint velocities."""
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if not np.isfinite(v) or v < 0:
-                raise ValueError(f"Gains.{f.name} must be a finite number >= 0, got {v!r}")
+        check_fields(self)
 
 
 def foot_lookup(model: mujoco.MjModel) -> np.ndarray:

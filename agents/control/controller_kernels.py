@@ -17,7 +17,7 @@ import numba as nb
 
 from agents.control import inverse_dynamics_kernels as K
 from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
-from quad_uneven_env.terrain.heightfield import _normal_kernel
+from quad_uneven_env.terrain.heightfield_kernels import normals_into
 
 INSIDE_CONES = 1 << 16
 """bit of :func:`control_step`'s result: the pinv forces lie in every stance friction pyramid."""
@@ -83,7 +83,7 @@ def control_step(
         for i in range(foot_sites.shape[0]):
             for k in range(3):
                 site_pos[i, k] = site_xpos[foot_sites[i], k]
-        _normal_kernel(hf_flat, nrow, ncol, ox, oy, inv_cell, site_pos, normals)
+        normals_into(hf_flat, nrow, ncol, ox, oy, inv_cell, site_pos, normals)
         if mu > 0.0 and status > 0 and mask != 0:
             K.stance_pyramids_into(normals, mask, mu, cones)
             inside = True

@@ -26,6 +26,8 @@ import math
 import numba as nb
 import numpy as np
 
+from quad_uneven_env.spatial_kernels import inv3_into
+
 N_LEGS = 4
 NV = 18
 
@@ -35,28 +37,6 @@ _f3 = nb.float64[:, :, :]
 
 DONE, DAMPED, EXACT = 1, 2, 4
 """status bits of :func:`id_pinv` (0: not handled, use the numpy path)."""
-
-
-@nb.njit(nb.boolean(_f2, _f2), cache=False, nogil=True)
-def inv3(A, out):  # pragma: no cover - compiled
-    """out = A^-1 (3 x 3) by the adjugate; False (out untouched) if det(A) == 0."""
-    c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
-    c01 = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
-    c02 = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
-    det = A[0, 0] * c00 + A[0, 1] * c01 + A[0, 2] * c02
-    if det == 0.0:
-        return False
-    s = 1.0 / det
-    out[0, 0] = c00 * s
-    out[1, 0] = c01 * s
-    out[2, 0] = c02 * s
-    out[0, 1] = (A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]) * s
-    out[1, 1] = (A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]) * s
-    out[2, 1] = (A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]) * s
-    out[0, 2] = (A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]) * s
-    out[1, 2] = (A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]) * s
-    out[2, 2] = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]) * s
-    return True
 
 
 @nb.njit(nb.int64(_f2, _f1, _f3, _f2, nb.int64, _f1, nb.float64, nb.float64, _f1, _f2, _f1, _f1, _f3, _f3),
@@ -103,7 +83,7 @@ def id_pinv(M, h, J, Jdd, mask, bdd, inv_sigma, damping, tau, F, qacc, r, Jinv, 
             for a in range(3):
                 for b in range(3):
                     JL[a, b] = J[leg, a, c + b]
-            if inv3(JL, Jinv[leg]):
+            if inv3_into(JL, Jinv[leg]):
                 big = 0.0
                 for a in range(3):
                     for b in range(3):
@@ -127,7 +107,7 @@ def id_pinv(M, h, J, Jdd, mask, bdd, inv_sigma, damping, tau, F, qacc, r, Jinv, 
                     for k in range(3):
                         s += JL[k, a] * JL[k, b]
                     H[a, b] = s + (damping * damping if a == b else 0.0)
-            inv3(H, Hi)  # positive definite: det > 0
+            inv3_into(H, Hi)  # positive definite: det > 0
             for a in range(3):
                 for b in range(3):
                     s = 0.0
@@ -332,7 +312,7 @@ def clip_into(x, limit, out):  # pragma: no cover - compiled
 
 @nb.njit(nb.boolean(_f3, nb.int64, _f1, _f2, _f3, _f1, _f2, _f1, _f2, _f1, _f2, _f1), cache=False, nogil=True)
 def qp_fill(J, mask, r, F0, cones, lower, H, g, A, b, C, l):  # pragma: no cover - compiled
-    """The "qp" problem in the stance forces x = [F_i]_i (see ``agents.control.inverse_dynamics``), into preallocated arrays.
+    """The "qp" problem in the stance forces x = [F_i]_i (see ``inverse_dynamics``), into preallocated arrays.
 
     H = blockdiag(J_L,i J_L,i^T) + 1e-9 I, g = -blockdiag(J_L,i J_L,i^T) F0, A = [J_b,i^T]_i,
     b = r[:6], C = blockdiag(cones[k]) (k-th stance leg), l = lower per leg.
@@ -421,7 +401,7 @@ def qp_apply(x, C, l, A, b, J, mask, r, tau, F):  # pragma: no cover - compiled
 
 @nb.njit(nb.void(_f2, nb.float64, _f3), cache=False, nogil=True)
 def friction_pyramid_into(normals, mu, out):  # pragma: no cover - compiled
-    """out (p, 5, 3): ``mu' n - t1, mu' n + t1, mu' n - t2, mu' n + t2, n`` per normal (``agents.control.inverse_dynamics``)."""
+    """out (p, 5, 3): ``mu' n - t1, mu' n + t1, mu' n - t2, mu' n + t2, n`` per normal (``inverse_dynamics``)."""
     mus = mu / math.sqrt(2.0)
     for i in range(normals.shape[0]):
         nn = math.sqrt(normals[i, 0] ** 2 + normals[i, 1] ** 2 + normals[i, 2] ** 2)

@@ -18,7 +18,6 @@ Terrain parameters are validated by :func:`quad_uneven_env.terrain.parse_terrain
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import re
 from collections.abc import Mapping
@@ -26,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from quad_uneven_env.config import CONFIG_DIR, read_yaml, resolve_config_path
+from quad_uneven_env.fields import REQUIRED, Param
 from quad_uneven_env.terrain import TERRAIN_KINDS, parse_terrain_spec
 from quad_uneven_env.terrain.kinds import KINDS
 
@@ -121,10 +121,18 @@ def load_suite(name_or_path: str | os.PathLike[str]) -> Suite:
     return suite_from_dict(raw, source=str(path))
 
 
-def _number(value: Any, field: str, lo: float = 0.0) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= lo:
-        raise SuiteError(f"{field} must be a finite number > {lo:g}, got {value!r}")
-    return float(value)
+GOAL_DISTANCE = Param("goal_distance", REQUIRED, "m", "distance along +x from the spawn point", lo=0.0, hi=500.0,
+                      lo_open=True)  # fmt: skip
+TIME_LIMIT = Param("time_limit", REQUIRED, "s", "simulated seconds per episode", lo=0.0, hi=3600.0, lo_open=True)
+SEED = Param("seed", REQUIRED, "-", "terrain and reset seed", kind="int", lo=0, hi=2**63 - 1)
+
+
+def _check(p: Param, value: Any, where: str = "") -> Any:
+    """``p.check`` with the error as a :class:`SuiteError`."""
+    try:
+        return p.check(value, where)
+    except ValueError as e:
+        raise SuiteError(str(e)) from None
 
 
 def _rename_terrain_error(msg: str, i: int) -> str:
@@ -140,9 +148,7 @@ def _rename_terrain_error(msg: str, i: int) -> str:
 def _seeds(value: Any, field: str) -> tuple[int, ...]:
     if not isinstance(value, list) or not value:
         raise SuiteError(f"{field} must be a non-empty list of integers >= 0, got {value!r}")
-    for k, s in enumerate(value):
-        if isinstance(s, bool) or not isinstance(s, int) or s < 0:
-            raise SuiteError(f"{field}[{k}] must be an integer >= 0, got {s!r}")
+    value = [_check(dataclasses.replace(SEED, name=f"{field}[{k}]"), s) for k, s in enumerate(value)]
     if len(set(value)) != len(value):
         raise SuiteError(f"{field} must not repeat a seed, got {value!r}")
     return tuple(int(s) for s in value)
@@ -199,8 +205,8 @@ def suite_from_dict(raw: Mapping[str, Any], source: str = "") -> Suite:
     name = raw["name"]
     if not isinstance(name, str) or not name.strip():
         raise SuiteError(f"name must be a non-empty string, got {name!r}")
-    goal = _number(raw["goal_distance"], "goal_distance")
-    limit = _number(raw["time_limit"], "time_limit")
+    goal = _check(GOAL_DISTANCE, raw["goal_distance"])
+    limit = _check(TIME_LIMIT, raw["time_limit"])
     terrains = raw["terrains"]
     if not isinstance(terrains, list) or not terrains:
         raise SuiteError(f"terrains must be a non-empty list of {{kind, params, seeds}} entries, got {terrains!r}")

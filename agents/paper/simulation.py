@@ -30,6 +30,7 @@ from planners.cycle import GaitCyclePlan
 from planners.reference import Reference, aim_feet_below_footholds
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
+from quad_uneven_env import physics
 
 DISTRIBUTIONS = ("qp", "pinv")
 """Torque distributions offered on the command line ("qp": friction-cone aware; "pinv": the paper's)."""
@@ -170,8 +171,8 @@ def run_paper_sim(config: PaperRunConfig | None = None, progress: bool = True) -
     d.qpos[:] = s0.qpos
     d.qvel[:] = 0.0
     mujoco.mj_forward(m, d)
-    start_err = d.site_xpos[idx.foot_sites] - reference.sites_start
-    cog_start = d.subtree_com[idx.trunk_body].copy()
+    start_err = physics.feet_pos(d, idx) - reference.sites_start
+    cog_start = physics.cog(d, idx).copy()
     hook = PaperReference(reference, cfg.settle, cfg.touchdown_depth, d, idx)
     controller = ComputedTorqueController(hook, distribution=cfg.distribution, gains=Gains())
     controller.reset(m, d, u.terrain)
@@ -183,7 +184,7 @@ def run_paper_sim(config: PaperRunConfig | None = None, progress: bool = True) -
         _, _, term, _, info = u.step(zero)
         if term:
             break
-    settle_drift = float(np.linalg.norm(d.subtree_com[idx.trunk_body] - cog_start))
+    settle_drift = float(np.linalg.norm(physics.cog(d, idx) - cog_start))
     run_time = plan.duration + cfg.hold if cfg.duration is None else min(cfg.duration, plan.duration + cfg.hold)
     n = round(run_time / dt)
     rec = _Recorder(n, m, idx)

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from quad_uneven_env.config import CONFIG_DIR, read_yaml
+from quad_uneven_env.fields import check_fields, param
 from quad_uneven_env.terrain import parse_terrain_spec
 
 RL_CONFIG_DIR = CONFIG_DIR / "rl"
@@ -37,35 +38,35 @@ class TrainConfigError(ValueError):
 class TrainConfig:
     """Everything one training run needs (SI units; steps are control steps of 20 ms)."""
 
-    algo: str = "ppo"
+    algo: str = param("ppo", kind="choice", choices=ALGOS)
     """``ppo`` or ``sac``."""
     terrain: str = "rough"
     """terrain kind, preset (``configs/terrain/``) or YAML path; a new surface is drawn at every reset."""
-    timesteps: int = 100_000
+    timesteps: int = param(100_000, "steps", kind="int", lo=1)
     """total environment steps over all parallel envs."""
-    time_limit_min: float = 0.0
+    time_limit_min: float = param(0.0, "min", lo=0.0, hi=1e6, hi_open=True)
     """wall-clock budget of the training loop (minutes); training stops there and saves; 0: none."""
-    seed: int = 0
+    seed: int = param(0, kind="int", lo=0)
     """seed of the model and of the envs (env i gets seed + i; the evaluation env seed + 1000)."""
-    n_envs: int = 2
+    n_envs: int = param(2, kind="int", lo=1, hi=1024)
     """parallel training envs."""
-    vec_env: str = "auto"
+    vec_env: str = param("auto", kind="choice", choices=VEC_ENVS)
     """``auto``, ``dummy`` or ``subproc``."""
-    residual_scale: float = 0.1
+    residual_scale: float = param(0.1, "of the torque limit", lo=0.0, hi=1.0, lo_open=True)
     """residual torque per unit action as a fraction of the torque limit, in (0, 1]."""
-    max_episode_steps: int = 1000
+    max_episode_steps: int = param(1000, "steps", kind="int", lo=1)
     """control steps per training episode (1000 = 20 s)."""
     env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
     """extra QuadUneven-v0 arguments (e.g. ``reward_weights``), also used by ``quad-uneven evaluate``."""
-    normalize_obs: bool = True
+    normalize_obs: bool = param(True, kind="bool")
     """VecNormalize the observations (statistics saved next to the model)."""
-    normalize_reward: bool = True
+    normalize_reward: bool = param(True, kind="bool")
     """VecNormalize the rewards (training only)."""
-    eval_freq: int = 20_000
+    eval_freq: int = param(20_000, "steps", kind="int", lo=0)
     """env steps (all envs) between evaluations of the deterministic policy; 0: none."""
-    eval_episodes: int = 2
+    eval_episodes: int = param(2, kind="int", lo=1)
     """episodes per evaluation."""
-    checkpoint_freq: int = 50_000
+    checkpoint_freq: int = param(50_000, "steps", kind="int", lo=0)
     """env steps (all envs) between checkpoints; 0: none."""
     hyperparams: dict[str, Any] = dataclasses.field(default_factory=dict)
     """keyword arguments of the SB3 algorithm class (``learning_rate``, ``n_steps``, ...)."""
@@ -75,18 +76,6 @@ class TrainConfig:
     def to_dict(self) -> dict[str, Any]:
         """A JSON-serialisable copy."""
         return dataclasses.asdict(self)
-
-
-def _int(name: str, value: Any, low: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise TrainConfigError(f"{name} must be an integer >= {low}, got {value!r}")
-    return int(value)
-
-
-def _bool(name: str, value: Any) -> bool:
-    if not isinstance(value, bool):
-        raise TrainConfigError(f"{name} must be true or false, got {value!r}")
-    return value
 
 
 def _mapping(name: str, value: Any) -> dict[str, Any]:
@@ -102,29 +91,14 @@ def validate(cfg: TrainConfig) -> TrainConfig:
 
     :raises TrainConfigError: naming the first invalid field and its allowed values.
     """
-    if cfg.algo not in ALGOS:
-        raise TrainConfigError(f"algo must be one of {list(ALGOS)}, got {cfg.algo!r}")
-    if cfg.vec_env not in VEC_ENVS:
-        raise TrainConfigError(f"vec_env must be one of {list(VEC_ENVS)}, got {cfg.vec_env!r}")
+    try:
+        check_fields(cfg, where="")
+    except ValueError as err:
+        raise TrainConfigError(str(err)) from None
     try:
         parse_terrain_spec(cfg.terrain)
     except ValueError as err:
         raise TrainConfigError(f"terrain: {err}") from None
-    _int("timesteps", cfg.timesteps, 1)
-    _int("seed", cfg.seed, 0)
-    _int("n_envs", cfg.n_envs, 1)
-    _int("max_episode_steps", cfg.max_episode_steps, 1)
-    _int("eval_freq", cfg.eval_freq, 0)
-    _int("eval_episodes", cfg.eval_episodes, 1)
-    _int("checkpoint_freq", cfg.checkpoint_freq, 0)
-    scale = cfg.residual_scale
-    if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0.0 < scale <= 1.0:
-        raise TrainConfigError(f"residual_scale must be a number in (0, 1] (of the torque limit), got {scale!r}")
-    limit = cfg.time_limit_min
-    if isinstance(limit, bool) or not isinstance(limit, int | float) or not 0.0 <= limit < 1e6:
-        raise TrainConfigError(f"time_limit_min must be a number of minutes >= 0 (0: none), got {limit!r}")
-    _bool("normalize_obs", cfg.normalize_obs)
-    _bool("normalize_reward", cfg.normalize_reward)
     env_kwargs = _mapping("env_kwargs", cfg.env_kwargs)
     bad = sorted(set(env_kwargs) & set(FORBIDDEN_ENV_KWARGS))
     if bad:

@@ -10,17 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def quat_wxyz_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrix R_WB (3 x 3) of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = np.asarray(quat_wxyz, dtype=float) / np.linalg.norm(quat_wxyz)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+from quad_uneven_env.spatial import quat_to_matrix
 
 
 def qpos_mj_to_pin(qpos: np.ndarray) -> np.ndarray:
@@ -43,27 +33,27 @@ def velocity_map(qpos: np.ndarray) -> np.ndarray:
     """T (nv x nv) with ``qvel_mj = T @ v_pin``: the base block is R_WB, the rest identity."""
     nv = len(qpos) - 1
     T = np.eye(nv)
-    T[:3, :3] = quat_wxyz_to_matrix(qpos[3:7])
+    T[:3, :3] = quat_to_matrix(qpos[3:7])
     return T
 
 
 def qvel_mj_to_pin(qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
     """MuJoCo qvel -> Pinocchio v: the base linear velocity rotated into the base frame."""
     v = np.array(qvel, dtype=float)
-    v[:3] = quat_wxyz_to_matrix(qpos[3:7]).T @ v[:3]
+    v[:3] = quat_to_matrix(qpos[3:7]).T @ v[:3]
     return v
 
 
 def qvel_pin_to_mj(qpos: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Pinocchio v -> MuJoCo qvel: the base linear velocity rotated into the world frame."""
     qvel = np.array(v, dtype=float)
-    qvel[:3] = quat_wxyz_to_matrix(qpos[3:7]) @ qvel[:3]
+    qvel[:3] = quat_to_matrix(qpos[3:7]) @ qvel[:3]
     return qvel
 
 
 def qacc_pin_to_mj(qpos: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
     """Pinocchio a (d/dt of v) -> MuJoCo qacc: ``T a + Tdot v`` with ``Tdot v = R (omega_B x v_B)``."""
-    R = quat_wxyz_to_matrix(qpos[3:7])
+    R = quat_to_matrix(qpos[3:7])
     qacc = np.array(a, dtype=float)
     qacc[:3] = R @ (a[:3] + np.cross(v[3:6], v[:3]))
     return qacc
@@ -71,7 +61,7 @@ def qacc_pin_to_mj(qpos: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray
 
 def qacc_mj_to_pin(qpos: np.ndarray, qvel: np.ndarray, qacc: np.ndarray) -> np.ndarray:
     """MuJoCo qacc -> Pinocchio a, the inverse of :func:`qacc_pin_to_mj`."""
-    R = quat_wxyz_to_matrix(qpos[3:7])
+    R = quat_to_matrix(qpos[3:7])
     v_B = R.T @ np.asarray(qvel[:3], dtype=float)
     a = np.array(qacc, dtype=float)
     a[:3] = R.T @ qacc[:3] - np.cross(qvel[3:6], v_B)

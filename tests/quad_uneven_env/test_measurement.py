@@ -119,7 +119,7 @@ def test_kernel_with_a_yawed_base_and_without_support(lift):
 
 
 def test_clip_finite_into():
-    from quad_uneven_env.measurement import clip_finite_into
+    from quad_uneven_env.measurement_kernels import clip_finite_into
 
     lim = np.array([1.0, 2.0, 3.0])
     out = np.full(3, 7.0)

@@ -105,7 +105,7 @@ def test_convention_roundtrip(rng):
     # Against MuJoCo's own quaternion -> matrix.
     R = np.zeros(9)
     mujoco.mju_quat2Mat(R, qpos[3:7])
-    np.testing.assert_allclose(conv.quat_wxyz_to_matrix(qpos[3:7]), R.reshape(3, 3), atol=1e-14)
+    np.testing.assert_allclose(conv.quat_to_matrix(qpos[3:7]), R.reshape(3, 3), atol=1e-14)
 
 
 def test_qacc_conversion_matches_finite_difference(rng):

@@ -37,6 +37,7 @@ import numpy as np
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot.dynamics.base import DynamicsTerms
 from quad_uneven_env.robot.dynamics.explicit_kernels import explicit_terms
+from quad_uneven_env.spatial import cross, quat_to_matrix
 
 _TOL = 1e-12
 _AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0))  # HAA, HFE, KFE
@@ -58,41 +59,6 @@ _PT = (1 + np.arange(12))[:, None, None]  # point index of leg point (leg, pt) =
 _ROW3 = np.arange(3)[None, :, None]
 _LEGCOL = (6 + 3 * (np.arange(12) // 3))[:, None, None] + np.arange(3)[None, None, :]
 _FEET = 1 + 3 * np.arange(4) + 2
-
-
-def _cross(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """x × y over the last axis (broadcasting); cheaper than np.cross for tiny arrays."""
-    return x[..., _IDX1] * y[..., _IDX2] - x[..., _IDX2] * y[..., _IDX1]
-
-
-def _quat_matrix_map() -> np.ndarray:
-    """K (16, 9): vec(R) = vec(q q^T) K / |q|^2 for a quaternion q = (w, x, y, z), R = R_WB."""
-    K = np.zeros((4, 4, 9))
-    w, x, y, z = range(4)
-    diag = {0: (1, 1, -1, -1), 4: (1, -1, 1, -1), 8: (1, -1, -1, 1)}
-    for e, signs in diag.items():
-        for i, sg in enumerate(signs):
-            K[i, i, e] = sg
-    for e, terms in {
-        1: ((x, y, 2), (w, z, -2)),
-        2: ((x, z, 2), (w, y, 2)),
-        3: ((x, y, 2), (w, z, 2)),
-        5: ((y, z, 2), (w, x, -2)),
-        6: ((x, z, 2), (w, y, -2)),
-        7: ((y, z, 2), (w, x, 2)),
-    }.items():
-        for i, j, c in terms:
-            K[i, j, e] = c
-    return K.reshape(16, 9)
-
-
-_QK = _quat_matrix_map()
-
-
-def _quat_to_R(quat: np.ndarray) -> np.ndarray:
-    """R_WB (N, 3, 3) of quaternions (N, 4) (w, x, y, z), normalised here."""
-    Q = quat[:, :, None] * quat[:, None, :]
-    return ((Q.reshape(-1, 16) @ _QK) / np.einsum("ni,ni->n", quat, quat)[:, None]).reshape(-1, 3, 3)
 
 
 def _check_axis(model: mujoco.MjModel, name: str, axis: tuple[float, float, float]) -> int:
@@ -211,7 +177,7 @@ class ExplicitDynamics:
     def _terms(self, qpos: np.ndarray, qvel: np.ndarray) -> tuple[np.ndarray, ...]:
         """All 13 points (trunk COM, per leg thigh COM, shank COM, foot) in one stacked pass."""
         N = qpos.shape[0]
-        R = _quat_to_R(qpos[:, 3:7])  # (N, 3, 3) R_WB
+        R = quat_to_matrix(qpos[:, 3:7])  # (N, 3, 3) R_WB
         Rt = np.swapaxes(R, -1, -2)
         w = qvel[:, 3:6]  # (N, 3) base angular velocity, B frame
         WxT = np.zeros((N, 1, 3, 3))  # [w]x^T: v @ WxT = w x v
@@ -259,7 +225,7 @@ class ExplicitDynamics:
         Ry[..., _RY_ROWS, _RY_COLS] = np.stack([ct, st, -st, ct], -1)
         R_Bl = Rx[:, :, None] @ Ry
         I_B = R_Bl @ self.I_pts @ np.swapaxes(R_Bl, -1, -2)  # (N, 4, 3pts, 3, 3)
-        tau = (I_B @ alpha[..., None])[..., 0] + _cross(w_link, (I_B @ w_link[..., None])[..., 0])
+        tau = (I_B @ alpha[..., None])[..., 0] + cross(w_link, (I_B @ w_link[..., None])[..., 0])
 
         # ---- stacked Jacobians of the 13 points, B frame: rows (v, w), 18 columns
         r_all = np.concatenate([np.broadcast_to(self.r_trunk_B, (N, 1, 3)), r.reshape(N, 12, 3)], 1)

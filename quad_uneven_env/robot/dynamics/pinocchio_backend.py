@@ -19,9 +19,10 @@ import pinocchio as pin
 
 from quad_uneven_env import constants as C
 from quad_uneven_env.config import RobotConfig, load_robot_config
-from quad_uneven_env.robot.conventions import qacc_mj_to_pin, qpos_mj_to_pin, quat_wxyz_to_matrix, qvel_mj_to_pin
+from quad_uneven_env.robot.conventions import qacc_mj_to_pin, qpos_mj_to_pin, qvel_mj_to_pin
 from quad_uneven_env.robot.dynamics.base import DynamicsTerms
 from quad_uneven_env.robot.model import robot_mjcf
+from quad_uneven_env.spatial import quat_to_matrix
 
 
 def build_pinocchio_model(cfg: RobotConfig) -> pin.Model:
@@ -65,7 +66,7 @@ class PinocchioDynamics:
         q[3:7] /= np.linalg.norm(q[3:7])
         v = qvel_mj_to_pin(qpos, qvel)
         a0 = qacc_mj_to_pin(qpos, qvel, np.zeros_like(qvel))
-        R = quat_wxyz_to_matrix(qpos[3:7])
+        R = quat_to_matrix(qpos[3:7])
         M_pin = pin.crba(model, data, q).copy()
         M_pin = np.triu(M_pin) + np.triu(M_pin, 1).T
         f_pin = pin.rnea(model, data, q, v, a0).copy()

@@ -1,0 +1,171 @@
+"""The one set of field validators: a declaration per field gives its check, its error message and its docs row.
+
+:class:`Param` declares a field (default, unit, allowed range or choices, meaning); every config of the
+project is validated through it, so every bad value raises the same ``ValueError``:
+``where.field must be <allowed> (<unit>), got <value>``.
+
+- terrain kinds list their parameters as ``Param`` objects (:mod:`quad_uneven_env.terrain.params`);
+- frozen config dataclasses declare fields with :func:`param` and call :func:`check_fields` in
+  ``__post_init__``; :func:`from_mapping` builds one from a user's mapping, rejecting unknown keys.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from collections.abc import Mapping
+from typing import Any, TypeVar
+
+import numpy as np
+
+REQUIRED = object()
+"""Sentinel default of a parameter the user must give."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Param:
+    """One validated field: terrain parameter or config dataclass field.
+
+    ``kind`` is ``"float"``, ``"int"``, ``"bool"``, ``"choice"`` (one of ``choices``), ``"xy"`` (a
+    finite (x, y) pair or None) or ``"array"`` (validated by its owner).
+    """
+
+    name: str
+    """parameter name (key in the spec's params)."""
+    default: Any
+    """default value, or ``REQUIRED``."""
+    unit: str
+    """unit as printed in the docs ("m", "deg", "-")."""
+    doc: str
+    """one-line meaning."""
+    kind: str = "float"
+    """value type, see the class docstring."""
+    lo: float | None = None
+    """lower bound (None: unbounded)."""
+    hi: float | None = None
+    """upper bound (None: unbounded)."""
+    lo_open: bool = False
+    """True: the lower bound is excluded."""
+    hi_open: bool = False
+    """True: the upper bound is excluded."""
+    choices: tuple[str, ...] = ()
+    """allowed values of a ``"choice"`` parameter."""
+
+    def allowed(self) -> str:
+        """Human-readable allowed values, e.g. ``"(0, 30]"`` or ``"one of ['up', 'down']"``."""
+        if self.kind == "choice":
+            return f"one of {list(self.choices)}"
+        if self.kind == "xy":
+            return "a finite (x, y) pair or null"
+        if self.kind == "array":
+            return "a 2-D array or the path of a .npy file"
+        if self.kind == "bool":
+            return "true or false"
+        lo = "-inf" if self.lo is None else f"{self.lo:g}"
+        hi = "inf" if self.hi is None else f"{self.hi:g}"
+        left = "(" if self.lo_open or self.lo is None else "["
+        right = ")" if self.hi_open or self.hi is None else "]"
+        kind = "integer" if self.kind == "int" else "number"
+        return f"{kind} in {left}{lo}, {hi}{right}"
+
+    def check(self, value: Any, where: str) -> Any:
+        """Validated, normalised ``value`` (float, int, bool, str or tuple); ValueError naming ``where.name``.
+
+        Booleans are not numbers, and a number must be finite and in range before anything else uses it.
+        """
+        field = f"{where}.{self.name}" if where else self.name
+        if self.kind == "bool":
+            if not isinstance(value, bool | np.bool_):
+                raise ValueError(f"{field} must be {self.allowed()}, got {value!r} of type {type(value).__name__}")
+            return bool(value)
+        if self.kind == "choice":
+            if not isinstance(value, str) or value not in self.choices:
+                raise ValueError(f"{field} must be {self.allowed()}, got {value!r}")
+            return value
+        if self.kind == "xy":
+            if value is None:
+                return None
+            try:
+                pair = tuple(float(v) for v in value)
+            except (TypeError, ValueError):
+                pair = ()
+            if len(pair) != 2 or not all(math.isfinite(v) for v in pair):
+                raise ValueError(f"{field} must be {self.allowed()} (m), got {value!r}")
+            return pair
+        if self.kind == "array":
+            return value
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise ValueError(
+                f"{field} must be a {self.allowed()}{self._unit()}, got {value!r} of type {type(value).__name__}"
+            )
+        v = float(value)
+        if self.kind == "int":
+            if not math.isfinite(v) or v != int(v):
+                raise ValueError(f"{field} must be an {self.allowed()}, got {value!r}")
+            v = int(v)
+        if not math.isfinite(v) or not self._in_range(v):
+            raise ValueError(f"{field} must be a {self.allowed()}{self._unit()}, got {value!r}")
+        return v
+
+    def _unit(self) -> str:
+        return "" if self.unit in ("", "-") else f" ({self.unit})"
+
+    def _in_range(self, v: float) -> bool:
+        if self.lo is not None and (v < self.lo or (self.lo_open and v == self.lo)):
+            return False
+        return not (self.hi is not None and (v > self.hi or (self.hi_open and v == self.hi)))
+
+
+_META = "quad_uneven_param"
+T = TypeVar("T")
+
+
+def param(default: Any, unit: str = "-", doc: str = "", **check: Any) -> Any:
+    """A dataclass field with default ``default`` whose value is checked by a :class:`Param`.
+
+    :param check: ``kind``, ``lo``, ``hi``, ``lo_open``, ``hi_open``, ``choices`` of :class:`Param`.
+    """
+    return dataclasses.field(default=default, metadata={_META: Param("", default, unit, doc, **check)})
+
+
+def params_of(cls: type) -> tuple[Param, ...]:
+    """The :class:`Param` of every field of dataclass ``cls`` declared with :func:`param`, named."""
+    return tuple(
+        dataclasses.replace(f.metadata[_META], name=f.name) for f in dataclasses.fields(cls) if _META in f.metadata
+    )
+
+
+def check_fields(obj: Any, where: str | None = None) -> None:
+    """Check (and normalise in place: ints to floats, numpy bools to bools) every :func:`param` field of ``obj``.
+
+    :param where: prefix of the error messages (default: the class name).
+    :raises ValueError: ``where.field must be <allowed>, got <value>``.
+    """
+    where = type(obj).__name__ if where is None else where
+    for p in params_of(type(obj)):
+        object.__setattr__(obj, p.name, p.check(getattr(obj, p.name), where))
+
+
+def from_mapping(cls: type[T], raw: Mapping[str, Any] | T | None, where: str) -> T:
+    """An instance of the frozen config dataclass ``cls`` from ``raw`` (None: the defaults; an instance: itself).
+
+    :raises ValueError: on a non-mapping, an unknown key (listing the allowed ones) or a bad value,
+        each message starting with ``where``.
+    """
+    if raw is None:
+        return cls()
+    if isinstance(raw, cls):
+        return raw
+    names = [f.name for f in dataclasses.fields(cls)]  # type: ignore[arg-type]
+    if not isinstance(raw, Mapping):
+        raise ValueError(f"{where} must be a mapping with keys from {sorted(names)}, got {raw!r}")
+    unknown = sorted(set(raw) - set(names))
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {unknown}; allowed: {sorted(names)}")
+    checks = {p.name: p for p in params_of(cls)}
+    values = {k: checks[k].check(v, where) if k in checks else v for k, v in raw.items()}
+    try:
+        return cls(**values)
+    except ValueError as err:  # cross-field checks of __post_init__ name the class: name ``where`` instead
+        raise ValueError(str(err).replace(f"{cls.__name__}.", f"{where}.", 1)) from None
