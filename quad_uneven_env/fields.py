@@ -97,7 +97,7 @@ class Param:
             return value
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
             raise ValueError(
-                f"{field} must be a {self.allowed()}{self._unit()}, got {value!r} of type {type(value).__name__}"
+                f"{field} must be {self._a()}{self._unit()}, got {value!r} of type {type(value).__name__}"
             )
         v = float(value)
         if self.kind == "int":
@@ -105,8 +105,12 @@ class Param:
                 raise ValueError(f"{field} must be an {self.allowed()}, got {value!r}")
             v = int(v)
         if not math.isfinite(v) or not self._in_range(v):
-            raise ValueError(f"{field} must be a {self.allowed()}{self._unit()}, got {value!r}")
+            raise ValueError(f"{field} must be {self._a()}{self._unit()}, got {value!r}")
         return v
+
+    def _a(self) -> str:
+        text = self.allowed()
+        return f"an {text}" if text[0] in "aeiou" else f"a {text}"
 
     def _unit(self) -> str:
         return "" if self.unit in ("", "-") else f" ({self.unit})"

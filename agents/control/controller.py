@@ -35,12 +35,12 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from agents.control import controller_kernels as FK
 from agents.control import inverse_dynamics_kernels as K
-from agents.control.elimination import DAMPING, SINGULAR_SIGMA, ProjectedDynamics, eliminate_constraints, stance_layout
-from agents.control.inverse_dynamics import DISTRIBUTIONS, IDResult, InverseDynamics, friction_pyramid
+from agents.control.elimination import ProjectedDynamics, eliminate_constraints, stance_layout
+from agents.control.fast_path import FastControlStep, PackedReference
+from agents.control.inverse_dynamics import DISTRIBUTIONS, IDResult, InverseDynamics, WorkspaceResult, friction_pyramid
 from agents.control.verify import IDCheck, verify_inverse_dynamics
-from planners.types import PACKED_FIELDS, ReferenceSample
+from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env.fields import check_fields, param
 from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
@@ -60,9 +60,6 @@ __all__ = [
 
 STANCE_MODES: tuple[str, ...] = ("both", "planned", "measured")
 """Allowed values of ``ComputedTorqueController(stance_mode=...)``; the index is the kernels' code."""
-
-_NO_TERRAIN = (np.empty(0), 0, 0, 0.0, 0.0, 0.0)
-"""height-field kernel arguments that tell ``controller_kernels.control_step`` to skip the normals."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -124,7 +121,7 @@ class ComputedTorqueController:
         with ``row`` the same sample packed as :data:`planners.types.PACKED_FIELDS` (55,) and
         ``planned`` its stance bitmask, or None where only ``reference`` applies. With the
         "mujoco" backend the controller then runs one compiled call per step
-        (:mod:`agents.control.controller_kernels`) and gives the same torques.
+        (:class:`agents.control.fast_path.FastControlStep`) and gives the same torques.
     """
 
     def __init__(
@@ -151,41 +148,27 @@ class ComputedTorqueController:
         self.t0 = 0.0
         self.terrain: Any = None
         self._model: mujoco.MjModel | None = None
-        self._last: IDResult | tuple[int, Any] | None = None
-        self._last_reference: ReferenceSample | tuple[float, np.ndarray, int] | None = None
+        self._fast: FastControlStep | None = None
+        self._last: IDResult | WorkspaceResult | None = None
+        self._last_reference: ReferenceSample | PackedReference | None = None
         self._bdd = np.empty(C.NV)
         self._stance_memo: dict = {}
 
     @property
     def last(self) -> IDResult | None:
-        """The inverse-dynamics result of the last call (diagnostics)."""
+        """The inverse-dynamics result of the last call (diagnostics; read it before the next call)."""
         last = self._last
-        if isinstance(last, tuple):  # fast path, pinv forces inside the cones: built on demand
-            status, lay, version = last
-            if version != self.id.ws_version:
-                raise RuntimeError(
-                    "controller.last: the inverse-dynamics buffers were reused since; read it right after the call"
-                )
-            ws = self.id._ws
-            last = self._last = IDResult(
-                ws[0].copy(), ws[1].copy(), ws[2].copy(), lay.stance,
-                "qp" if self.distribution == "qp" and lay.n_stance else "pinv",
-                exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
-            )  # fmt: skip
+        if isinstance(last, WorkspaceResult):  # fast path, pinv forces inside the cones: built on demand
+            distribution = "qp" if self.distribution == "qp" and last.layout.n_stance else "pinv"
+            last = self._last = last.build(self.id, distribution)
         return last
 
     @property
     def last_reference(self) -> ReferenceSample | None:
         """The reference sample of the last call (diagnostics)."""
         last = self._last_reference
-        if isinstance(last, tuple):  # fast path: unpack the row on demand
-            t, row, planned = last
-            parts, k = [], 0
-            for _, n in PACKED_FIELDS:
-                parts.append(row[k : k + n].copy())
-                k += n
-            stance = tuple(bool(planned >> i & 1) for i in range(C.N_LEGS))
-            last = self._last_reference = ReferenceSample(t, *parts, stance)  # type: ignore[arg-type]
+        if isinstance(last, PackedReference):  # fast path: unpacked on demand
+            last = self._last_reference = last.unpack()
         return last
 
     @property
@@ -212,7 +195,7 @@ class ComputedTorqueController:
         self.terrain_geom = model.geom(C.TERRAIN_GEOM).id
         self._foot_sites = np.array([model.site(s).id for s in C.FOOT_SITES])
         self._normal_buf = np.empty((C.N_LEGS, 3))
-        # buffers of the compiled mujoco-backend path: M, J_feet, Jdot qdot, G
+        # buffers of the mujoco-backend terms on the readable path: M, J_feet, Jdot qdot, G
         self._terms_buf = (
             np.empty((C.NV, C.NV)),
             np.empty((C.N_LEGS, 3, C.NV)),
@@ -220,9 +203,12 @@ class ComputedTorqueController:
             np.empty(C.NV),
         )
         self._stance_memo.clear()
-        self._site_buf = np.empty((C.N_LEGS, 3))
-        self._fast_cache: tuple | None = None
-        self._layouts = [stance_layout(tuple(bool(m >> i & 1) for i in range(C.N_LEGS))) for m in range(16)]
+        self._fast = None
+        if self.backend == "mujoco":
+            self._fast = FastControlStep(
+                model, self.dynamics, self.id,
+                self.foot_of_geom, self.terrain_geom, self.torque_limit,
+            )  # fmt: skip
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any = None) -> None:
         """Bind to ``model``, restart the reference clock at ``data.time``, keep ``terrain`` for normals."""
@@ -237,11 +223,13 @@ class ComputedTorqueController:
         if model is not self._model:
             self._bind(model)
         t = float(data.time) - self.t0
-        if self.reference_row is not None and self.backend == "mujoco":
+        if self.reference_row is not None and self._fast is not None:
             packed = self.reference_row(t)
             if packed is not None:
-                tau = self._fast_step(data, t, *packed)
-                if tau is not None:
+                fast = self._fast.step(data, self.terrain, self._gains, STANCE_MODES.index(self.stance_mode), *packed)
+                if fast is not None:
+                    tau, self._last = fast
+                    self._last_reference = PackedReference(t, *packed)
                     return tau
         ref = self.reference(t)
         meas = K.foot_contact_mask(data.contact.geom, self.foot_of_geom, self.terrain_geom) if data.ncon else 0
@@ -270,55 +258,6 @@ class ComputedTorqueController:
         tau = np.empty(C.N_JOINTS)
         K.clip_into(result.tau, self.torque_limit, tau)
         return tau
-
-    def _fast_step(self, data: mujoco.MjData, t: float, row: np.ndarray, planned: int) -> np.ndarray | None:
-        """:meth:`__call__` from a packed reference row by one compiled call (:mod:`agents.control.controller_kernels`);
-        None where the general path is needed (1-2 stance feet, a failed Cholesky, a malformed row)."""
-        tail, normals = self._fast_arguments(data)
-        self.id.ws_version += 1  # control_step rewrites the inverse-dynamics buffers
-        try:
-            code = FK.control_step(
-                row, planned, STANCE_MODES.index(self.stance_mode),
-                data.contact.geom, self.foot_of_geom, self.terrain_geom, *tail,
-            )  # fmt: skip
-        except TypeError:  # arrays the kernel does not take (numba dispatch): the general path
-            return None
-        if code < 0 or not (code >> 4) & K.DONE:
-            return None
-        lay = self._layouts[code & 15]
-        status, ws = code >> 4, self.id._ws
-        self._last_reference = (t, row, planned)
-        tau = np.empty(C.N_JOINTS)
-        if self.distribution == "qp" and lay.n_stance and not code & FK.INSIDE_CONES:
-            result = IDResult(
-                ws[0].copy(), ws[1].copy(), ws[2].copy(), lay.stance, "pinv",
-                exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
-            )  # fmt: skip
-            self.id._distribute_qp(lay, self._terms_buf[1], ws[3], result, normals)
-            self._last = result
-            K.clip_into(result.tau, self.torque_limit, tau)
-        else:  # the pinv torques (for "qp": its optimum, as control_step checked the cones)
-            self._last = (status, lay, self.id.ws_version)  # the IDResult is built from the buffers if asked for
-            K.clip_into(ws[0], self.torque_limit, tau)
-        return tau
-
-    def _fast_arguments(self, data: mujoco.MjData) -> tuple[tuple, np.ndarray | None]:
-        """The arguments of ``control_step`` after the contacts (views and buffers that outlive a step),
-        and the normals buffer (None without "qp" or a height field); rebuilt when an input object changes."""
-        hf = getattr(self.terrain, "heightfield", None)
-        c = self._fast_cache
-        if c is not None and c[0] is data and c[1] is hf and c[2] is self._gains and c[3] == self.distribution:
-            return c[4], c[5]
-        normals = self._normal_buf if self.distribution == "qp" and hasattr(hf, "kernel_args") else None
-        hf_args = _NO_TERRAIN if normals is None else hf.kernel_args
-        tail = (
-            data.qpos, data.qvel, self._gains, self._bdd, *self.dynamics.data_views(data)[1:],
-            *self._terms_buf, data.qfrc_bias, 1.0 / SINGULAR_SIGMA, DAMPING, *self.id._ws,
-            *hf_args, self._foot_sites, self._site_buf, self._normal_buf,
-            self.id.mu if normals is not None else 0.0, self.id._cone_lower, self.id._cone_buf,
-        )  # fmt: skip
-        self._fast_cache = (data, hf, self._gains, self.distribution, tail, normals)
-        return tail, normals
 
     def select_stance(self, planned, measured: np.ndarray) -> tuple[bool, bool, bool, bool]:
         """Stance set from the plan and the measured contacts (rule in the module docstring)."""

@@ -34,6 +34,7 @@ and inequality rows natively, reports infeasibility, and costs ~7 µs on these p
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import daqp
 import mujoco
@@ -78,6 +79,51 @@ class IDResult:
     relaxed: bool = False
     """"qp" was infeasible with the commanded base acceleration: the forces closest to producing it
     inside the friction cones were used instead (the base acceleration is then not exact)."""
+
+
+class IDWorkspace(NamedTuple):
+    """Output buffers of the compiled inverse dynamics (:func:`inverse_dynamics_kernels.id_pinv`)."""
+
+    tau: np.ndarray
+    """(12,) joint torques (N m)."""
+    F: np.ndarray
+    """(4, 3) contact forces (N, world)."""
+    qacc: np.ndarray
+    """(18,) commanded full acceleration."""
+    r: np.ndarray
+    """(18,) M qacc + h."""
+    Jinv: np.ndarray
+    """(4, 3, 3) stance leg Jacobian inverses."""
+    S: np.ndarray
+    """(4, 3, 6) stance blocks of the elimination matrix S."""
+
+
+@dataclasses.dataclass(frozen=True)
+class WorkspaceResult:
+    """A pinv solution still held in an :class:`InverseDynamics` workspace; :meth:`build` copies it out.
+
+    The fast path records this instead of copying every step; it is valid until the workspace is reused.
+    """
+
+    status: int
+    """the kernel's status bits."""
+    layout: StanceLayout
+    """the stance layout solved for."""
+    version: int
+    """``workspace_version`` right after the solve."""
+
+    def build(self, inverse_dynamics: InverseDynamics, distribution: str) -> IDResult:
+        """The :class:`IDResult` (``distribution`` as recorded).
+
+        :raises RuntimeError: if the workspace was rewritten since.
+        """
+        if self.version != inverse_dynamics.workspace_version:
+            raise RuntimeError(
+                "controller.last: the inverse-dynamics buffers were reused since; read it right after the call"
+            )
+        result = inverse_dynamics.result_from_workspace(self.status, self.layout)
+        result.distribution = distribution
+        return result
 
 
 def friction_pyramid(normal_W: np.ndarray, mu: float) -> np.ndarray:
@@ -132,15 +178,17 @@ class InverseDynamics:
             np.broadcast_to(friction_pyramid(np.array([0.0, 0.0, 1.0]), self.mu), (C.N_LEGS, 5, 3))
         )
         self._qp: dict[int, _StanceQP] = {}
-        self._cone_lower = np.array([0.0, 0.0, 0.0, 0.0, self.min_normal_force])
-        self._cone_buf = np.empty((C.N_LEGS, 5, 3))
-        self.ws_version = 0
-        """incremented whenever the work buffers below are rewritten (lazy results check it)."""
-        # kernel work buffers: tau, F, qacc, r = M qacc + h, J_L^-1, S stance blocks
-        self._ws = (
+        self.cone_lower = np.array([0.0, 0.0, 0.0, 0.0, self.min_normal_force])
+        """(5,) lower bounds of the friction-pyramid rows (the last one: the minimum normal force, N)."""
+        self.cone_buffer = np.empty((C.N_LEGS, 5, 3))
+        """(4, 5, 3) friction pyramids of the feet, rewritten by the kernels from the terrain normals."""
+        self.workspace = IDWorkspace(
             np.zeros(C.N_JOINTS), np.zeros((C.N_LEGS, 3)), np.zeros(C.NV), np.zeros(C.NV),
             np.zeros((C.N_LEGS, 3, 3)), np.zeros((C.N_LEGS, 3, 6)),
         )  # fmt: skip
+        """the compiled kernels' output buffers (rewritten by every compiled solve)."""
+        self.workspace_version = 0
+        """incremented whenever :attr:`workspace` is rewritten (:class:`WorkspaceResult` checks it)."""
 
     # ---------------------------------------------------------------- public API
     def solve(
@@ -189,8 +237,8 @@ class InverseDynamics:
         """Fast path of :meth:`solve_terms` on validated inputs (the terms' arrays, a layout, an
         (n_beta,) float64 ``beta_ddot``) by the compiled kernel; None when it does not apply (1 or 2
         stance feet, a degenerate stance, arrays it cannot take): then use :meth:`solve_terms`."""
-        ws = self._ws
-        self.ws_version += 1
+        ws = self.workspace
+        self.workspace_version += 1
         try:
             status = K.id_pinv(
                 M, h, J_feet, Jdot_qdot_feet, lay.mask, beta_ddot,
@@ -200,13 +248,18 @@ class InverseDynamics:
             return None
         if status <= 0:
             return None
-        result = IDResult(
-            ws[0].copy(), ws[1].copy(), ws[2].copy(), lay.stance, "pinv",
+        result = self.result_from_workspace(status, lay)
+        if self.distribution == "qp" and lay.n_stance:
+            self.distribute_qp(lay, J_feet, ws.r, result, normals_W)
+        return result
+
+    def result_from_workspace(self, status: int, lay: StanceLayout) -> IDResult:
+        """The pinv :class:`IDResult` (copies) of the compiled solve now in :attr:`workspace`."""
+        ws = self.workspace
+        return IDResult(
+            ws.tau.copy(), ws.F.copy(), ws.qacc.copy(), lay.stance, "pinv",
             exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
         )  # fmt: skip
-        if self.distribution == "qp" and lay.n_stance:
-            self._distribute_qp(lay, J_feet, ws[3], result, normals_W)
-        return result
 
     # ---------------------------------------------------------------- internals
     def _solve(self, proj: ProjectedDynamics, beta_ddot: np.ndarray, normals_W: np.ndarray | None) -> IDResult:
@@ -237,7 +290,7 @@ class InverseDynamics:
         result = IDResult(tau, F, qacc, lay.stance, "pinv", exact=exact, damped=proj.damped)
         if self.distribution == "qp" and lay.n_stance:
             if exact:
-                self._distribute_qp(lay, terms.J_feet, r, result, normals_W)
+                self.distribute_qp(lay, terms.J_feet, r, result, normals_W)
             else:
                 result.qp_fallback = True
         return result
@@ -258,19 +311,23 @@ class InverseDynamics:
             F[lay.stance_legs] = np.linalg.lstsq(J_st.T, resid, rcond=None)[0].reshape(-1, 3)
         return F
 
-    def _distribute_qp(
+    def distribute_qp(
         self, lay: StanceLayout, J_feet: np.ndarray, r: np.ndarray, result: IDResult, normals_W: np.ndarray | None
     ) -> None:
+        """Replace ``result``'s pinv torques and forces by the friction-cone QP's (in place; module doc).
+
+        :param J_feet: (4, 3, 18) foot Jacobians; ``r`` (18,) = M qacc + h; ``normals_W`` (4, 3) or None (+z).
+        """
         p = lay.n_stance
         qp = self._qp.get(p)
         if qp is None:
             qp = self._qp[p] = _StanceQP(p)
 
         def fill(J_feet: np.ndarray, r: np.ndarray, normals_W: np.ndarray | None) -> bool:
-            F0, low = result.contact_forces, self._cone_lower
+            F0, low = result.contact_forces, self.cone_lower
             if normals_W is None:
                 return K.qp_fill(J_feet, lay.mask, r, F0, self._cone_up[:p], low, *qp.problem)
-            return K.qp_fill_with_cones(normals_W, self.mu, J_feet, lay.mask, r, F0, self._cone_buf, low, *qp.problem)
+            return K.qp_fill_with_cones(normals_W, self.mu, J_feet, lay.mask, r, F0, self.cone_buffer, low, *qp.problem)
 
         try:
             inside = fill(J_feet, r, normals_W)

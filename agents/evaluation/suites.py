@@ -124,7 +124,7 @@ def load_suite(name_or_path: str | os.PathLike[str]) -> Suite:
 GOAL_DISTANCE = Param("goal_distance", REQUIRED, "m", "distance along +x from the spawn point", lo=0.0, hi=500.0,
                       lo_open=True)  # fmt: skip
 TIME_LIMIT = Param("time_limit", REQUIRED, "s", "simulated seconds per episode", lo=0.0, hi=3600.0, lo_open=True)
-SEED = Param("seed", REQUIRED, "-", "terrain and reset seed", kind="int", lo=0, hi=2**63 - 1)
+SEED = Param("seed", REQUIRED, "-", "terrain and reset seed", kind="int", lo=0)
 
 
 def _check(p: Param, value: Any, where: str = "") -> Any:

@@ -12,6 +12,8 @@ import pytest
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.control.controller import STANCE_MODES, ComputedTorqueController
 from agents.control.controller_kernels import select_stance_mask
+from agents.control.fast_path import PackedReference
+from agents.control.inverse_dynamics import WorkspaceResult
 from agents.expert import ExpertConfig, attach_expert
 from planners.types import PACKED_FIELDS
 
@@ -42,7 +44,7 @@ def test_fast_path_gives_the_general_paths_torques(distribution, atol):
         if policy._reference_row(t) is None:
             continue
         tau_fast = ctrl(m, d)
-        assert isinstance(ctrl._last_reference, tuple), "the fast path was not taken"
+        assert isinstance(ctrl._last_reference, PackedReference), "the fast path was not taken"
         fast, ref_fast = ctrl.last, ctrl.last_reference
         row_fn, ctrl.reference_row = ctrl.reference_row, None
         try:
@@ -70,9 +72,9 @@ def test_lazy_last_result_refuses_overwritten_buffers():
         obs, *_ = env.step(policy.predict(obs)[0])
         mujoco.mj_forward(m, d)
         ctrl(m, d)
-        if isinstance(ctrl._last, tuple):
+        if isinstance(ctrl._last, WorkspaceResult):
             break
-    assert isinstance(ctrl._last, tuple), "the fast path did not leave a lazy result"
+    assert isinstance(ctrl._last, WorkspaceResult), "the fast path did not leave a lazy result"
     stance = (True, True, True, True)
     ctrl.id.solve(d.qpos, d.qvel, np.zeros(6), stance)  # reuses the work buffers
     with pytest.raises(RuntimeError, match="reused"):

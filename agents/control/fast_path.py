@@ -1,0 +1,132 @@
+"""The controller's per-step work in one compiled call: MuJoCo backend, packed reference rows.
+
+:class:`FastControlStep` does what the readable path of
+:class:`~agents.control.controller.ComputedTorqueController` does at one physics step (measured
+contacts and stance set, PD command, dynamics terms, pinv inverse dynamics, terrain normals) in one
+call of :func:`~agents.control.controller_kernels.control_step`, and gives the same torques (tested
+in ``tests/agents/test_control_fast.py``). The friction-cone QP, when the pinv forces leave a cone,
+is the readable path's own :meth:`InverseDynamics.distribute_qp`. Every case the kernel does not
+handle (1-2 stance feet, a failed Cholesky, arrays of other types) returns None: the caller then
+takes the readable path.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from agents.control import controller_kernels as FK
+from agents.control import inverse_dynamics_kernels as K
+from agents.control.elimination import DAMPING, SINGULAR_SIGMA, stance_layout
+from agents.control.inverse_dynamics import IDResult, InverseDynamics, WorkspaceResult
+from planners.types import PACKED_FIELDS, ReferenceSample
+from quad_uneven_env import constants as C
+
+_NO_TERRAIN = (np.empty(0), 0, 0, 0.0, 0.0, 0.0)
+"""height-field kernel arguments that tell ``control_step`` to skip the normals."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PackedReference:
+    """A reference sample as the fast path received it: a packed row (:data:`PACKED_FIELDS`) and a stance mask."""
+
+    t: float
+    """s since the controller's reset."""
+    row: np.ndarray
+    """(55,) packed :class:`ReferenceSample` arrays."""
+    planned: int
+    """planned stance bitmask (bit i: leg i)."""
+
+    def unpack(self) -> ReferenceSample:
+        """The :class:`ReferenceSample` (copies)."""
+        parts, k = [], 0
+        for _, n in PACKED_FIELDS:
+            parts.append(self.row[k : k + n].copy())
+            k += n
+        stance = tuple(bool(self.planned >> i & 1) for i in range(C.N_LEGS))
+        return ReferenceSample(self.t, *parts, stance)  # type: ignore[arg-type]
+
+
+class FastControlStep:
+    """One compiled call per physics step for a controller bound to one model.
+
+    :param dynamics: the controller's "mujoco" backend (its ``data_views``).
+    :param inverse_dynamics: the controller's solver: the kernel writes its :attr:`~InverseDynamics.workspace`.
+    :param foot_of_geom: (ngeom,) leg of each foot geom, ``N_LEGS`` elsewhere.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        dynamics: Any,
+        inverse_dynamics: InverseDynamics,
+        foot_of_geom: np.ndarray,
+        terrain_geom: int,
+        torque_limit: np.ndarray,
+    ) -> None:
+        self.dynamics = dynamics
+        self.id = inverse_dynamics
+        self.foot_of_geom = foot_of_geom
+        self.terrain_geom = terrain_geom
+        self.torque_limit = torque_limit
+        self.foot_sites = np.array([model.site(s).id for s in C.FOOT_SITES])
+        self.layouts = [stance_layout(tuple(bool(m >> i & 1) for i in range(C.N_LEGS))) for m in range(16)]
+        # outputs of the kernel: M, J_feet, Jdot qdot, G; beta_ddot; foot sites; normals
+        self._terms = (np.empty((C.NV, C.NV)), np.empty((C.N_LEGS, 3, C.NV)), np.empty((C.N_LEGS, 3)), np.empty(C.NV))
+        self._bdd = np.empty(C.NV)
+        self._sites = np.empty((C.N_LEGS, 3))
+        self._normals = np.empty((C.N_LEGS, 3))
+        self._cache: tuple | None = None
+
+    def step(
+        self, data: mujoco.MjData, terrain: Any, gains: np.ndarray, stance_mode: int, row: np.ndarray, planned: int
+    ) -> tuple[np.ndarray, IDResult | WorkspaceResult] | None:
+        """Torques (12, N m, clipped) and the solution at ``data`` (after ``mj_step1``), or None (readable path).
+
+        :param gains: (6,) kp/kd of position, rotation and joints (``ComputedTorqueController``'s array).
+        :param stance_mode: index into ``STANCE_MODES`` (``controller_kernels.STANCE_*``).
+        :param row: (55,) packed reference; ``planned`` its stance bitmask.
+        """
+        tail, normals = self._arguments(data, terrain, gains)
+        self.id.workspace_version += 1  # control_step rewrites the inverse-dynamics buffers
+        try:
+            code = FK.control_step(
+                row, planned, stance_mode, data.contact.geom, self.foot_of_geom, self.terrain_geom, *tail
+            )
+        except TypeError:  # arrays the kernel does not take (numba dispatch): the readable path
+            return None
+        if code < 0 or not (code >> 4) & K.DONE:
+            return None
+        lay = self.layouts[code & 15]
+        status, ws = code >> 4, self.id.workspace
+        tau = np.empty(C.N_JOINTS)
+        if self.id.distribution == "qp" and lay.n_stance and not code & FK.INSIDE_CONES:
+            result = self.id.result_from_workspace(status, lay)
+            self.id.distribute_qp(lay, self._terms[1], ws.r, result, normals)
+            K.clip_into(result.tau, self.torque_limit, tau)
+            return tau, result
+        # the pinv torques (for "qp": its optimum, as control_step checked the cones); copied out only if asked
+        K.clip_into(ws.tau, self.torque_limit, tau)
+        return tau, WorkspaceResult(status, lay, self.id.workspace_version)
+
+    def _arguments(self, data: mujoco.MjData, terrain: Any, gains: np.ndarray) -> tuple[tuple, np.ndarray | None]:
+        """The arguments of ``control_step`` after the contacts (views and buffers that outlive a step),
+        and the normals buffer (None without "qp" or a height field); rebuilt when an input object changes."""
+        hf = getattr(terrain, "heightfield", None)
+        c = self._cache
+        if c is not None and c[0] is data and c[1] is hf and c[2] is gains:
+            return c[3], c[4]
+        qp = self.id.distribution == "qp"
+        normals = self._normals if qp and hasattr(hf, "kernel_args") else None
+        hf_args = _NO_TERRAIN if normals is None else hf.kernel_args
+        tail = (
+            data.qpos, data.qvel, gains, self._bdd, *self.dynamics.data_views(data)[1:],
+            *self._terms, data.qfrc_bias, 1.0 / SINGULAR_SIGMA, DAMPING, *self.id.workspace,
+            *hf_args, self.foot_sites, self._sites, self._normals,
+            self.id.mu if normals is not None else 0.0, self.id.cone_lower, self.id.cone_buffer,
+        )  # fmt: skip
+        self._cache = (data, hf, gains, tail, normals)
+        return tail, normals
