@@ -82,7 +82,7 @@ _BLAS: list[ThreadpoolController] = []
 
 
 def _blas_controller() -> ThreadpoolController:
-    """One ThreadpoolController per process: building it scans the loaded libraries (~2 ms)."""
+    """One ThreadpoolController per process: building it scans the loaded libraries."""
     if not _BLAS:
         _BLAS.append(ThreadpoolController())
     return _BLAS[0]
@@ -254,8 +254,8 @@ class ExpertPolicy:
             )
             tic = time.perf_counter()
             try:
-                # Small dense problems: multi-threaded BLAS only adds contention (10-50x slower
-                # on a loaded 2-core machine), so the planner runs single-threaded.
+                # Small dense problems: multi-threaded BLAS only adds contention (much slower on
+                # a loaded 2-core machine), so the planner runs single-threaded.
                 with _blas_controller().limit(limits=1, user_api="blas"):
                     plan = plan_gait_cycle(scenario)
             except PlanningError as err:

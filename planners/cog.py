@@ -263,8 +263,8 @@ def _dense_index(red: _Reduced, coef: np.ndarray, n: int = 241) -> list[tuple[np
 
 def _solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lo: np.ndarray) -> np.ndarray | None:
     """min 1/2 z'Hz + g'z s.t. C z >= lo; None when infeasible. quadprog (Goldfarb-Idnani dual
-    active set): exact, and on these ~120-variable problems ~4 x faster than ProxQP and ~2 x faster
-    than DAQP (both measured)."""
+    active set): exact, and on these ~120-variable problems faster than ProxQP and DAQP
+    (docs/results_planning.md)."""
     try:
         return quadprog.solve_qp(H, -g, C.T, lo, 0)[0]
     except ValueError:  # "constraints are inconsistent, no solution"

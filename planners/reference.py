@@ -56,7 +56,7 @@ class Reference:
         self._grid = self.evaluate(self._grid_t, newton_steps=3)  # converged to ~1e-14 (tests)
         self._grid_p = self._grid[0]
         self._grid_mask = (self._grid[6].astype(np.int64) << np.arange(4)).sum(axis=1).tolist()
-        # Shared tuples: thousands of new ones per plan would wake Python's cyclic GC (~10 ms a plan).
+        # Shared tuples: thousands of new ones per plan would wake Python's cyclic GC.
         self._grid_stance = [_STANCE_OF_MASK[m] for m in self._grid_mask]
         # One packed row per grid time, so that a sample is one copy plus views of it.
         p, pd, pdd, q, qd, qdd, _ = self._grid

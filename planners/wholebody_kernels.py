@@ -1,9 +1,9 @@
 """Compiled :meth:`planners.wholebody.WholeBody.place_base` over a time grid.
 
 The expert builds the whole-body reference of every gait cycle on a 2 ms grid (~1550 points);
-in numpy that is ~60 array operations on (T, 4, 3) arrays per Newton step, ~25 ms per cycle.
-Here each time point is one loop iteration of scalar arithmetic. The formulas are those of
-:mod:`planners.wholebody` (its module docstring); ``tests/test_planners_reference.py`` checks the
+in numpy that is ~60 array operations on (T, 4, 3) arrays per Newton step. Here each time point
+is one loop iteration of scalar arithmetic. The formulas are those of
+:mod:`planners.wholebody` (its module docstring); ``tests/planners/test_reference.py`` checks the
 two implementations agree.
 """
 

@@ -15,6 +15,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 __version__ = "0.1.0"
 
+__all__ = ["ENV_ID", "__version__", "register_envs"]
+
 ENV_ID = "QuadUneven-v0"
 """Gymnasium id of :class:`quad_uneven_env.env.QuadUnevenEnv`."""
 

@@ -96,9 +96,7 @@ class Param:
         if self.kind == "array":
             return value
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
-            raise ValueError(
-                f"{field} must be {self._a()}{self._unit()}, got {value!r} of type {type(value).__name__}"
-            )
+            raise ValueError(f"{field} must be {self._a()}{self._unit()}, got {value!r} of type {type(value).__name__}")
         v = float(value)
         if self.kind == "int":
             if not math.isfinite(v) or v != int(v):

@@ -3,12 +3,13 @@
 Every control step the env needs the foot contacts (from MuJoCo's contact sensors), the
 whole-robot COG and its acceleration, the stability index of the feet in contact, the terrain
 height under the base and around it, and the observation vector built from all of that. In
-numpy this is ~70 small array operations (~70 us, as much as one MuJoCo step of this model);
-here it is one numba call writing into preallocated buffers.
+numpy this is ~70 small array operations (together as costly as a MuJoCo step of this model);
+here it is one numba call (:mod:`quad_uneven_env.measurement_kernels`) writing into preallocated
+buffers.
 
 The arithmetic is that of :func:`quad_uneven_env.physics.measure_contacts`,
 :func:`quad_uneven_env.stability.stability_index`, :meth:`HeightField.height` and the layout of
-:mod:`quad_uneven_env.observations`; ``tests/test_measurement.py`` checks each against them.
+:mod:`quad_uneven_env.observations`; ``tests/quad_uneven_env/test_measurement.py`` checks each against them.
 """
 
 from __future__ import annotations

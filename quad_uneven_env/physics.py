@@ -250,7 +250,7 @@ def instability_warnings(data: mujoco.MjData | np.ndarray) -> int:
     """Number of MuJoCo bad-qpos/qvel/qacc warnings raised so far in ``data`` (runs every physics step).
 
     :param data: the MjData, or its ``data.warning.number`` array (a view into the MjData that
-        stays valid, ~1 µs cheaper per call than taking it again).
+        stays valid, cheaper than taking it again every call).
     """
     n = data if isinstance(data, np.ndarray) else data.warning.number
     return int(n[_BAD_WARNINGS[0]]) + int(n[_BAD_WARNINGS[1]]) + int(n[_BAD_WARNINGS[2]])

@@ -20,7 +20,7 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def inv3(A: np.ndarray) -> np.ndarray:
-    """Inverse of (..., 3, 3) matrices by the adjugate (batched LAPACK is ~10 x slower on 3 x 3)."""
+    """Inverse of (..., 3, 3) matrices by the adjugate (batched LAPACK is slower on 3 x 3)."""
     a, b, c = A[..., 0, 0], A[..., 0, 1], A[..., 0, 2]
     d, e, f = A[..., 1, 0], A[..., 1, 1], A[..., 1, 2]
     g, h, i = A[..., 2, 0], A[..., 2, 1], A[..., 2, 2]

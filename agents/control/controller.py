@@ -298,7 +298,7 @@ class ComputedTorqueController:
     def _normals(self, data: mujoco.MjData, stance: tuple[bool, ...]) -> np.ndarray | None:
         """(4, 3) terrain normals under the feet (world); only stance rows are used by the QP.
 
-        The normal of the surface triangle under each foot site (compiled query, ~1 us): it is
+        The normal of the surface triangle under each foot site (compiled query): it is
         constant while a foot stays on its triangle, so the QP's friction cones stay cached.
         """
         hf = getattr(self.terrain, "heightfield", None)

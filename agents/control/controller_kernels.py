@@ -1,7 +1,7 @@
 """One compiled call for the controller's per-step work on the MuJoCo backend (the expert's hot path).
 
 :func:`control_step` does in one numba call what :meth:`agents.control.controller.ComputedTorqueController.__call__`
-otherwise does in a dozen (each ~1-3 µs of Python and dispatch): the measured foot contacts and
+otherwise does in a dozen (each paying Python and dispatch overhead): the measured foot contacts and
 the stance set, the PD command from a packed reference row (:data:`planners.types.PACKED_FIELDS`),
 the dynamics terms from ``mj_step1``'s results, the pinv inverse dynamics, and the terrain normals
 under the feet. It calls the same kernels as the general path (:mod:`agents.control.inverse_dynamics_kernels`,

@@ -26,8 +26,8 @@ the cone of the model's mu) with a minimum normal force. It is posed in the cont
 ``|tau - tau_pinv|^2``) subject to the six base rows ``sum_i J_b,i^T F_i = (M qacc + h)_base``
 and the cone rows; then ``tau_i = (M qacc + h)_i - J_L,i^T F_i``. Solver: DAQP
 (a dual active-set method for small dense QPs, made for real-time MPC): exact, handles equality
-and inequality rows natively, reports infeasibility, and costs ~7 µs on these problems against
-~50 µs for ProxQP, which the first version used. An infeasible problem is relaxed (see
+and inequality rows natively, reports infeasibility, and has no per-solve setup cost (timings:
+docs/results.md). An infeasible problem is relaxed (see
 ``_relax``); an unsolved one falls back to "pinv" and sets ``result.qp_fallback``.
 """
 
@@ -374,8 +374,7 @@ class _StanceQP:
     """A preallocated "qp" problem for p stance feet (3p forces, 6 equalities, 5p cone rows), solved by DAQP.
 
     DAQP (Arnström et al., a dual active-set solver for small dense QPs) solves these 12-variable
-    problems exactly in a few active-set iterations, ~7 µs a call; ProxQP, used before, needed
-    ~50 µs even warm-started with 2 iterations (its per-solve setup dominates at this size).
+    problems exactly in a few active-set iterations, with no setup cost per solve (small problems).
     Each solve is independent of the previous one (no warm start), so results are reproducible.
     """
 

@@ -94,7 +94,7 @@ def _targets(rows: Sequence[Mapping[str, Any]]) -> list[str]:
         "| target | entry | episodes | success rate (required) | mean speed of successes, m/s (required) | "
         "successes with index >= 0 for >= 99% of the time | passed | why not |"
     )
-    lines = ["## Targets (issue 5, section 6)", "", head, "|" + "---|" * (head.count("|") - 1)]
+    lines = ["## Targets", "", head, "|" + "---|" * (head.count("|") - 1)]
     for r in rows:
         cells = [
             r["target"],

@@ -1,4 +1,4 @@
-"""Issue 5's targets (section 6), checked against an evaluation's per-entry summary where they apply."""
+"""The expert's walking targets, checked against an evaluation's per-entry summary where they apply."""
 
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ TARGETS: tuple[Target, ...] = (
     Target("stairs 8 cm down", "stairs", {"riser": 0.08, "direction": "down"}, 0.90),
     Target("stepping stones", "stepping_stones", {}, 0.80),
 )
-"""Issue 5 section 6 (goal 5 m, >= 10 seeds); every target also asks that each success keeps the
+"""The nominal walking targets (goal 5 m, >= 10 seeds); every target also asks that each success keeps the
 measured stability index >= 0 for >= 99% of its time."""
 
 

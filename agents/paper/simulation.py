@@ -1,4 +1,4 @@
-"""The paper's §6 scenario run in the simulator (issue 5 §4): ``quad-uneven paper --out DIR``.
+"""The paper's §6 scenario run in the simulator: ``quad-uneven paper --out DIR``.
 
 One gait cycle of the paper (Table-1 robot, footholds given as by the paper's "expert user",
 phases 1, 1, 1, 0.1, 1, 1, 1 s, COG (0.01, 0, 0.544) -> (0.21, 0, 0.5743) m) is planned on the
@@ -198,7 +198,7 @@ def run_paper_sim(config: PaperRunConfig | None = None, progress: bool = True) -
             break
     env.close()
     arrays = rec.finish(plan)
-    return PaperRun(plan, cfg, dt, u._mass, idx.torque_limit.copy(), start_err, settle_drift, fall, arrays)
+    return PaperRun(plan, cfg, dt, idx.total_mass, idx.torque_limit.copy(), start_err, settle_drift, fall, arrays)
 
 
 class _Recorder:

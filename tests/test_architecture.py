@@ -1,0 +1,154 @@
+"""The layout's rules as tests: layering, no private imports, pure planners, argparse only in the CLI.
+
+Each rule walks the source with ``ast`` (what a module imports is what it says), so a new module
+that breaks a rule fails here, whatever it is named.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("quad_uneven_env", "planners", "agents")
+LAYER = {name: i for i, name in enumerate(PACKAGES)}
+"""A package may import only packages of a lower layer: agents -> planners -> quad_uneven_env."""
+
+
+def _modules() -> list[tuple[str, Path]]:
+    out = []
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            rel = path.relative_to(ROOT).with_suffix("")
+            parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
+            out.append((".".join(parts), path))
+    return out
+
+
+def _imports(path: Path) -> list[tuple[int, str, list[str]]]:
+    """(line, imported module, imported names) of every import in ``path``, at any depth."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, a.name, []) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.append((node.lineno, node.module, [a.name for a in node.names]))
+    return found
+
+
+MODULES = _modules()
+
+
+def layering_violations(modules=MODULES) -> list[str]:
+    bad = []
+    for mod, path in modules:
+        own = LAYER[mod.split(".")[0]]
+        for line, target, _ in _imports(path):
+            top = target.split(".")[0]
+            if top in LAYER and LAYER[top] > own:
+                bad.append(f"{path.relative_to(ROOT)}:{line} imports {target} (against agents -> planners -> env)")
+    return bad
+
+
+def private_import_violations(modules=MODULES) -> list[str]:
+    bad = []
+    for _, path in modules:
+        for line, target, names in _imports(path):
+            if target.split(".")[0] not in LAYER:
+                continue
+            private = [n for n in names if n.startswith("_") and not n.startswith("__")]
+            private += [p for p in target.split(".") if p.startswith("_") and not p.startswith("__")]
+            if private:
+                bad.append(f"{path.relative_to(ROOT)}:{line} imports private {private} from {target}")
+    return bad
+
+
+def argparse_violations(modules=MODULES) -> list[str]:
+    return [
+        f"{path.relative_to(ROOT)}:{line} imports argparse (parsers belong in agents/cli.py)"
+        for mod, path in modules
+        if mod != "agents.cli"
+        for line, target, _ in _imports(path)
+        if target == "argparse"
+    ]
+
+
+def test_imports_follow_the_layers():
+    assert layering_violations() == []
+
+
+def test_no_module_imports_another_modules_private_names():
+    assert private_import_violations() == []
+
+
+def test_only_the_cli_builds_parsers():
+    assert argparse_violations() == []
+
+
+def test_the_rules_catch_a_wrong_import(tmp_path):
+    """Each checker flags a module written to break it (so the tests above can fail)."""
+    bad = tmp_path / "bad.py"
+    bad.write_text(
+        "import argparse\nfrom agents.expert import ExpertConfig\nfrom quad_uneven_env.stability import _hidden\n"
+    )
+    fake = [("quad_uneven_env.bad", bad)]
+    global ROOT
+    root, ROOT = ROOT, tmp_path
+    try:
+        assert any("agents.expert" in v for v in layering_violations(fake))
+        assert any("_hidden" in v for v in private_import_violations(fake))
+        assert argparse_violations(fake)
+    finally:
+        ROOT = root
+
+
+def _loaded_after(statement: str) -> set[str]:
+    code = f"import sys; {statement}; print(' '.join(sorted({{m.split('.')[0] for m in sys.modules}})))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    return set(out.stdout.split())
+
+
+def test_planners_load_no_simulator_and_no_plotting():
+    loaded = _loaded_after("import planners")
+    assert loaded.isdisjoint({"mujoco", "gymnasium", "matplotlib", "agents"}), loaded & {"mujoco", "gymnasium"}
+
+
+def test_import_agents_loads_no_torch_or_sb3():
+    loaded = _loaded_after("import agents, agents.evaluation, agents.control")
+    assert loaded.isdisjoint({"torch", "stable_baselines3"})
+
+
+def test_gymnasium_imported_after_the_package_still_finds_the_env():
+    loaded = _loaded_after(
+        "import planners, quad_uneven_env; import gymnasium as gym; gym.make('QuadUneven-v0', terrain='flat')"
+    )
+    assert "mujoco" in loaded
+
+
+@pytest.mark.parametrize("mod", [m for m, p in MODULES if p.name == "__init__.py"])
+def test_every_package_has_a_front_door(mod):
+    path = next(p for m, p in MODULES if m == mod)
+    tree = ast.parse(path.read_text())
+    assert ast.get_docstring(tree), f"{mod} has no docstring"
+    names = [t.id for n in tree.body if isinstance(n, ast.Assign) for t in n.targets if isinstance(t, ast.Name)]
+    assert "__all__" in names or mod.count(".") >= 2, f"{mod} has no __all__"
+
+
+HISTORY = re.compile(r"\b[Ii]ssue \d+|\(issue|section \d+ of|the first version")
+
+
+def test_no_process_history_in_the_code():
+    """Issue numbers and change histories belong in the git log and docs/results*.md, not the code."""
+    hits = []
+    for path in [p for _, p in MODULES] + sorted((ROOT / "tests").rglob("*.py")):
+        if path == Path(__file__).resolve():
+            continue
+        for i, line in enumerate(path.read_text().splitlines(), 1):
+            if HISTORY.search(line):
+                hits.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
+    assert hits == []
