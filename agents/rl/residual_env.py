@@ -135,6 +135,13 @@ class ResidualExpertEnv(gym.Wrapper):
         self.expert, self.controller = install_residual_controller(env, residual_scale, expert_config)
         self.residual_scale = self.controller.residual_scale
 
+    def reset(self, **kwargs: Any):
+        """Reset the env (the expert plans its first cycle); the info has the step's keys (residual zero)."""
+        obs, info = self.env.reset(**kwargs)
+        info["residual_scale"] = self.residual_scale
+        info["residual_torque"] = 0.0
+        return obs, info
+
     def step(self, action: np.ndarray):
         """One control step of expert + residual ``action``; see :meth:`QuadUnevenEnv.step`."""
         obs, reward, terminated, truncated, info = self.env.step(action)
