@@ -97,7 +97,7 @@ def test_cleanrl_style_loop_over_two_async_envs():
         rng = np.random.default_rng(3)
         returns = []
         for _ in range(300):
-            obs, reward, term, trunc, infos = envs.step(rng.normal(0, 0.5, (2, 12)).astype(np.float32))
+            obs, _reward, _term, _trunc, infos = envs.step(rng.normal(0, 0.5, (2, 12)).astype(np.float32))
             assert np.isfinite(obs).all()
             if "episode" in infos:
                 returns += list(infos["episode"]["r"][infos["_episode"]])
@@ -116,7 +116,7 @@ def test_make_vec_residual_env(mode):
     try:
         envs.reset(seed=0)
         for _ in range(45):
-            _, _, term, trunc, infos = envs.step(np.zeros((2, 12), np.float32))
+            _, _, term, _trunc, infos = envs.step(np.zeros((2, 12), np.float32))
             assert infos["residual_torque"].shape == (2,) and infos["edge_moments"].shape == (2, 4)
             assert not term.any()  # the expert walks: only truncations
     finally:
