@@ -91,8 +91,10 @@ class QuadUnevenEnv(gym.Env):
     ==============================  ==========  ===========================================================
     ``stability_index``             float       N m; ``-inf`` with fewer than 3 stance feet
     ``stability_index_normalized``  float       m (index / m g)
-    ``edge_moments``                (4,)        N m, the clockwise support edges' tumbling moments; NaN
-                                                beyond the number of stance feet (``-inf`` if < 3)
+    ``edge_moments``                (4,)        N m, the clockwise support edges' tumbling moments, padded
+                                                with +inf beyond the number of stance feet (an absent edge
+                                                never tips, so the index is still their minimum; NaN would
+                                                fail Gymnasium's env checker); ``-inf`` entries if < 3 feet
     ``contact_forces``              (4, 3)      N, terrain on each foot, world frame, leg order
     ``foot_contact``                (4,) bool   the foot touches the terrain
     ``cog``, ``cog_vel``,           (3,)        whole-robot COG (m), velocity (m/s), acceleration (m/s^2,
@@ -393,8 +395,8 @@ class QuadUnevenEnv(gym.Env):
 
     @staticmethod
     def _padded_moments(meas: StepMeasurement) -> np.ndarray:
-        """(4,) edge moments (N m) of the clockwise support edges, NaN beyond the number of stance feet."""
-        out = np.full(C.N_LEGS, np.nan)
+        """(4,) edge moments (N m) of the clockwise support edges, +inf beyond the number of stance feet."""
+        out = np.full(C.N_LEGS, np.inf)
         m = meas.moments
         out[: m.shape[0]] = m
         return out
