@@ -9,30 +9,66 @@ index is the minimum over the edges; positive means no edge tips. The feet may b
 different heights (uneven terrain). Eq. 23 of the paper prints the opposite edge direction;
 the clockwise order of eq. 19 is what makes an interior COG positive, and is used here.
 
-With fewer than three stance feet there is no support polygon: the index is ``-inf``
-(``NO_SUPPORT``) and so is every edge moment, so nothing downstream can read stability into it
-(and, unlike NaN, equal inputs give equal outputs).
+Degenerate support polygons have a defined value, never an exception, the same in the numpy and the
+compiled path:
+
+* fewer than three stance feet: no support polygon; index and every edge moment ``-inf``
+  (``NO_SUPPORT``), so nothing downstream can read stability into it (and, unlike NaN, equal
+  inputs give equal outputs);
+* coincident feet (an edge shorter than ``MIN_EDGE_LENGTH`` = 1 nm): that edge has no direction,
+  so it is no tipping axis; its moment is ``+inf`` (``NO_EDGE``) and the index is the minimum over
+  the other edges, i.e. the index of the polygon with the coincident feet merged (for a static COG
+  over a convex polygon, the moment about an ever shorter corner edge never undercuts both of its
+  neighbours, so this is also the limit). With fewer than three proper edges left (all feet on at
+  most two distinct points) there is no polygon: ``NO_SUPPORT`` as above;
+* collinear feet (three or more distinct points on one straight line): a polygon without
+  interior whose edges run along the line both ways, so their moments are ``+M`` and ``-M``
+  about that line and the index is ``-|M|`` <= 0: the limit of ever thinner polygons (a line
+  support tips to one side or the other).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from quad_uneven_env.stability_kernels import edge_moments_into
+from quad_uneven_env.stability_kernels import MIN_EDGE_LENGTH, MIN_EDGES, NO_EDGE, NO_SUPPORT, edge_moments_into
 
-NO_SUPPORT = -np.inf
-"""Index returned when fewer than three feet are in stance (no support polygon)."""
+__all__ = [
+    "GRAVITY",
+    "MIN_EDGE_LENGTH",
+    "NO_EDGE",
+    "NO_SUPPORT",
+    "normalized_stability_index",
+    "order_clockwise",
+    "stability_index",
+]
 
 GRAVITY = 9.81
 """m/s^2"""
 
 
 def order_clockwise(feet: np.ndarray) -> np.ndarray:
-    """Indices that order ``feet`` (n x 3) clockwise seen from above (decreasing polar angle)."""
-    feet = np.asarray(feet, dtype=float)
-    centre = feet[:, :2].mean(axis=0)
-    angle = np.arctan2(feet[:, 1] - centre[1], feet[:, 0] - centre[0])
-    return np.argsort(-angle, kind="stable")
+    """Indices that order ``feet`` (n x 3) clockwise seen from above (decreasing polar angle about their centroid).
+
+    Bit for bit the order of the compiled twin (:func:`quad_uneven_env.stability_kernels.edge_moments_into`):
+    the same summation order for the centroid and libm's ``atan2`` (numpy's vectorised ``arctan2`` may
+    differ in the last bit), so feet tied on one ray from the centroid (a collinear support) are
+    ordered alike by both paths. A few feet: the scalar loop costs nothing.
+    """
+    xy = np.asarray(feet, dtype=float)[:, :2].tolist()
+    n = len(xy)
+    if n == 0:
+        return np.zeros(0, dtype=np.intp)
+    cx = cy = 0.0
+    for x, y in xy:
+        cx += x
+        cy += y
+    cx /= n
+    cy /= n
+    key = np.array([-math.atan2(y - cy, x - cx) for x, y in xy])
+    return np.argsort(key, kind="stable")
 
 
 def stability_index(
@@ -50,8 +86,8 @@ def stability_index(
     :param mass: robot mass (kg).
     :param g: gravity (m/s^2), acting along -z.
     :return: ``(index, edge_moments)``: index shape () or (T,); edge_moments (n,) or (T, n),
-        edge ``i`` going from the i-th to the (i+1)-th foot in clockwise order. With fewer
-        than three feet: index and moments ``-inf``.
+        edge ``i`` going from the i-th to the (i+1)-th foot in clockwise order. Degenerate
+        polygons (fewer than three feet, coincident or collinear feet): see the module docstring.
     """
     cog = np.asarray(cog, dtype=float)
     cog_acc = np.asarray(cog_acc, dtype=float)
@@ -60,19 +96,24 @@ def stability_index(
         raise ValueError(f"cog and cog_acc must both have shape (3,) or (T, 3), got {cog.shape} and {cog_acc.shape}")
     n = feet.shape[0]
     lead = cog.shape[:-1]
-    if n < 3:
+    if n < MIN_EDGES:
         return np.full(lead, NO_SUPPORT), np.full((*lead, n), NO_SUPPORT)
     if cog.ndim == 1:
         return _stability_index_one(cog, cog_acc, np.ascontiguousarray(feet), float(mass), float(g))
     ordered = feet[order_clockwise(feet)]
     edges = ordered[np.r_[1:n, 0]] - ordered
-    kappa = edges / np.linalg.norm(edges, axis=1, keepdims=True)
+    length = np.sqrt((edges * edges).sum(axis=1))
+    proper = length > MIN_EDGE_LENGTH
+    if np.count_nonzero(proper) < MIN_EDGES:
+        return np.full(lead, NO_SUPPORT), np.full((*lead, n), NO_SUPPORT)
+    kappa = edges / np.where(proper, length, 1.0)[:, None]
     fx, fy = -mass * cog_acc[..., 0:1], -mass * cog_acc[..., 1:2]
     fz = -mass * (g + cog_acc[..., 2:3])
     r = cog[..., None, :] - ordered  # (..., n, 3)
     rx, ry, rz = r[..., 0], r[..., 1], r[..., 2]
     # kappa . (r x F), written out: np.cross is slow on small arrays and this is a hot path.
     moments = kappa[:, 0] * (ry * fz - rz * fy) + kappa[:, 1] * (rz * fx - rx * fz) + kappa[:, 2] * (rx * fy - ry * fx)
+    moments[..., ~proper] = NO_EDGE
     return moments.min(axis=-1), moments
 
 
@@ -98,5 +139,5 @@ def _stability_index_one(
     """:func:`stability_index` of one instant, compiled: the env calls it every step, where
     numpy's per-call overhead on 3-vectors would dominate. Same arithmetic (tested equal)."""
     moments = np.empty(feet.shape[0])
-    edge_moments_into(cog, acc, feet, mass, g, moments)
-    return np.float64(moments.min()), moments
+    index = edge_moments_into(cog, acc, feet, mass, g, moments)
+    return np.float64(index), moments
