@@ -127,7 +127,7 @@ class StepMeasurement:
     # ------------------------------------------------------------------ outputs
     @property
     def index(self) -> float:
-        """N m, stability index of the feet in contact (``-inf`` without a support polygon, see :mod:`~quad_uneven_env.stability`)."""
+        """N m, stability index of the feet in contact (``-inf`` without a support polygon: see ``stability``)."""
         return float(self._scalars[_INDEX])
 
     @property

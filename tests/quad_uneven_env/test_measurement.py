@@ -172,6 +172,6 @@ def test_kernel_with_coincident_and_collinear_contact_points(points, expect):
         assert meas.index == NO_SUPPORT and np.all(obs == -STABILITY_CLIP)
     else:
         # Gravity and inertia load F = -m (a + g z); its moment about the x axis through the feet.
-        f = -u.idx.total_mass * (meas.cog_acc + [0.0, 0.0, -u.model.opt.gravity[2]])
+        f = -u.idx.total_mass * (meas.cog_acc - u.model.opt.gravity)
         moment = np.cross(meas.cog - np.array(points[0]), f)[0]
         assert meas.index == pytest.approx(-abs(moment), rel=1e-9)

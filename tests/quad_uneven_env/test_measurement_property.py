@@ -101,11 +101,17 @@ FAST = [  # (frame_skip, seed, steps, torques, termination): 2,600 steps
     (10, 6, 200, "uniform", None),
 ]
 SLOW = [  # 19,000 more steps (a robot thrashing on the ground makes MuJoCo's steps slow)
-    *((1, s, 1500, t, lim) for s, t, lim in ((11, "bang_bang", None), (12, "uniform", THRASH), (13, "bang_bang", THRASH))),
-    *((2, s, 1500, t, lim) for s, t, lim in ((21, "bang_bang", THRASH), (22, "uniform", None), (23, "uniform", THRASH))),
-    *((10, s, 2000, t, lim) for s, t, lim in ((31, "bang_bang", THRASH), (32, "uniform", THRASH), (33, "bang_bang", None))),
+    (1, 11, 1500, "bang_bang", None),
+    (1, 12, 1500, "uniform", THRASH),
+    (1, 13, 1500, "bang_bang", THRASH),
     (1, 14, 2000, "bang_bang", THRASH),
+    (2, 21, 1500, "bang_bang", THRASH),
+    (2, 22, 1500, "uniform", None),
+    (2, 23, 1500, "uniform", THRASH),
     (2, 24, 2000, "bang_bang", THRASH),
+    (10, 31, 2000, "bang_bang", THRASH),
+    (10, 32, 2000, "uniform", THRASH),
+    (10, 33, 2000, "bang_bang", None),
 ]
 
 

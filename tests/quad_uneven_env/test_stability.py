@@ -136,7 +136,8 @@ def test_coincident_feet_merge_into_the_polygon_of_the_distinct_points():
     assert index == pytest.approx(float(triangle)) == pytest.approx(M * G / np.sqrt(5))
     # The zero-length edge is reported as no tipping axis (+inf), the other three as the triangle's.
     assert moments.shape == (4,) and np.sum(moments == NO_EDGE) == 1
-    assert sorted(moments[np.isfinite(moments)] / (M * G)) == pytest.approx(sorted([1.0, 1 / np.sqrt(5), 1 / np.sqrt(5)]))
+    expected = sorted([1.0, 1 / np.sqrt(5), 1 / np.sqrt(5)])
+    assert sorted(moments[np.isfinite(moments)] / (M * G)) == pytest.approx(expected)
 
 
 def test_a_shrinking_corner_edge_tends_to_the_merged_value():
