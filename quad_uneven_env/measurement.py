@@ -132,8 +132,8 @@ class StepMeasurement:
 
     @property
     def moments(self) -> np.ndarray:
-        """(n,) N m, tumbling moment of each support polygon edge, n = feet in contact (clockwise; ``+inf`` for a
-        zero-length edge, ``-inf`` for all without a polygon)."""
+        """(n,) N m, tumbling moment of each support polygon edge, n = feet in contact (clockwise; a zero-length
+        edge reports the index, all are ``-inf`` without a polygon)."""
         return self._moments[: int(self._scalars[_N_STANCE])]
 
     @property

@@ -14,7 +14,8 @@ import numpy as np
 from quad_uneven_env.observations import STABILITY_CLIP
 from quad_uneven_env.physics import MIN_FOOT_FORCE
 from quad_uneven_env.spatial_kernels import quat_to_matrix_into
-from quad_uneven_env.stability_kernels import NO_SUPPORT, edge_moments_into
+from quad_uneven_env.stability import NO_SUPPORT
+from quad_uneven_env.stability_kernels import edge_moments_into
 from quad_uneven_env.terrain.heightfield_kernels import heights_into
 
 _MIN_FOOT_FORCE_SQ = MIN_FOOT_FORCE * MIN_FOOT_FORCE
@@ -138,8 +139,8 @@ def measure_observe_into(  # pragma: no cover - compiled
         obs[o[6] + leg] = 1.0 if foot_contact[leg] else 0.0
     index_norm = scalars[0] / norm
     obs[o[7]] = index_norm if math.isfinite(index_norm) else -STABILITY_CLIP
-    # Edge slots: the normalised moments (a zero-length edge's +inf clips to the upper bound below),
-    # zero-padded; all at the lower bound when some feet touch but span no polygon.
+    # Edge slots: the normalised moments, zero-padded; all at the lower bound when some feet touch
+    # but span no polygon.
     no_polygon = n_stance > 0 and scalars[0] == NO_SUPPORT
     for k in range(4):
         if no_polygon:

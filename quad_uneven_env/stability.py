@@ -9,22 +9,23 @@ index is the minimum over the edges; positive means no edge tips. The feet may b
 different heights (uneven terrain). Eq. 23 of the paper prints the opposite edge direction;
 the clockwise order of eq. 19 is what makes an interior COG positive, and is used here.
 
-Degenerate support polygons have a defined value, never an exception, the same in the numpy and the
+With fewer than three stance feet there is no support polygon: the index is ``-inf``
+(``NO_SUPPORT``) and so is every edge moment, so nothing downstream can read stability into it
+(and, unlike NaN, equal inputs give equal outputs).
+
+Degenerate polygons have a defined value, never an exception, the same in the numpy and the
 compiled path:
 
-* fewer than three stance feet: no support polygon; index and every edge moment ``-inf``
-  (``NO_SUPPORT``), so nothing downstream can read stability into it (and, unlike NaN, equal
-  inputs give equal outputs);
-* coincident feet (an edge shorter than ``MIN_EDGE_LENGTH`` = 1 nm): that edge has no direction,
-  so it is no tipping axis; its moment is ``+inf`` (``NO_EDGE``) and the index is the minimum over
-  the other edges, i.e. the index of the polygon with the coincident feet merged (for a static COG
-  over a convex polygon, the moment about an ever shorter corner edge never undercuts both of its
-  neighbours, so this is also the limit). With fewer than three proper edges left (all feet on at
-  most two distinct points) there is no polygon: ``NO_SUPPORT`` as above;
-* collinear feet (three or more distinct points on one straight line): a polygon without
-  interior whose edges run along the line both ways, so their moments are ``+M`` and ``-M``
-  about that line and the index is ``-|M|`` <= 0: the limit of ever thinner polygons (a line
-  support tips to one side or the other).
+* coincident feet (closer than ``MIN_EDGE`` = 1e-9 m to the next one in clockwise order): their
+  joining "edge" has no direction and bounds nothing, so it is left out of the minimum and reports
+  the index as its moment. The index is that of the polygon with the coincident feet merged (for
+  a static COG over a convex polygon the moment about an ever shorter corner edge never undercuts
+  both of its neighbours, so this is also the limit). With fewer than three real edges left
+  (fewer than three distinct feet) there is no polygon: ``NO_SUPPORT`` as above;
+* collinear feet (three or more distinct points on one straight line) span a polygon of zero
+  area: its edges run both ways along the line, so their moments are ``+M`` and ``-M`` about that
+  line and the index is ``-|M|`` <= 0 (the robot tips about that line; the limit of ever thinner
+  polygons).
 """
 
 from __future__ import annotations
@@ -33,17 +34,10 @@ import math
 
 import numpy as np
 
-from quad_uneven_env.stability_kernels import MIN_EDGE_LENGTH, MIN_EDGES, NO_EDGE, NO_SUPPORT, edge_moments_into
+from quad_uneven_env.stability_kernels import MIN_EDGE, MIN_EDGES, edge_moments_into
 
-__all__ = [
-    "GRAVITY",
-    "MIN_EDGE_LENGTH",
-    "NO_EDGE",
-    "NO_SUPPORT",
-    "normalized_stability_index",
-    "order_clockwise",
-    "stability_index",
-]
+NO_SUPPORT = -np.inf
+"""Index returned without a support polygon (fewer than three feet, or fewer than three distinct ones)."""
 
 GRAVITY = 9.81
 """m/s^2"""
@@ -103,18 +97,19 @@ def stability_index(
     ordered = feet[order_clockwise(feet)]
     edges = ordered[np.r_[1:n, 0]] - ordered
     length = np.sqrt((edges * edges).sum(axis=1))
-    proper = length > MIN_EDGE_LENGTH
-    if np.count_nonzero(proper) < MIN_EDGES:
+    joined = length < MIN_EDGE  # coincident feet: not an edge
+    if np.count_nonzero(~joined) < MIN_EDGES:
         return np.full(lead, NO_SUPPORT), np.full((*lead, n), NO_SUPPORT)
-    kappa = edges / np.where(proper, length, 1.0)[:, None]
+    kappa = edges / np.where(joined, 1.0, length)[:, None]
     fx, fy = -mass * cog_acc[..., 0:1], -mass * cog_acc[..., 1:2]
     fz = -mass * (g + cog_acc[..., 2:3])
     r = cog[..., None, :] - ordered  # (..., n, 3)
     rx, ry, rz = r[..., 0], r[..., 1], r[..., 2]
     # kappa . (r x F), written out: np.cross is slow on small arrays and this is a hot path.
     moments = kappa[:, 0] * (ry * fz - rz * fy) + kappa[:, 1] * (rz * fx - rx * fz) + kappa[:, 2] * (rx * fy - ry * fx)
-    moments[..., ~proper] = NO_EDGE
-    return moments.min(axis=-1), moments
+    index = moments[..., ~joined].min(axis=-1)
+    moments[..., joined] = index[..., None]
+    return index, moments
 
 
 def normalized_stability_index(

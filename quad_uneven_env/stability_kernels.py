@@ -11,17 +11,12 @@ import math
 import numba as nb
 import numpy as np
 
-NO_SUPPORT = -math.inf
-"""N m: index and edge moments when there is no support polygon (fewer than three proper edges)."""
-
-NO_EDGE = math.inf
-"""N m: moment reported for a zero-length edge (coincident feet): it is no tipping axis and bounds nothing."""
-
-MIN_EDGE_LENGTH = 1e-9
-"""m: an edge between feet closer than this is zero-length (the feet coincide)."""
+MIN_EDGE = 1e-9
+"""m: a support polygon edge shorter than this joins coincident feet and is not an edge (see
+:func:`quad_uneven_env.stability.stability_index`)."""
 
 MIN_EDGES = 3
-"""Proper (non-zero-length) edges a support polygon needs; with fewer the index is ``NO_SUPPORT``."""
+"""Real (not zero-length) edges a support polygon needs; with fewer the index is ``-inf`` (no support)."""
 
 
 @nb.njit(cache=False, nogil=True)
@@ -33,8 +28,8 @@ def edge_moments_into(cog, acc, feet, mass, g, out):  # pragma: no cover - compi
     n = feet.shape[0]
     if n < MIN_EDGES:
         for k in range(n):
-            out[k] = NO_SUPPORT
-        return NO_SUPPORT
+            out[k] = -math.inf
+        return -math.inf
     # Centroid as numpy's mean computes it (sum, then divide), so both paths order ties alike.
     cx = 0.0
     cy = 0.0
@@ -55,15 +50,16 @@ def edge_moments_into(cog, acc, feet, mass, g, out):  # pragma: no cover - compi
         q = order[(k + 1) % n]
         ex, ey, ez = feet[q, 0] - feet[p, 0], feet[q, 1] - feet[p, 1], feet[q, 2] - feet[p, 2]
         norm = math.sqrt(ex * ex + ey * ey + ez * ez)
-        if not norm > MIN_EDGE_LENGTH:
-            out[k] = NO_EDGE
+        if norm < MIN_EDGE:  # coincident feet: the edge bounds nothing (filled in below)
+            out[k] = math.inf
             continue
         rx, ry, rz = cog[0] - feet[p, 0], cog[1] - feet[p, 1], cog[2] - feet[p, 2]
         out[k] = (ex * (ry * fz - rz * fy) + ey * (rz * fx - rx * fz) + ez * (rx * fy - ry * fx)) / norm
         index = min(index, out[k])
         n_edges += 1
-    if n_edges < MIN_EDGES:
-        for k in range(n):
-            out[k] = NO_SUPPORT
-        return NO_SUPPORT
-    return index
+    for k in range(n):
+        if n_edges < MIN_EDGES:
+            out[k] = -math.inf
+        elif out[k] == math.inf:
+            out[k] = index
+    return index if n_edges >= MIN_EDGES else -math.inf
