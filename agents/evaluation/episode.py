@@ -47,6 +47,8 @@ class EvalConfig:
     """extra QuadUneven-v0 arguments (override the policy's own)."""
     video_dir: str | None = None
     """directory for MP4s of the first episode of each terrain entry (None: no video)."""
+    allow_pickle: bool = False
+    """load pickled files of a model folder (they can run code: trusted files only)."""
 
 
 @dataclasses.dataclass
@@ -100,7 +102,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     video = cfg.video_dir is not None and task.first_of_entry
     env = make_env(task, cfg, render=video)
     u = env.unwrapped
-    policy = make_policy(cfg.policy, env, cfg.algo)
+    policy = make_policy(cfg.policy, env, cfg.algo, cfg.allow_pickle)
     dt = u.dt
     mass, g = float(u.idx.total_mass), float(-u.model.opt.gravity[2])
     writer, video_path, frame_every = None, None, max(1, round(1.0 / (VIDEO_FPS * dt)))

@@ -59,7 +59,7 @@ def _preflight(task: EpisodeTask, cfg: EvalConfig) -> None:
     """Build the first episode's env and policy here, so bad env kwargs or policies fail before any worker starts."""
     env = make_env(task, cfg)
     try:
-        make_policy(cfg.policy, env, cfg.algo)
+        make_policy(cfg.policy, env, cfg.algo, cfg.allow_pickle)
     finally:
         env.close()
 
@@ -82,6 +82,7 @@ def evaluate(
     algo: str = "ppo",
     env_kwargs: Mapping[str, Any] | None = None,
     progress: bool = True,
+    allow_pickle: bool = False,
 ) -> dict[str, Any]:
     """Run ``policy`` on every (terrain entry, seed) of ``suite``; write ``out/results.json``, ``report.md``, PNGs.
 
@@ -92,6 +93,7 @@ def evaluate(
     :param workers: episodes run in this many spawned processes (1: in this process).
     :param video: MP4 of the first episode of each terrain entry in ``out/videos/``.
     :param env_kwargs: extra QuadUneven-v0 arguments (override the policy's own).
+    :param allow_pickle: unpickle files of an SB3 model folder (trusted files only).
     :return: the results.json content.
     :raises SuiteError: on an invalid suite; ``PolicyError`` on an unusable policy; ValueError on bad arguments.
     """
@@ -112,6 +114,7 @@ def evaluate(
         algo=algo,
         env_kwargs=dict(env_kwargs or {}),
         video_dir=str(out / "videos") if video else None,
+        allow_pickle=allow_pickle,
     )
     _preflight(tasks[0], cfg)
     runs = _run_all(tasks, cfg, min(workers, len(tasks)), progress)
