@@ -195,7 +195,7 @@ def test_residual_policy_installs_expert_and_normalizes(tmp_path):
     (tmp_path / "run" / "model_obs_norm.npz").unlink()
     from agents.evaluation.policies import PolicyError
 
-    with pytest.raises(PolicyError, match="obs_norm.npz is missing"):
+    with pytest.raises(PolicyError, match=r"obs_norm\.npz is missing"):
         make_policy(path, gym.make("QuadUneven-v0", terrain="flat"))
 
 
