@@ -120,7 +120,9 @@ class PhysicsController(Protocol):
     Called after ``mujoco.mj_step1`` (so ``data`` holds kinematics, the mass matrix,
     ``qfrc_bias`` and contacts of the current state) and before ``mujoco.mj_step2``; returns
     the 12 joint torques (N m, ``JOINT_NAMES`` order), which the env clips to the motor limits.
-    An optional ``reset(model, data, terrain)`` method is called at the end of every reset.
+    An exception it raises, or a return that is not 12 finite numbers, ends the episode as diverged
+    (the control step is undone). It needs ``action_mode="torque"``. An optional
+    ``reset(model, data, terrain)`` method is called at the end of every reset.
     """
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray: ...
