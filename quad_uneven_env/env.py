@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import math
+import os
+import reprlib
+import sys
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
@@ -19,6 +23,7 @@ from quad_uneven_env.config import (
     dataclass_from_mapping,
     load_robot_config,
 )
+from quad_uneven_env.fields import Param
 from quad_uneven_env.measurement import StepMeasurement
 from quad_uneven_env.measurement_kernels import clip_finite_into
 from quad_uneven_env.observations import (
@@ -36,6 +41,77 @@ from quad_uneven_env.termination import FallCheck
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec
 
 ACTION_MODES = ("torque", "joint_pd")
+RENDER_MODES = ("human", "rgb_array", "depth_array")
+
+MAX_EPISODE_STEPS = 10**9
+"""Upper bound of ``episode_step_cap`` (control steps)."""
+
+ENV_ARGS: tuple[Param, ...] = (
+    Param("frame_skip", 10, "-", "physics steps per control step", kind="int", lo=1, hi=1000),
+    Param("timestep", 0.002, "s", "physics timestep", lo=0.0, hi=0.002, lo_open=True),
+    Param("action_mode", "torque", "-", "what an action commands (see Action)", kind="choice", choices=ACTION_MODES),
+    Param(
+        "gait_period",
+        6.1,
+        "s",
+        "period of the observation's gait clock (the paper's cycle)",
+        lo=0.0,
+        hi=1000.0,
+        lo_open=True,
+    ),
+    Param(
+        "reset_noise_scale",
+        0.02,
+        "rad, rad/s",
+        "uniform noise on the joint angles and velocities at reset",
+        lo=0.0,
+        hi=1.0,
+    ),
+    Param("pd_kp", 100.0, "N m/rad", "``joint_pd`` servo stiffness", lo=0.0, hi=1e5, lo_open=True),
+    Param("pd_kd", 3.0, "N m s/rad", "``joint_pd`` servo damping", lo=0.0, hi=1e4),
+    Param(
+        "pd_action_scale", 0.5, "rad", "``joint_pd`` target offset per unit of action", lo=0.0, hi=math.pi, lo_open=True
+    ),
+    Param("render_mode", None, "-", "how ``render()`` draws", kind="choice", choices=RENDER_MODES, none_ok=True),
+    Param("width", 640, "px", "rendered image width", kind="int", lo=1, hi=4096),
+    Param("height", 480, "px", "rendered image height", kind="int", lo=1, hi=4096),
+    Param(
+        "episode_step_cap",
+        1_000_000,
+        "-",
+        "control steps after which the env itself truncates an episode, whatever time limit a wrapper sets",
+        kind="int",
+        lo=1,
+        hi=MAX_EPISODE_STEPS,
+    ),
+)
+"""The env's scalar arguments: their checks at make time, their error messages and the Arguments table."""
+
+_STATE = mujoco.mjtState.mjSTATE_INTEGRATION
+"""What a failed control step restores: time, qpos, qvel, act, warm start, ctrl, applied forces, ..."""
+
+
+def arguments_table() -> str:
+    """Markdown table of :data:`ENV_ARGS` (argument, default, allowed, unit, meaning)."""
+    rows = ["| argument | default | allowed | unit | meaning |", "|---|---|---|---|---|"]
+    for q in ENV_ARGS:
+        default = "None" if q.default is None else f"{q.default!r}"
+        rows.append(f"| ``{q.name}`` | ``{default}`` | {q.allowed()} | {q.unit} | {q.doc} |")
+    return "\n".join(rows)
+
+
+def check_display(render_mode: str | None) -> None:
+    """Refuse ``render_mode="human"`` where no window can open (Linux without ``DISPLAY``/``WAYLAND_DISPLAY``).
+
+    Runs before any window or GLFW code: without a display GLFW aborts the process instead of raising.
+    """
+    if render_mode != "human" or not sys.platform.startswith("linux"):
+        return
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise ValueError(
+            "render_mode='human' needs a display, but neither DISPLAY nor WAYLAND_DISPLAY is set; "
+            "use render_mode='rgb_array' (offscreen) on a headless machine"
+        )
 
 
 class PhysicsController(Protocol):
@@ -44,7 +120,9 @@ class PhysicsController(Protocol):
     Called after ``mujoco.mj_step1`` (so ``data`` holds kinematics, the mass matrix,
     ``qfrc_bias`` and contacts of the current state) and before ``mujoco.mj_step2``; returns
     the 12 joint torques (N m, ``JOINT_NAMES`` order), which the env clips to the motor limits.
-    An optional ``reset(model, data, terrain)`` method is called at the end of every reset.
+    An exception it raises, or a return that is not 12 finite numbers, ends the episode as diverged
+    (the control step is undone). It needs ``action_mode="torque"``. An optional
+    ``reset(model, data, terrain)`` method is called at the end of every reset.
     """
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray: ...
@@ -65,7 +143,9 @@ class QuadUnevenEnv(gym.Env):
 
     Out-of-range actions are clipped to [-1, 1]; NaN/Inf or a wrong shape raises ``ValueError``
     and leaves the simulation untouched. With a physics-rate ``controller`` (see
-    :class:`PhysicsController`), the controller's torques are applied and it receives the action.
+    :class:`PhysicsController`), the controller's torques are applied and it receives the action;
+    a controller needs ``action_mode="torque"`` (with ``"joint_pd"`` its torques would become servo
+    targets: refused with a ``ValueError`` at make and by :meth:`set_controller`).
 
     **Observation**: a flat finite float32 Box; ``env.observation_structure`` maps each name to
     its slice. Every entry is clipped to its bounds:
@@ -79,9 +159,16 @@ class QuadUnevenEnv(gym.Env):
 
     **Episode end**: terminated on a fall (trunk touches the terrain, trunk origin lower than
     ``min_base_height`` or higher than ``max_base_height`` above the terrain below it, tilt beyond
-    ``max_tilt_deg``), on leaving the terrain, or on numerical divergence (NaN/Inf state or a
-    MuJoCo bad qpos/qvel/qacc warning; ``info["diverged"] = True``); the reason is in
-    ``info["termination_reason"]``. Truncation by ``max_episode_steps`` (1000 = 20 s by default).
+    ``max_tilt_deg``), on leaving the terrain, or when the control step fails (``info["diverged"] =
+    True``): a NaN/Inf state or a MuJoCo bad qpos/qvel/qacc warning, an error raised by MuJoCo, or a
+    controller that raises any exception or returns anything but 12 finite numbers; the reason is in
+    ``info["termination_reason"]``. ``step`` itself never raises for what happens inside the
+    simulation or a controller (only for a malformed action, before anything runs). A failed control
+    step is undone: the simulation state (time included) is put back to where the step started, so
+    the simulation advances by whole control steps only, and the observation and ``info`` repeat the
+    last good measurement, which is of that state. Truncation by ``max_episode_steps`` (1000 = 20 s
+    by default) and, whatever the time limit, after ``episode_step_cap`` control steps
+    (``info["termination_reason"]`` then says so).
 
     **Info** (the same keys, shapes and dtypes at every step and reset, so that Gymnasium's vector
     envs can stack them; ``gym.make_vec("QuadUneven-v0", num_envs=N)`` gives N copies):
@@ -111,14 +198,18 @@ class QuadUnevenEnv(gym.Env):
     constraint solve, i.e. at the start of that 2 ms step.
 
     **Arguments**: ``terrain`` (kind name or ``{"kind": ..., **params}``, see docs/terrain.md;
-    default ``"rough"``), ``robot`` (config name or YAML path, default ``"paper"``),
-    ``frame_skip`` (physics steps per control step, default 10), ``timestep`` (s, <= 0.002),
-    ``action_mode``, ``controller``, ``reward_weights``, ``termination``, ``height_scan``,
-    ``gait_period`` (s, default 6.1: the paper's cycle), ``reset_noise_scale`` (rad and rad/s of
-    uniform noise on the joints at reset, default 0.02), ``render_mode``, ``width``, ``height``.
+    default ``"rough"``), ``robot`` (config name or YAML path, default ``"paper"``), ``controller``
+    (None or a :class:`PhysicsController`), ``reward_weights``, ``termination``, ``height_scan``
+    (mappings of :mod:`quad_uneven_env.config`'s fields), and the scalars below, each checked at make
+    time by type and range (a bool is not a number; the error names the argument and its allowed
+    values):
+
+    ARGUMENTS_TABLE
+
+    ``reset(seed=...)`` takes None or an integer >= 0 (not a bool).
     """
 
-    metadata = {"render_modes": ["human", "rgb_array", "depth_array"], "render_fps": 50}  # noqa: RUF012
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 50}  # noqa: RUF012
 
     def __init__(
         self,
@@ -139,34 +230,36 @@ class QuadUnevenEnv(gym.Env):
         render_mode: str | None = None,
         width: int = 640,
         height: int = 480,
+        episode_step_cap: int = 1_000_000,
     ) -> None:
-        if action_mode not in ACTION_MODES:
-            raise ValueError(f"action_mode must be one of {ACTION_MODES}, got {action_mode!r}")
-        if not (isinstance(frame_skip, int | np.integer) and frame_skip >= 1):
-            raise ValueError(f"frame_skip must be an integer >= 1, got {frame_skip!r}")
-        if not 0.0 < float(timestep) <= 0.002:
-            raise ValueError(f"timestep must be in (0, 0.002] s, got {timestep!r}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        for name, value in (("gait_period", gait_period), ("pd_kp", pd_kp), ("pd_action_scale", pd_action_scale)):
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
-        if not np.isfinite(reset_noise_scale) or reset_noise_scale < 0 or not np.isfinite(pd_kd) or pd_kd < 0:
-            raise ValueError("reset_noise_scale and pd_kd must be finite numbers >= 0")
+        given = dict(
+            frame_skip=frame_skip, timestep=timestep, action_mode=action_mode, gait_period=gait_period,
+            reset_noise_scale=reset_noise_scale, pd_kp=pd_kp, pd_kd=pd_kd, pd_action_scale=pd_action_scale,
+            render_mode=render_mode, width=width, height=height, episode_step_cap=episode_step_cap,
+        )  # fmt: skip
+        args = {q.name: q.check(given[q.name], "") for q in ENV_ARGS}
+        frame_skip, timestep, action_mode = args["frame_skip"], args["timestep"], args["action_mode"]
+        check_display(render_mode)
+        if not isinstance(robot, str | os.PathLike):
+            raise ValueError(
+                f"robot must be a config name or a .yaml path, got {robot!r} of type {type(robot).__name__}"
+            )
+        self.action_mode = action_mode
+        self._check_controller(controller)
 
         self.robot_cfg: RobotConfig = load_robot_config(robot)
         self.terrain = Terrain(parse_terrain_spec(terrain))
         self.reward_weights: RewardWeights = dataclass_from_mapping(RewardWeights, reward_weights, "reward_weights")
         self.termination: TerminationLimits = dataclass_from_mapping(TerminationLimits, termination, "termination")
         self.height_scan: HeightScanConfig = dataclass_from_mapping(HeightScanConfig, height_scan, "height_scan")
-        if self.height_scan.resolution <= 0 or self.height_scan.size_x < 0 or self.height_scan.size_y < 0:
-            raise ValueError("height_scan: resolution must be > 0 and sizes >= 0")
         self.frame_skip = int(frame_skip)
-        self.action_mode = action_mode
-        self.gait_period = float(gait_period)
-        self.reset_noise_scale = float(reset_noise_scale)
-        self.pd_action_scale = float(pd_action_scale)
+        self.gait_period = args["gait_period"]
+        self.reset_noise_scale = args["reset_noise_scale"]
+        self.pd_action_scale = args["pd_action_scale"]
+        self.episode_step_cap: int = args["episode_step_cap"]
+        """control steps after which the env truncates an episode (see the class docstring)."""
         self._controller = controller
+        self._episode_steps = 0
 
         xml = scene_mjcf(
             self.robot_cfg,
@@ -177,7 +270,10 @@ class QuadUnevenEnv(gym.Env):
         self.model = mujoco.MjModel.from_xml_string(xml)
         # Divergence must end the episode visibly, not be hidden by MuJoCo's automatic reset.
         self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
+        vis = self.model.vis.global_
+        vis.offwidth, vis.offheight = max(vis.offwidth, args["width"]), max(vis.offheight, args["height"])
         self.data = mujoco.MjData(self.model)
+        self._saved_state = np.empty(mujoco.mj_stateSize(self.model, _STATE))
         self._warning_counts = self.data.warning.number  # live view of MuJoCo's warning counters
         self._dt = float(self.model.opt.timestep) * self.frame_skip
         self.idx = RobotIndex.from_model(self.model)
@@ -193,7 +289,7 @@ class QuadUnevenEnv(gym.Env):
         self._joint_lo = self.model.jnt_range[1:, 0].copy()
         self._joint_hi = self.model.jnt_range[1:, 1].copy()
         if action_mode == "joint_pd":
-            self._make_servos(float(pd_kp), float(pd_kd))
+            self._make_servos(args["pd_kp"], args["pd_kd"])
 
         self.action_space = spaces.Box(-1.0, 1.0, (C.N_JOINTS,), dtype=np.float32)
         self._fields = observation_fields(self.height_scan, C.N_JOINTS)
@@ -202,7 +298,7 @@ class QuadUnevenEnv(gym.Env):
 
         self.render_mode = render_mode
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.dt))
-        self._width, self._height = int(width), int(height)
+        self._width, self._height = args["width"], args["height"]
         self._renderer = None
 
         self._prev_action = np.zeros(C.N_JOINTS)
@@ -238,13 +334,38 @@ class QuadUnevenEnv(gym.Env):
         return self._controller
 
     def set_controller(self, controller: PhysicsController | Callable[..., np.ndarray] | None) -> None:
-        """Install (or remove, with None) the physics-rate controller; takes effect at the next step."""
+        """Install (or remove, with None) the physics-rate controller; takes effect at the next step.
+
+        :raises ValueError: if ``controller`` is not callable, or the env is in ``action_mode="joint_pd"``.
+        """
+        self._check_controller(controller)
         self._controller = controller
+
+    def _check_controller(self, controller: Any) -> None:
+        if controller is None:
+            return
+        if not callable(controller):
+            raise ValueError(
+                f"controller must be None or a callable (model, data, action) -> 12 torques (N m), "
+                f"got {reprlib.repr(controller)} of type {type(controller).__name__}"
+            )
+        if self.action_mode != "torque":
+            raise ValueError(
+                f"controller must be None with action_mode={self.action_mode!r}: a physics-rate controller returns "
+                "torques, which would drive the position servos as targets; use action_mode='torque'"
+            )
 
     # ------------------------------------------------------------------ reset
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """Regenerate the terrain from ``np_random``, stand the robot at the spawn point."""
-        super().reset(seed=seed)
+        """Regenerate the terrain from ``np_random``, stand the robot at the spawn point.
+
+        :param seed: None or an integer >= 0 (not a bool); see :meth:`gymnasium.Env.reset`.
+        """
+        if seed is not None and (
+            isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer) or seed < 0
+        ):
+            raise ValueError(f"seed must be None or an integer >= 0, got {seed!r} of type {type(seed).__name__}")
+        super().reset(seed=None if seed is None else int(seed))
         if options:
             raise ValueError(f"reset options are not supported (got keys {sorted(options)}); pass terrain to make()")
         self.terrain.generate(self.np_random)
@@ -271,6 +392,7 @@ class QuadUnevenEnv(gym.Env):
             self._controller.reset(self.model, self.data, self.terrain)
 
         self._prev_action[:] = 0.0
+        self._episode_steps = 0
         meas = self._measure()
         self._start_x = float(meas.cog[0])
         self._last_index_norm = meas.index / (self._mass * self._g)
@@ -309,44 +431,36 @@ class QuadUnevenEnv(gym.Env):
         m, d = self.model, self.data
         x_before = float(self._meas.cog[0])
 
-        reason = None
-        if self._controller is not None:
-            lim, ctrl, warnings = self.idx.torque_limit, d.ctrl, self._warning_counts
-            for _ in range(self.frame_skip):
-                mujoco.mj_step1(m, d)
-                if instability_warnings(warnings) > self._warnings_at_reset:
-                    break  # reported below; the controller must not see a garbage state
-                try:
-                    tau = np.asarray(self._controller(m, d, a), dtype=np.float64)
-                except (np.linalg.LinAlgError, ArithmeticError) as err:
-                    reason = f"diverged: controller failed ({type(err).__name__}: {err})"
-                    break
-                if tau.shape != (C.N_JOINTS,) or not clip_finite_into(tau, lim, ctrl):
-                    reason = "diverged: controller returned non-finite or mis-shaped torques"
-                    break
-                mujoco.mj_step2(m, d)  # a bad qacc here is caught by the next check (or the one below)
-        else:
-            if self.action_mode == "torque":
-                np.multiply(a, self.idx.torque_limit, out=d.ctrl)
-            else:
-                np.clip(self._home_joints + self.pd_action_scale * a, self._joint_lo, self._joint_hi, out=d.ctrl)
-            mujoco.mj_step(m, d, self.frame_skip)
-
+        mujoco.mj_getState(m, d, self._saved_state, _STATE)
+        try:
+            reason = self._advance(a)
+        except Exception as err:  # MuJoCo's own errors (mujoco.FatalError), raised from inside its step
+            reason = f"diverged: MuJoCo failed ({type(err).__name__}: {err})"
+        except BaseException:  # Ctrl-C and the like still propagate, from a whole-step state
+            self._restore_state()
+            raise
         # MuJoCo's own checks (mj_checkPos/Vel/Acc) flag NaN, Inf and huge values in qpos, qvel
         # and qacc; with auto-reset disabled the bad state stays for us to see.
         if reason is None and instability_warnings(self._warning_counts) > self._warnings_at_reset:
             reason = "diverged: MuJoCo reported a bad (NaN, Inf or huge) qpos/qvel/qacc"
+        if reason is not None:
+            self._restore_state()  # a failed control step is undone: the state is the last good one again
+        else:
+            self._prev_action[:] = a
+            reason = self._measure_safely()
         diverged = reason is not None
 
         meas = self._meas
-        self._prev_action[:] = a
         if diverged:
             index_norm = self._last_index_norm  # the buffers still hold the last good measurement
         else:
-            self._measure()
             reason = self._fall.reason(meas.base, meas.ground, meas.R, meas.trunk_contact)
             index_norm = meas.index / (self._mass * self._g)
         fell = reason is not None
+        self._episode_steps += 1
+        truncated = not fell and self._episode_steps >= self.episode_step_cap
+        if truncated:
+            reason = f"step cap: {self.episode_step_cap} control steps (episode_step_cap)"
 
         cog_x = float(meas.cog[0])
         cog_vel_x = 0.0 if diverged else (cog_x - x_before) / self.dt
@@ -355,7 +469,7 @@ class QuadUnevenEnv(gym.Env):
         power = 0.0 if diverged else float(np.abs(torque * d.qvel[6:]).sum())
         terms = reward_terms(self.reward_weights, cog_vel_x, index_norm, tau_frac, power, self._mass * self._g, fell)
         reward = float(sum(terms.values()))
-        # After a divergence the state is garbage: repeat the last good observation.
+        # After a failed step the observation is the last good one (that of the restored state).
         if not diverged:
             self._last_obs = meas.obs.astype(np.float32)
             self._last_index_norm = index_norm
@@ -363,7 +477,68 @@ class QuadUnevenEnv(gym.Env):
         info = self._info(meas, terms, diverged, reason)
         if self.render_mode == "human":
             self.render()
-        return obs, reward, fell, False, info
+        return obs, reward, fell, truncated, info
+
+    # ------------------------------------------------------------------ physics loops
+    def _advance(self, a: np.ndarray) -> str | None:
+        """``frame_skip`` physics steps under the clipped action ``a``; the failure reason, or None.
+
+        With a controller the loop stops at the first failure (the caller undoes the step).
+        """
+        m, d = self.model, self.data
+        if self._controller is None:
+            if self.action_mode == "torque":
+                np.multiply(a, self.idx.torque_limit, out=d.ctrl)
+            else:
+                np.clip(self._home_joints + self.pd_action_scale * a, self._joint_lo, self._joint_hi, out=d.ctrl)
+            mujoco.mj_step(m, d, self.frame_skip)
+            return None
+        warnings = self._warning_counts
+        for _ in range(self.frame_skip):
+            mujoco.mj_step1(m, d)
+            if instability_warnings(warnings) > self._warnings_at_reset:
+                return None  # reported by the caller; the controller must not see a garbage state
+            reason = self._controller_torques_into(a, d.ctrl)
+            if reason is not None:
+                return reason
+            mujoco.mj_step2(m, d)  # a bad qacc here is caught by the next check (or the caller's)
+        return None
+
+    def _controller_torques_into(self, a: np.ndarray, out: np.ndarray) -> str | None:
+        """Call the controller on the current (``mj_step1``) state and write its torques, clipped to the motor
+        limits, into ``out``; the failure reason, or None.
+
+        A failure is any exception the controller raises and any return that is not 12 finite numbers
+        (a string, a mapping, None, a wrong shape, NaN/Inf).
+        """
+        try:
+            raw = self._controller(self.model, self.data, a)
+        except Exception as err:  # any controller error ends the episode; it never escapes step()
+            return f"diverged: controller raised {type(err).__name__}: {err}"
+        tau = raw if type(raw) is np.ndarray and raw.dtype == np.float64 else _as_float_array(raw)
+        if tau is None or tau.shape != (C.N_JOINTS,):
+            return f"diverged: controller returned {_describe(raw)}, not {C.N_JOINTS} finite torques (N m)"
+        if not clip_finite_into(tau, self.idx.torque_limit, out):
+            bad = np.flatnonzero(~np.isfinite(tau)).tolist()
+            return f"diverged: controller returned non-finite torques (NaN/Inf at indices {bad})"
+        return None
+
+    def _restore_state(self) -> None:
+        """Put the simulation back to the state saved at the start of the control step (and recompute its
+        derived quantities: positions, contacts, sensors)."""
+        mujoco.mj_setState(self.model, self.data, self._saved_state, _STATE)
+        try:
+            mujoco.mj_forward(self.model, self.data)
+        except Exception:  # the episode is over: a state MuJoCo cannot evaluate stays as restored
+            pass
+
+    def _measure_safely(self) -> str | None:
+        """:meth:`_measure`, with any error it raises turned into a failure reason (None when it succeeds)."""
+        try:
+            self._measure()
+        except Exception as err:  # a measurement bug must end the episode, not a training run
+            return f"diverged: measurement failed ({type(err).__name__}: {err})"
+        return None
 
     # ------------------------------------------------------------------ measurement
     def _measure(self) -> StepMeasurement:
@@ -444,7 +619,25 @@ class QuadUnevenEnv(gym.Env):
             self._renderer = None
 
 
+def _as_float_array(raw: Any) -> np.ndarray | None:
+    """``raw`` as a float64 array if it holds plain numbers (not bools, strings or objects), else None."""
+    try:
+        arr = np.asarray(raw)
+    except Exception:  # ragged sequences, objects whose __array__ fails
+        return None
+    if arr.dtype.kind not in "iuf":
+        return None
+    return arr.astype(np.float64)
+
+
+def _describe(raw: Any) -> str:
+    """A short description of a malformed controller return, for ``termination_reason``."""
+    if isinstance(raw, np.ndarray):
+        return f"an array of shape {raw.shape} and dtype {raw.dtype}"
+    return f"{reprlib.repr(raw)} of type {type(raw).__name__}"
+
+
 if QuadUnevenEnv.__doc__:
     QuadUnevenEnv.__doc__ = QuadUnevenEnv.__doc__.replace(
         "OBSERVATION_TABLE", observation_table(observation_fields(HeightScanConfig())).replace("\n", "\n    ")
-    )
+    ).replace("ARGUMENTS_TABLE", arguments_table().replace("\n", "\n    "))

@@ -102,7 +102,7 @@ class StepMeasurement:
         self.foot_contact = np.zeros(C.N_LEGS, dtype=np.bool_)
         """(4,) the foot touches the terrain."""
         self.foot_points = np.zeros((C.N_LEGS, 3))
-        """(4, 3) m, force-weighted contact point of each foot (foot site minus its radius if none)."""
+        """(4, 3) m, contact point of each foot by the contact rule of :mod:`quad_uneven_env.physics`."""
         self.total_force = np.zeros(3)
         """(3,) N, sum of all terrain forces on the robot."""
         self.cog = np.zeros(3)
@@ -127,12 +127,13 @@ class StepMeasurement:
     # ------------------------------------------------------------------ outputs
     @property
     def index(self) -> float:
-        """N m, stability index of the feet in contact (``-inf`` with fewer than three)."""
+        """N m, stability index of the feet in contact (``-inf`` without a support polygon: see ``stability``)."""
         return float(self._scalars[_INDEX])
 
     @property
     def moments(self) -> np.ndarray:
-        """(n,) N m, tumbling moment of each support polygon edge, n = feet in contact (clockwise)."""
+        """(n,) N m, tumbling moment of each support polygon edge, n = feet in contact (clockwise; a zero-length
+        edge reports the index, all are ``-inf`` without a polygon)."""
         return self._moments[: int(self._scalars[_N_STANCE])]
 
     @property

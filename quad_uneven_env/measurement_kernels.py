@@ -12,10 +12,13 @@ import numba as nb
 import numpy as np
 
 from quad_uneven_env.observations import STABILITY_CLIP
+from quad_uneven_env.physics import MIN_FOOT_FORCE
 from quad_uneven_env.spatial_kernels import quat_to_matrix_into
 from quad_uneven_env.stability import NO_SUPPORT
 from quad_uneven_env.stability_kernels import edge_moments_into
 from quad_uneven_env.terrain.heightfield_kernels import heights_into
+
+_MIN_FOOT_FORCE_SQ = MIN_FOOT_FORCE * MIN_FOOT_FORCE
 
 
 @nb.njit(cache=False, nogil=True)
@@ -59,6 +62,8 @@ def measure_observe_into(  # pragma: no cover - compiled
 ):
     trunk, robot_adr, trunk_adr = ints[0], ints[1], ints[2]
     # Contacts: sensors report the force the robot exerts on the terrain; the terrain's is its negative.
+    # A foot's point is the sensor's force-weighted contact point, or the foot's lowest point when it
+    # carries (almost) no force: the rule of physics.ContactMeasurement.foot_points.
     n_feet_found = 0.0
     n_stance = 0
     for leg in range(4):
@@ -67,11 +72,14 @@ def measure_observe_into(  # pragma: no cover - compiled
         found = sd[a]
         n_feet_found += found
         foot_contact[leg] = found > 0
+        f2 = 0.0
         for k in range(3):
             foot_forces[leg, k] = -sd[a + 1 + k]
+            f2 += sd[a + 1 + k] * sd[a + 1 + k]
             feet_pos[leg, k] = site_xpos[s, k]
         if found > 0:
             n_stance += 1
+        if found > 0 and f2 >= _MIN_FOOT_FORCE_SQ:
             for k in range(3):
                 foot_points[leg, k] = sd[a + 4 + k]
         else:
@@ -87,23 +95,17 @@ def measure_observe_into(  # pragma: no cover - compiled
     scalars[3] = 1.0 if n_trunk > 0 else 0.0
     scalars[4] = 1.0 if sd[robot_adr] - n_feet_found - n_trunk > 0 else 0.0
 
-    # Stability index of the feet in contact.
+    # Stability index of the feet in contact (degenerate polygons: see quad_uneven_env.stability).
     g = -gravity[2]
     scalars[1] = n_stance
-    if n_stance < 3:
-        scalars[0] = NO_SUPPORT
-        for k in range(n_stance):
-            moments[k] = NO_SUPPORT
-    else:
-        stance = np.empty((n_stance, 3))
-        j = 0
-        for leg in range(4):
-            if foot_contact[leg]:
-                for k in range(3):
-                    stance[j, k] = foot_points[leg, k]
-                j += 1
-        edge_moments_into(cog, cog_acc, stance, mass, g, moments[:n_stance])
-        scalars[0] = moments[:n_stance].min()
+    stance = np.empty((n_stance, 3))
+    j = 0
+    for leg in range(4):
+        if foot_contact[leg]:
+            for k in range(3):
+                stance[j, k] = foot_points[leg, k]
+            j += 1
+    scalars[0] = edge_moments_into(cog, cog_acc, stance, mass, g, moments[:n_stance])
 
     # Base pose and the terrain scan in the yaw-aligned base frame.
     quat_to_matrix_into(qpos[3:7], R)
@@ -137,15 +139,14 @@ def measure_observe_into(  # pragma: no cover - compiled
         obs[o[6] + leg] = 1.0 if foot_contact[leg] else 0.0
     index_norm = scalars[0] / norm
     obs[o[7]] = index_norm if math.isfinite(index_norm) else -STABILITY_CLIP
-    all_finite = True
-    for k in range(n_stance):
-        if not math.isfinite(moments[k]):
-            all_finite = False
+    # Edge slots: the normalised moments, zero-padded; all at the lower bound when some feet touch
+    # but span no polygon.
+    no_polygon = n_stance > 0 and scalars[0] == NO_SUPPORT
     for k in range(4):
-        if k < n_stance and all_finite:
-            obs[o[8] + k] = moments[k] / norm
-        elif n_stance > 0 and not all_finite:
+        if no_polygon:
             obs[o[8] + k] = -STABILITY_CLIP
+        elif k < n_stance:
+            obs[o[8] + k] = moments[k] / norm
         else:
             obs[o[8] + k] = 0.0
     obs[o[9]] = math.sin(clock_phase)

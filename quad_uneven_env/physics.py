@@ -1,8 +1,20 @@
 """Named, vectorised accessors to the robot in a MuJoCo model/data pair.
 
 :class:`RobotIndex` resolves every id once; :func:`measure_contacts` turns MuJoCo's contact
-list into per-foot world-frame forces. Nothing here allocates more than a few small arrays:
-it runs every control step.
+sensors into per-foot world-frame forces and points, :func:`measure_contacts_reference` does
+the same from the raw contact list (the test reference). Nothing here allocates more than a few
+small arrays: it runs every control step.
+
+**The contact rule** (one rule for the sensors, the raw contact list and the compiled measurement
+of :mod:`quad_uneven_env.measurement_kernels`):
+
+* a foot is *in contact* when MuJoCo has at least one active contact (one with constraint rows)
+  between its sphere and the terrain, whatever the force;
+* its *contact point* is the mean of its contact positions weighted by the norms of their
+  contact-frame forces (MuJoCo's ``reduce="netforce"``) when the net terrain force on the foot is
+  at least ``MIN_FOOT_FORCE``; otherwise (no contact, or a contact carrying no force, e.g. a sphere
+  already separating, for which the sensor reports the point (0, 0, 0)) it is the foot's lowest
+  point, the foot site minus the foot radius along world z.
 """
 
 from __future__ import annotations
@@ -13,6 +25,9 @@ import mujoco
 import numpy as np
 
 from quad_uneven_env import constants as C
+
+MIN_FOOT_FORCE = 1e-9
+"""N: below this net terrain force a foot in contact has no force-weighted point (see the contact rule)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -81,7 +96,8 @@ class ContactMeasurement:
     foot_contact: np.ndarray
     """(4,) bool, foot touches the terrain."""
     foot_points: np.ndarray
-    """(4, 3) force-weighted contact point of each foot (m); the foot site minus its radius if none."""
+    """(4, 3) force-weighted contact point of each foot (m); its lowest point (site minus radius) when the foot
+    is not in contact or carries less than ``MIN_FOOT_FORCE`` (the module's contact rule)."""
     total_force: np.ndarray
     """(3,) sum of all terrain forces on the robot, feet and other links (N)."""
     trunk_contact: bool
@@ -104,9 +120,10 @@ def measure_contacts(
     foot = sd[idx.foot_sensor_rows]  # (4, 7): found, force (3), pos (3)
     contact = foot[:, 0] > 0
     foot_forces = -foot[:, 1:4]
+    loaded = contact & (np.einsum("ij,ij->i", foot_forces, foot_forces) >= MIN_FOOT_FORCE * MIN_FOOT_FORCE)
     points = data.site_xpos[idx.foot_sites].copy()
     points[:, 2] -= foot_radius
-    points[contact] = foot[contact, 4:7]
+    points[loaded] = foot[loaded, 4:7]
     r = idx.robot_sensor_adr
     n_robot = sd[r]
     n_trunk = sd[idx.trunk_sensor_adr]
@@ -125,11 +142,13 @@ def measure_contacts_reference(
 ) -> ContactMeasurement:
     """:func:`measure_contacts` from the raw contact list (slower; the independent reference).
 
+    Same contact rule (module docstring), computed from ``data.contact`` and the constraint forces.
     Vectorised over contacts for elliptic cones, where the constraint force rows of a contact
     are its force in the contact frame; other cones go through ``mj_contactForce``.
     """
     foot_forces = np.zeros((C.N_LEGS, 3))
     total = np.zeros(3)
+    n_contacts = np.zeros(C.N_LEGS)
     weight = np.zeros(C.N_LEGS)
     weighted_pts = np.zeros((C.N_LEGS, 3))
     trunk_contact = other_contact = False
@@ -154,18 +173,20 @@ def measure_contacts_reference(
             on_foot = leg >= 0
             if on_foot.any():
                 legs = leg[on_foot]
-                w = np.maximum(np.linalg.norm(f_c[on_foot], axis=1), 1e-9)
+                w = np.linalg.norm(f_c[on_foot], axis=1)
                 pos = con.pos[:ncon][keep][on_foot]
                 for k in range(3):
                     foot_forces[:, k] = np.bincount(legs, f_world[on_foot, k], C.N_LEGS)
                     weighted_pts[:, k] = np.bincount(legs, w * pos[:, k], C.N_LEGS)
                 weight = np.bincount(legs, w, C.N_LEGS)
+                n_contacts = np.bincount(legs, minlength=C.N_LEGS).astype(float)
             trunk_contact = bool((robot_g == idx.trunk_geom).any())
             other_contact = bool(((~on_foot) & (robot_g != idx.trunk_geom)).any())
-    contact = weight > 0
+    contact = n_contacts > 0
+    loaded = contact & (np.linalg.norm(foot_forces, axis=1) >= MIN_FOOT_FORCE) & (weight > 0)
     points = data.site_xpos[idx.foot_sites].copy()
     points[:, 2] -= foot_radius
-    points[contact] = weighted_pts[contact] / weight[contact, None]
+    points[loaded] = weighted_pts[loaded] / weight[loaded, None]
     return ContactMeasurement(foot_forces, contact, points, total, trunk_contact, other_contact)
 
 

@@ -33,10 +33,10 @@ def reference_observation(u, contacts, index, moments, heights_base, heights_sca
     obs[st["foot_contact"]] = contacts.foot_contact
     obs[st["stability_index"]] = index / norm if math.isfinite(index) else -STABILITY_CLIP
     edges = np.zeros(4)
-    if moments.size and np.isfinite(moments).all():
-        edges[: moments.size] = moments / norm
-    elif moments.size:
+    if moments.size and index == NO_SUPPORT:
         edges[:] = -STABILITY_CLIP
+    elif moments.size:
+        edges[: moments.size] = moments / norm
     obs[st["edge_moments"]] = edges
     phase = 2 * np.pi * d.time / u.gait_period
     obs[st["gait_clock"]] = (np.sin(phase), np.cos(phase))
@@ -65,10 +65,12 @@ def check_against_reference(u) -> None:
     trunk = u.idx.trunk_body
     np.testing.assert_array_equal(meas.cog, u.data.subtree_com[trunk])
     np.testing.assert_allclose(meas.cog_acc, ref.total_force / u.idx.total_mass + u.model.opt.gravity, atol=1e-12)
+    # The numpy (vectorised) path of the index, not the compiled one the single-instant call uses.
     index, moments = stability_index(
-        meas.cog, meas.cog_acc, ref.foot_points[ref.foot_contact], u.idx.total_mass, -u.model.opt.gravity[2]
+        meas.cog[None], meas.cog_acc[None], ref.foot_points[ref.foot_contact], u.idx.total_mass, -u.model.opt.gravity[2]
     )
-    assert meas.index == pytest.approx(float(index), abs=1e-9) or (meas.index == index == NO_SUPPORT)
+    index, moments = float(index[0]), moments[0]
+    assert meas.index == pytest.approx(index, abs=1e-9) or (meas.index == index == NO_SUPPORT)
     np.testing.assert_allclose(meas.moments, moments, atol=1e-9)
     xy = scan_points_W(u)
     heights = u.terrain.heightfield.height(xy[:, 0], xy[:, 1])
@@ -129,3 +131,47 @@ def test_clip_finite_into():
     assert not clip_finite_into(np.array([0.0, np.nan, 0.0]), lim, out)
     np.testing.assert_array_equal(out, 7.0)  # untouched
     assert not clip_finite_into(np.array([np.inf, 0.0, 0.0]), lim, out)
+
+
+@pytest.mark.parametrize(
+    "points, expect",
+    [
+        # LF and RF reported on the same point, LH and RH elsewhere: a triangle with a zero-length edge.
+        ([[0.25, 0.0, 0.0], [0.25, 0.0, 0.0], [-0.25, 0.18, 0.0], [-0.25, -0.18, 0.0]], "finite"),
+        # Three feet on one point, the fourth elsewhere: no polygon.
+        ([[0.25, 0.0, 0.0], [0.25, 0.0, 0.0], [0.25, 0.0, 0.0], [-0.25, -0.18, 0.0]], "no_support"),
+        # All four on the line y = 0: index -|moment about the line|.
+        ([[0.25, 0.0, 0.0], [0.1, 0.0, 0.0], [-0.1, 0.0, 0.0], [-0.25, 0.0, 0.0]], "collinear"),
+    ],
+)
+def test_kernel_with_coincident_and_collinear_contact_points(points, expect):
+    """Sensor data written by hand: every foot loaded, at degenerate points; kernel = numpy path, no exception."""
+    env = gym.make("QuadUneven-v0", terrain="flat")
+    u = env.unwrapped
+    env.reset(seed=0)
+    sd = u.data.sensordata
+    for leg, p in enumerate(points):
+        a = u.idx.foot_sensor_adr[leg]
+        sd[a] = 1.0  # one contact found
+        sd[a + 1 : a + 4] = (0.0, 0.0, -100.0)  # the foot pushes the terrain down: 100 N up on the foot
+        sd[a + 4 : a + 7] = p
+    meas = u._meas
+    meas.update(u.terrain.heightfield, u._prev_action, u.gait_period)
+    np.testing.assert_array_equal(meas.foot_points, points)
+    index, moments = stability_index(
+        meas.cog[None], meas.cog_acc[None], np.array(points), u.idx.total_mass, -u.model.opt.gravity[2]
+    )
+    np.testing.assert_allclose(meas.index, index[0], rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(meas.moments, moments[0], rtol=1e-12, atol=1e-9)
+    obs = meas.obs[u.observation_structure["edge_moments"]]
+    assert np.isfinite(meas.obs).all()
+    if expect == "finite":
+        # The zero-length edge reports the index, as does the lowest real edge.
+        assert np.isfinite(meas.index) and np.sum(meas.moments == meas.index) >= 2
+    elif expect == "no_support":
+        assert meas.index == NO_SUPPORT and np.all(obs == -STABILITY_CLIP)
+    else:
+        # Gravity and inertia load F = -m (a + g z); its moment about the x axis through the feet.
+        f = -u.idx.total_mass * (meas.cog_acc - u.model.opt.gravity)
+        moment = np.cross(meas.cog - np.array(points[0]), f)[0]
+        assert meas.index == pytest.approx(-abs(moment), rel=1e-9)

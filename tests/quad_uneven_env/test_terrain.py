@@ -527,3 +527,46 @@ def test_compiled_height_and_normal_points_equal_numpy():
     normals = hf.normal_points(np.column_stack([x, y, np.zeros_like(x)]))
     np.testing.assert_allclose(normals, hf.normal(x, y), rtol=0, atol=1e-12)
     assert (normals[:, 2] < 0.999).mean() > 0.05  # the stones' edges: tilted triangles were sampled
+
+
+def _npy_header_only(path, shape, dtype="<f8", version=(1, 0)):
+    """A .npy file whose header claims ``shape`` but which holds no data at all."""
+    from numpy.lib import format as fmt
+
+    header = {"descr": dtype, "fortran_order": False, "shape": shape}
+    with open(path, "wb") as f:
+        (fmt.write_array_header_1_0 if version == (1, 0) else fmt.write_array_header_2_0)(f, header)
+
+
+@pytest.mark.parametrize(
+    "shape, dtype, version, message",
+    [
+        ((100_000, 100_000), "<f8", (1, 0), "heights has 100000 x 100000 nodes in its header; the cap is"),
+        ((100_000, 100_000), "<f8", (2, 0), "heights has 100000 x 100000 nodes in its header"),
+        ((10, 10, 10), "<f8", (1, 0), "must be a 2-D array"),
+        ((10, 10), "|O", (1, 0), "holds object values, not numbers"),
+        ((10, 10), "<U3", (1, 0), "not numbers"),
+    ],
+)
+def test_heightmap_npy_is_refused_from_its_header_before_loading(tmp_path, monkeypatch, shape, dtype, version, message):
+    path = tmp_path / "huge.npy"
+    _npy_header_only(path, shape, dtype, version)
+    monkeypatch.setattr(np, "load", lambda *a, **k: pytest.fail("np.load ran before the header was checked"))
+    with pytest.raises(ValueError, match=r"heights") as err:
+        parse_terrain_spec({"kind": "heightmap", "heights": str(path)})
+    assert message in str(err.value)
+
+
+@pytest.mark.parametrize("content", [b"", b"not a numpy file at all", b"\x93NUMPY\x01\x00\xff\xff{"])
+def test_heightmap_npy_garbage_is_a_clean_error(tmp_path, content):
+    path = tmp_path / "bad.npy"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=r"cannot read .* as a \.npy array"):
+        parse_terrain_spec({"kind": "heightmap", "heights": str(path)})
+
+
+def test_heightmap_npy_truncated_after_a_valid_header(tmp_path):
+    path = tmp_path / "short.npy"
+    _npy_header_only(path, (50, 60))  # a sane header, no data
+    with pytest.raises(ValueError, match=r"cannot read .* as a \.npy array"):
+        parse_terrain_spec({"kind": "heightmap", "heights": str(path)})

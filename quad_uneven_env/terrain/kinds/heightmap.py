@@ -19,11 +19,34 @@ SPAWN_FLAT_TOLERANCE = 1e-3
 _SHARED = {q.name: q for q in SHARED_PARAMS}
 
 
+def check_npy_header(path: Path, where: str) -> None:
+    """Refuse a .npy file from its header alone (before any data is read) unless it holds a 2-D numeric
+    array of at most ``MAX_CELLS`` nodes: a header can claim a shape far larger than memory.
+
+    :raises ValueError: naming ``where.heights``.
+    """
+    fmt = np.lib.format
+    try:
+        with path.open("rb") as f:
+            version = fmt.read_magic(f)
+            read = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+            shape, _fortran, dtype = read(f)
+    except (OSError, ValueError, SyntaxError, TypeError) as exc:
+        raise ValueError(f"{where}.heights: cannot read {str(path)!r} as a .npy array ({exc})") from None
+    if dtype.kind not in "iuf":
+        raise ValueError(f"{where}.heights: {str(path)!r} holds {dtype} values, not numbers (m)")
+    if len(shape) != 2:
+        raise ValueError(f"{where}.heights must be a 2-D array (rows along y, columns along x), got shape {shape}")
+    if shape[0] * shape[1] > MAX_CELLS:
+        raise ValueError(f"{where}.heights has {shape[0]} x {shape[1]} nodes in its header; the cap is {MAX_CELLS}")
+
+
 def _load(value: Any, where: str) -> np.ndarray:
     if isinstance(value, (str, os.PathLike)):
         path = Path(value)
         if path.suffix != ".npy" or not path.is_file():
             raise ValueError(f"{where}.heights: {str(path)!r} is not an existing .npy file")
+        check_npy_header(path, where)
         try:
             value = np.load(path, allow_pickle=False)
         except (OSError, ValueError) as exc:
