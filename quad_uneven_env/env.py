@@ -33,6 +33,7 @@ from quad_uneven_env.physics import RobotIndex, instability_warnings
 from quad_uneven_env.randomization import (
     EpisodeDraw,
     ModelRandomizer,
+    Push,
     PushSchedule,
     RandomizationConfig,
     draw_episode,
@@ -96,7 +97,10 @@ class QuadUnevenEnv(gym.Env):
     ``edge_moments`` (N m), ``contact_forces`` (4 x 3, N, world), ``foot_contact`` (4,),
     ``cog``, ``cog_vel``, ``cog_acc`` (whole robot, world, the acceleration from Newton's law with
     the contact forces), ``feet_pos`` (4 x 3 foot sites, world), ``terrain_height_under_base``,
-    ``diverged``, ``termination_reason``, ``reward_terms``, ``distance`` (COG x travelled, m).
+    ``diverged``, ``termination_reason``, ``reward_terms``, ``distance`` (COG x travelled, m),
+    ``randomization`` (the episode's drawn world as a flat dict of floats, the same keys for every
+    config: nominal values where a factor is off), ``push_force`` ((3,) N, world: the mean push force
+    on the trunk over the step, zeros without a push).
     Measured quantities (contacts, COG, feet, stability) are those of the last physics step's
     constraint solve, i.e. at the start of that 2 ms step.
 
@@ -105,7 +109,17 @@ class QuadUnevenEnv(gym.Env):
     ``frame_skip`` (physics steps per control step, default 10), ``timestep`` (s, <= 0.002),
     ``action_mode``, ``controller``, ``reward_weights``, ``termination``, ``height_scan``,
     ``gait_period`` (s, default 6.1: the paper's cycle), ``reset_noise_scale`` (rad and rad/s of
-    uniform noise on the joints at reset, default 0.02), ``render_mode``, ``width``, ``height``.
+    uniform noise on the joints at reset, default 0.02), ``render_mode``, ``width``, ``height``,
+    ``randomization`` (None: the nominal world; a preset name of ``configs/randomization/``, a YAML path or
+    a mapping, see :class:`quad_uneven_env.randomization.RandomizationConfig` and docs/randomization.md).
+
+    **Randomization** (``randomization`` not None): drawn at every reset from ``np_random`` after the
+    terrain and the reset noise (so a seed gives the nominal env's terrain and start), written into
+    ``model`` and restored exactly before the next draw. Ground friction, payload and link masses
+    (``total_mass`` follows: stability index normalisation, COG acceleration), motor strength and joint
+    damping/friction are model parameters; actuation latency delays the applied command (``ctrl``) by k
+    physics steps in both action modes and for the controller hook; pushes are forces on the trunk's COM
+    (``xfrc_applied``); observation noise is added to the returned observation and clipped to the Box.
     """
 
     metadata = {"render_modes": ["human", "rgb_array", "depth_array"], "render_fps": 50}  # noqa: RUF012
@@ -241,8 +255,8 @@ class QuadUnevenEnv(gym.Env):
         return self._draw
 
     @property
-    def pushes(self) -> list:
-        """The pushes (:class:`quad_uneven_env.randomization.Push`) started so far this episode."""
+    def pushes(self) -> list[Push]:
+        """The pushes started so far this episode (start time, impulse, direction, duration, force)."""
         return self._push_schedule.pushes
 
     def set_controller(self, controller: PhysicsController | Callable[..., np.ndarray] | None) -> None:
@@ -444,7 +458,8 @@ class QuadUnevenEnv(gym.Env):
                 f"randomization.latency must be a [low, high] pair with high <= the control period "
                 f"{self._dt:g} s (frame_skip x timestep), got {list(cfg.latency)}"
             )
-        self._model_rand = ModelRandomizer(self.model, self.idx, servo=self.action_mode == "joint_pd")
+        self.model_randomizer = ModelRandomizer(self.model, self.idx, servo=self.action_mode == "joint_pd")
+        """writes each episode's draw into ``model`` and restores the nominal model (``restore()``)."""
         self._push_schedule = PushSchedule(cfg, self.physics_dt)
         self._push_force = np.zeros(3)
         self._cmd = np.zeros(C.N_JOINTS)
@@ -462,7 +477,7 @@ class QuadUnevenEnv(gym.Env):
         self._draw_info = self._draw.as_info()
 
     def _nominal_draw(self) -> EpisodeDraw:
-        r = self._model_rand
+        r = self.model_randomizer
         nominal = draw_episode(
             None, None, r.nominal_friction, r.nominal_damping, r.nominal_frictionloss, self.physics_dt
         )
@@ -470,7 +485,7 @@ class QuadUnevenEnv(gym.Env):
 
     def _draw_world(self) -> None:
         """Draw this episode's world from ``np_random`` (after the terrain and the reset noise) and apply it."""
-        cfg, r = self.randomization, self._model_rand
+        cfg, r = self.randomization, self.model_randomizer
         if cfg is not None:
             draw = draw_episode(
                 cfg, self.np_random, r.nominal_friction, r.nominal_damping, r.nominal_frictionloss, self.physics_dt

@@ -98,36 +98,78 @@ class RandomizationConfig:
     """
 
     friction: tuple[float, float] | None = _range(
-        "-", "foot-terrain Coulomb coefficient (terrain and robot geoms set alike)", lo=0.0, hi=5.0, lo_open=True
+        "-",
+        "foot-terrain sliding friction (terrain and every robot geom); U(low, high) per episode",
+        lo=0.0,
+        hi=5.0,
+        lo_open=True,
     )
     """-, in (0, 5]: sliding friction of the terrain and of every robot geom (MuJoCo takes the larger of a pair)."""
-    payload_mass: tuple[float, float] | None = _range("kg", "point mass added to the trunk", lo=0.0, hi=1000.0)
+    payload_mass: tuple[float, float] | None = _range(
+        "kg", "point mass added to the trunk; U per episode", lo=0.0, hi=1000.0
+    )
     """kg, in [0, 1000]: a point mass added to the trunk (the paper's robot weighs 50 kg)."""
-    payload_com_x: tuple[float, float] | None = _range("m", "payload position, trunk x", lo=-1.0, hi=1.0)
+    payload_com_x: tuple[float, float] | None = _range(
+        "m", "payload position along trunk x from its nominal COM; U per episode", lo=-1.0, hi=1.0
+    )
     """m, in [-1, 1]: payload position along trunk x, relative to the trunk's nominal COM."""
-    payload_com_y: tuple[float, float] | None = _range("m", "payload position, trunk y", lo=-1.0, hi=1.0)
+    payload_com_y: tuple[float, float] | None = _range(
+        "m", "payload position along trunk y; U per episode", lo=-1.0, hi=1.0
+    )
     """m, in [-1, 1]: along trunk y."""
-    payload_com_z: tuple[float, float] | None = _range("m", "payload position, trunk z", lo=-1.0, hi=1.0)
+    payload_com_z: tuple[float, float] | None = _range(
+        "m", "payload position along trunk z; U per episode", lo=-1.0, hi=1.0
+    )
     """m, in [-1, 1]: along trunk z."""
     link_mass_scale: tuple[float, float] | None = _range(
-        "-", "per-body mass and inertia factor", lo=0.0, hi=10.0, lo_open=True
+        "-",
+        "mass and inertia factor, COM kept; U per body (trunk, thighs, shanks) per episode",
+        lo=0.0,
+        hi=10.0,
+        lo_open=True,
     )
     """-, in (0, 10]: per body of :data:`ROBOT_BODIES`, mass and inertia x factor (COM kept)."""
-    motor_strength: tuple[float, float] | None = _range("-", "per-joint torque gain", lo=0.0, hi=10.0, lo_open=True)
+    motor_strength: tuple[float, float] | None = _range(
+        "-",
+        "applied / commanded torque, saturated at the nominal limit; U per joint per episode",
+        lo=0.0,
+        hi=10.0,
+        lo_open=True,
+    )
     """-, in (0, 10]: per joint, applied torque = factor x commanded torque, still saturated at the nominal limit
     (``joint_pd``: the servo's kp and kd scale alike)."""
-    joint_damping: tuple[float, float] | None = _range("N m s/rad", "per-joint viscous damping", lo=0.0, hi=100.0)
+    joint_damping: tuple[float, float] | None = _range(
+        "N m s/rad", "viscous joint damping (replaces the nominal); U per joint per episode", lo=0.0, hi=100.0
+    )
     """N m s/rad, in [0, 100]: per joint, replaces the robot config's damping."""
-    joint_frictionloss: tuple[float, float] | None = _range("N m", "per-joint Coulomb friction", lo=0.0, hi=100.0)
+    joint_frictionloss: tuple[float, float] | None = _range(
+        "N m", "dry joint friction (MuJoCo frictionloss); U per joint per episode", lo=0.0, hi=100.0
+    )
     """N m, in [0, 100]: per joint, MuJoCo's dry friction (``dof_frictionloss``)."""
-    latency: tuple[float, float] | None = _range("s", "actuation latency", lo=0.0, hi=1.0)
+    latency: tuple[float, float] | None = _range(
+        "s",
+        "command applied k physics steps late, k uniform over round(low/dt)..round(high/dt) per episode; "
+        "high <= control period",
+        lo=0.0,
+        hi=1.0,
+    )
     """s, in [0, 1] and at most the env's control period: torques act k physics steps late, k uniform over the
     integers round(low / timestep) ... round(high / timestep)."""
-    push_impulse: tuple[float, float] | None = _range("N s", "impulse of one push", lo=0.0, hi=1000.0)
+    push_impulse: tuple[float, float] | None = _range(
+        "N s", "impulse of a horizontal push on the trunk COM; U per push, direction U[0, 360) deg", lo=0.0, hi=1000.0
+    )
     """N s, in [0, 1000]: impulse of each push on the trunk, horizontal, direction uniform in [0, 360) deg."""
-    push_interval: tuple[float, float] | None = _range("s", "time between push starts", lo=0.0, hi=1e6, lo_open=True)
+    push_interval: tuple[float, float] | None = _range(
+        "s", "reset to first push and between push starts; U per push", lo=0.0, hi=1e6, lo_open=True
+    )
     """s, in (0, 1e6]: from the reset to the first push, and between push starts (required with ``push_impulse``)."""
-    push_duration: tuple[float, float] | None = _range("s", "duration of one push", lo=0.0, hi=10.0, lo_open=True)
+    push_duration: tuple[float, float] | None = _range(
+        "s",
+        "constant-force duration (whole physics steps), <= push_interval low; U per push",
+        lo=0.0,
+        hi=10.0,
+        lo_open=True,
+    )
     """s, in (0, 10], at most ``push_interval`` low: constant force = impulse / duration (rounded to physics steps)."""
     observation_noise: ObservationNoise | None = None
     """per-field uniform observation noise (a mapping of field -> scale), or None."""
@@ -182,15 +224,18 @@ def load_randomization(spec: str | os.PathLike[str] | Mapping[str, Any] | Random
 
 def config_table() -> str:
     """Markdown table of the factors (field, allowed, unit, meaning): the reference of docs/randomization.md."""
-    rows = ["| factor | allowed | unit | meaning |", "|---|---|---|---|"]
+    rows = ["| factor | allowed | unit | meaning and distribution (U: uniform on [low, high]) |", "|---|---|---|---|"]
     for p in params_of(RandomizationConfig):
         rows.append(f"| `{p.name}` | {p.allowed()} | {p.unit} | {p.doc} |")
-    rows.append("| `observation_noise` | null or a mapping field -> scale | field's unit | uniform noise per element |")
+    rows.append(
+        "| `observation_noise` | null or a mapping observation field -> scale >= 0 | the field's | added noise "
+        "U(-scale, scale) per element per step, then clipped to the Box |"
+    )
     return "\n".join(rows)
 
 
 # ------------------------------------------------------------------------------------------ the draw
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class EpisodeDraw:
     """One episode's drawn world (SI units); nominal values where a factor is off."""
 
@@ -345,6 +390,11 @@ class ModelRandomizer:
         self._scratch = mujoco.MjData(model)
         self.dirty = False
         """the model holds a draw (restore before the next one)."""
+
+    @property
+    def restored_fields(self) -> tuple[str, ...]:
+        """Names of the MjModel arrays kept and restored: those written plus those ``mj_setConst`` recomputes."""
+        return tuple(self._nominal)
 
     @property
     def nominal_friction(self) -> float:
