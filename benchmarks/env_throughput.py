@@ -2,7 +2,8 @@
 
 Prints env steps/s, mj_step/s and the overhead ratio env_step_time / (frame_skip x mj_step_time)
 for both environments, QuadUneven-v0 also with the ``mild`` randomization preset (the replay runs on the
-same randomized model, so the ratio is the env's overhead over the physics it steps). Usage: ``python benchmarks/env_throughput.py [--steps N]``.
+same randomized model, so the ratio is the env's overhead over the physics it steps).
+Usage: ``python benchmarks/env_throughput.py [--steps N]``.
 """
 
 from __future__ import annotations
