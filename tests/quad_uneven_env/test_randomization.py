@@ -58,6 +58,7 @@ def assert_bit_identical(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> 
         ({"joint_damping": [-0.1, 0.0]}, r"randomization\.joint_damping must be"),
         ({"latency": [0.0, 0.03]}, r"randomization\.latency .*control period 0\.02 s"),
         ({"push_impulse": [0.0, 10.0]}, r"randomization\.push_interval is required"),
+        ({"payload_com_y": [0.0, 0.1]}, r"randomization\.payload_com_y needs payload_mass"),
         (
             {"push_impulse": [0.0, 10.0], "push_interval": [0.1, 1.0], "push_duration": [0.1, 0.2]},
             r"randomization\.push_duration .*push_interval low",
