@@ -513,8 +513,8 @@ class PushSchedule:
         self._next = self._start = self._end = 0
         self._force = np.zeros(3)
 
-    def reset(self, rng: np.random.Generator) -> None:
-        """Forget the pushes; draw the first start time."""
+    def reset(self, rng: np.random.Generator | None) -> None:
+        """Forget the pushes; draw the first start time (``rng`` unused, may be None, when pushes are off)."""
         self.pushes = []
         self._start = self._end = 0
         self._next = self._steps(_uniform(rng, self.cfg.push_interval)) if self.on else 1 << 62

@@ -117,6 +117,17 @@ def test_same_seed_same_draw_different_seed_different_draw():
     assert d["randomization"] == a["randomization"]
 
 
+def test_a_seed_draws_the_same_world_on_every_terrain():
+    worlds = []
+    for terrain in ("flat", "rough", {"kind": "stairs", "direction": "up"}):
+        _, info = make(terrain=terrain, randomization="mild").reset(seed=21)
+        worlds.append(info["randomization"])
+    assert worlds[0]["friction"] == worlds[1]["friction"] == worlds[2]["friction"]
+    assert {k: v for k, v in worlds[0].items() if k != "total_mass"} == {
+        k: v for k, v in worlds[1].items() if k != "total_mass"
+    }
+
+
 def test_randomized_env_keeps_the_nominal_terrain_and_start_of_its_seed():
     nominal, randomized = make(terrain="rough"), make(terrain="rough", randomization="hard")
     nominal.reset(seed=3)
