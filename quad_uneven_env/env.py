@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import reprlib
@@ -34,6 +35,15 @@ from quad_uneven_env.observations import (
     observation_table,
 )
 from quad_uneven_env.physics import RobotIndex, instability_warnings
+from quad_uneven_env.randomization import (
+    EpisodeDraw,
+    ModelRandomizer,
+    Push,
+    PushSchedule,
+    RandomizationConfig,
+    draw_episode,
+    load_randomization,
+)
 from quad_uneven_env.rewards import REWARD_TERMS, reward_terms
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT, PhysicsOptions, scene_mjcf
@@ -192,6 +202,9 @@ class QuadUnevenEnv(gym.Env):
     ``diverged``                    bool        the episode ended by numerical divergence
     ``termination_reason``          str / None  why the episode ended (None while it runs)
     ``reward_terms``                dict        the named reward terms of this step (zeros at reset)
+    ``randomization``               dict        the episode's drawn world, floats, the same keys for every
+                                                config (nominal values where a factor is off)
+    ``push_force``                  (3,)        N, world: mean push on the trunk over the step (zeros: none)
     ==============================  ==========  ===========================================================
 
     Measured quantities (contacts, COG, feet, stability) are those of the last physics step's
@@ -207,6 +220,16 @@ class QuadUnevenEnv(gym.Env):
     ARGUMENTS_TABLE
 
     ``reset(seed=...)`` takes None or an integer >= 0 (not a bool).
+    ``randomization``: None (the nominal world), a preset name of ``configs/randomization/``, a YAML path or
+    a mapping (see :class:`quad_uneven_env.randomization.RandomizationConfig` and docs/randomization.md).
+
+    **Randomization** (``randomization`` not None): drawn at every reset from a child of ``np_random``
+    (``np_random.spawn``: a seed gives the same world on every terrain, and the nominal env's terrain and
+    start), written into ``model`` and restored exactly before the next draw. Ground friction, payload and
+    link masses (``total_mass`` follows: stability index normalisation, COG acceleration), motor strength and
+    joint damping/friction are model parameters; actuation latency delays the applied command (``ctrl``) by k
+    physics steps in both action modes and for the controller hook; pushes are forces on the trunk's COM
+    (``xfrc_applied``); observation noise is added to the returned observation and clipped to the Box.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 50}  # noqa: RUF012
@@ -231,6 +254,7 @@ class QuadUnevenEnv(gym.Env):
         width: int = 640,
         height: int = 480,
         episode_step_cap: int = 1_000_000,
+        randomization: str | Mapping[str, Any] | RandomizationConfig | None = None,
     ) -> None:
         given = dict(
             frame_skip=frame_skip, timestep=timestep, action_mode=action_mode, gait_period=gait_period,
@@ -247,6 +271,7 @@ class QuadUnevenEnv(gym.Env):
         self.action_mode = action_mode
         self._check_controller(controller)
 
+        self.randomization: RandomizationConfig | None = load_randomization(randomization)
         self.robot_cfg: RobotConfig = load_robot_config(robot)
         self.terrain = Terrain(parse_terrain_spec(terrain))
         self.reward_weights: RewardWeights = dataclass_from_mapping(RewardWeights, reward_weights, "reward_weights")
@@ -313,6 +338,7 @@ class QuadUnevenEnv(gym.Env):
             self.observation_space.high,
         )
         self._last_obs = np.zeros(self.observation_space.shape, dtype=np.float32)
+        self._init_randomization()
         self._last_index_norm = 0.0
         self._start_x = 0.0
         self._warnings_at_reset = 0
@@ -332,6 +358,21 @@ class QuadUnevenEnv(gym.Env):
     def controller(self) -> PhysicsController | None:
         """The physics-rate controller, or None."""
         return self._controller
+
+    @property
+    def total_mass(self) -> float:
+        """kg, the simulated whole-robot mass of this episode (the nominal one unless masses are randomized)."""
+        return self._mass
+
+    @property
+    def episode_draw(self) -> EpisodeDraw:
+        """This episode's drawn world (nominal values where a factor is off)."""
+        return self._draw
+
+    @property
+    def pushes(self) -> list[Push]:
+        """The pushes started so far this episode (start time, impulse, direction, duration, force)."""
+        return self._push_schedule.pushes
 
     def set_controller(self, controller: PhysicsController | Callable[..., np.ndarray] | None) -> None:
         """Install (or remove, with None) the physics-rate controller; takes effect at the next step.
@@ -386,6 +427,7 @@ class QuadUnevenEnv(gym.Env):
         self._home_joints = self.data.qpos[7:].copy()
         if self.action_mode == "joint_pd":
             self.data.ctrl[:] = self._home_joints
+        self._draw_world()
         mujoco.mj_forward(self.model, self.data)
         self._warnings_at_reset = instability_warnings(self._warning_counts)
         if self._controller is not None and hasattr(self._controller, "reset"):
@@ -396,10 +438,9 @@ class QuadUnevenEnv(gym.Env):
         meas = self._measure()
         self._start_x = float(meas.cog[0])
         self._last_index_norm = meas.index / (self._mass * self._g)
-        self._last_obs = meas.obs.astype(np.float32)
-        return self._last_obs.copy(), self._info(
-            meas, terms=dict.fromkeys(REWARD_TERMS, 0.0), diverged=False, reason=None
-        )
+        self._last_obs = self._observe(meas.obs)
+        info = self._info(meas, terms=dict.fromkeys(REWARD_TERMS, 0.0), diverged=False, reason=None)
+        return self._last_obs.copy(), info
 
     def _spawn_qpos(self) -> np.ndarray:
         """Standing pose over the spawn point: each foot on the terrain below its hip."""
@@ -432,20 +473,22 @@ class QuadUnevenEnv(gym.Env):
         x_before = float(self._meas.cog[0])
 
         mujoco.mj_getState(m, d, self._saved_state, _STATE)
+        delayed = (self._ctrl_ring.copy(), self._ctrl_prev.copy()) if self._latency else None
         try:
             reason = self._advance(a)
         except Exception as err:  # MuJoCo's own errors (mujoco.FatalError), raised from inside its step
             reason = f"diverged: MuJoCo failed ({type(err).__name__}: {err})"
         except BaseException:  # Ctrl-C and the like still propagate, from a whole-step state
-            self._restore_state()
+            self._restore_state(delayed)
             raise
         # MuJoCo's own checks (mj_checkPos/Vel/Acc) flag NaN, Inf and huge values in qpos, qvel
         # and qacc; with auto-reset disabled the bad state stays for us to see.
         if reason is None and instability_warnings(self._warning_counts) > self._warnings_at_reset:
             reason = "diverged: MuJoCo reported a bad (NaN, Inf or huge) qpos/qvel/qacc"
         if reason is not None:
-            self._restore_state()  # a failed control step is undone: the state is the last good one again
+            self._restore_state(delayed)  # a failed control step is undone: the state is the last good one again
         else:
+            self._physics_step += self.frame_skip
             self._prev_action[:] = a
             reason = self._measure_safely()
         diverged = reason is not None
@@ -471,7 +514,7 @@ class QuadUnevenEnv(gym.Env):
         reward = float(sum(terms.values()))
         # After a failed step the observation is the last good one (that of the restored state).
         if not diverged:
-            self._last_obs = meas.obs.astype(np.float32)
+            self._last_obs = self._observe(meas.obs)
             self._last_index_norm = index_norm
         obs = self._last_obs.copy()
         info = self._info(meas, terms, diverged, reason)
@@ -483,25 +526,22 @@ class QuadUnevenEnv(gym.Env):
     def _advance(self, a: np.ndarray) -> str | None:
         """``frame_skip`` physics steps under the clipped action ``a``; the failure reason, or None.
 
-        With a controller the loop stops at the first failure (the caller undoes the step).
+        With a controller the loop stops at the first failure (the caller undoes the step). Pushes and
+        latency (randomization) go through :meth:`_step_controller` / :meth:`_step_open_loop`; the
+        nominal open-loop step is one ``mj_step`` call.
         """
         m, d = self.model, self.data
-        if self._controller is None:
+        segments = self._push_segments()
+        if self._controller is not None:
+            return self._step_controller(a, segments)
+        if segments is None and self._latency == 0:
             if self.action_mode == "torque":
                 np.multiply(a, self.idx.torque_limit, out=d.ctrl)
             else:
                 np.clip(self._home_joints + self.pd_action_scale * a, self._joint_lo, self._joint_hi, out=d.ctrl)
             mujoco.mj_step(m, d, self.frame_skip)
-            return None
-        warnings = self._warning_counts
-        for _ in range(self.frame_skip):
-            mujoco.mj_step1(m, d)
-            if instability_warnings(warnings) > self._warnings_at_reset:
-                return None  # reported by the caller; the controller must not see a garbage state
-            reason = self._controller_torques_into(a, d.ctrl)
-            if reason is not None:
-                return reason
-            mujoco.mj_step2(m, d)  # a bad qacc here is caught by the next check (or the caller's)
+        else:
+            self._step_open_loop(a, segments)
         return None
 
     def _controller_torques_into(self, a: np.ndarray, out: np.ndarray) -> str | None:
@@ -523,10 +563,14 @@ class QuadUnevenEnv(gym.Env):
             return f"diverged: controller returned non-finite torques (NaN/Inf at indices {bad})"
         return None
 
-    def _restore_state(self) -> None:
+    def _restore_state(self, delayed: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Put the simulation back to the state saved at the start of the control step (and recompute its
-        derived quantities: positions, contacts, sensors)."""
+        derived quantities: positions, contacts, sensors); ``delayed``: the latency buffers saved with it.
+
+        The push schedule's draw of the failed step is not undone (the episode ends there)."""
         mujoco.mj_setState(self.model, self.data, self._saved_state, _STATE)
+        if delayed is not None:
+            self._ctrl_ring[:], self._ctrl_prev[:] = delayed
         try:
             mujoco.mj_forward(self.model, self.data)
         except Exception:  # the episode is over: a state MuJoCo cannot evaluate stays as restored
@@ -539,6 +583,142 @@ class QuadUnevenEnv(gym.Env):
         except Exception as err:  # a measurement bug must end the episode, not a training run
             return f"diverged: measurement failed ({type(err).__name__}: {err})"
         return None
+
+    # ------------------------------------------------------------------ physics loops
+    def _step_controller(self, a: np.ndarray, segments: list | None) -> str | None:
+        """``frame_skip`` physics steps under the physics-rate controller; the divergence reason or None.
+
+        With latency k > 0 the torque the controller returns at physics step n is applied at step n + k
+        (a ring of k + 1 commands); pushes set the trunk's ``xfrc_applied`` per step.
+        """
+        m, d = self.model, self.data
+        ctrl, warnings = d.ctrl, self._warning_counts
+        k, ring, n = self._latency, self._ctrl_ring, self._physics_step
+        forces = None if segments is None else [f for length, f in segments for _ in range(length)]
+        for j in range(self.frame_skip):
+            if forces is not None and (j == 0 or forces[j] is not forces[j - 1]):
+                self._set_push(forces[j])
+            mujoco.mj_step1(m, d)
+            if instability_warnings(warnings) > self._warnings_at_reset:
+                return None  # reported by the caller; the controller must not see a garbage state
+            out = ctrl if k == 0 else ring[(n + j) % (k + 1)]
+            reason = self._controller_torques_into(a, out)
+            if reason is not None:
+                return reason
+            if k:
+                ctrl[:] = ring[(n + j + 1) % (k + 1)]  # the command of k steps ago
+            mujoco.mj_step2(m, d)  # a bad qacc here is caught by the next check (or the caller's)
+        return None
+
+    def _step_open_loop(self, a: np.ndarray, segments: list | None) -> None:
+        """``frame_skip`` physics steps under action ``a`` with latency and/or pushes, as runs of ``mj_step``.
+
+        The command is constant over the control step, so latency k means: the previous command for the
+        first k physics steps, then this one; pushes split the runs where their force starts or stops.
+        """
+        m, d, cmd = self.model, self.data, self._cmd
+        if self.action_mode == "torque":
+            np.multiply(a, self.idx.torque_limit, out=cmd)
+        else:
+            np.clip(self._home_joints + self.pd_action_scale * a, self._joint_lo, self._joint_hi, out=cmd)
+        k = self._latency
+        runs = [(self.frame_skip, None)] if segments is None else segments
+        j = 0
+        for length, force in runs:
+            self._set_push(force)
+            for start, stop in ((j, min(j + length, k)), (max(j, k), j + length)):
+                if stop > start:
+                    d.ctrl[:] = self._ctrl_prev if start < k else cmd
+                    mujoco.mj_step(m, d, stop - start)
+            j += length
+        self._ctrl_prev[:] = cmd
+
+    def _push_segments(self) -> list | None:
+        """This control step's push runs (see :meth:`PushSchedule.segments`) and its mean push force, or None."""
+        if not self._push_schedule.on:
+            return None
+        segments = self._push_schedule.segments(self._world_rng, self._physics_step, self.frame_skip)
+        mean = self._push_force
+        mean[:] = 0.0
+        for length, force in segments:
+            if force is not None:
+                mean += force * (length / self.frame_skip)
+        return segments
+
+    def _set_push(self, force: np.ndarray | None) -> None:
+        """Push force (N, world) on the trunk's centre of mass, zero for None."""
+        f = self.data.xfrc_applied[self.idx.trunk_body, :3]
+        if force is None:
+            f[:] = 0.0
+        else:
+            f[:] = force
+
+    # ------------------------------------------------------------------ randomization
+    def _init_randomization(self) -> None:
+        """Bind the randomizer to the model (after the servos are made: their gains are nominal)."""
+        cfg = self.randomization
+        if cfg is not None and cfg.latency is not None and cfg.latency[1] > self._dt * (1 + 1e-9):
+            raise ValueError(
+                f"randomization.latency must be a [low, high] pair with high <= the control period "
+                f"{self._dt:g} s (frame_skip x timestep), got {list(cfg.latency)}"
+            )
+        self.model_randomizer = ModelRandomizer(self.model, self.idx, servo=self.action_mode == "joint_pd")
+        """writes each episode's draw into ``model`` and restores the nominal model (``restore()``)."""
+        self._push_schedule = PushSchedule(cfg, self.physics_dt)
+        self._push_force = np.zeros(3)
+        self._cmd = np.zeros(C.N_JOINTS)
+        self._ctrl_prev = np.zeros(C.N_JOINTS)
+        self._ctrl_ring = np.zeros((1, C.N_JOINTS))
+        self._physics_step = 0
+        self._latency = 0
+        self._world_rng: np.random.Generator | None = None
+        noise = cfg.observation_noise if cfg is not None else None
+        self._noise_scale = None
+        self._obs_low64 = self.observation_space.low.astype(np.float64)
+        self._obs_high64 = self.observation_space.high.astype(np.float64)
+        if noise is not None and noise.any():
+            self._noise_scale = np.concatenate([np.full(f.size, getattr(noise, f.name)) for f in self._fields])
+        self._draw = self._nominal_draw()
+        self._draw_info = self._draw.as_info()
+
+    def _nominal_draw(self) -> EpisodeDraw:
+        r = self.model_randomizer
+        nominal = draw_episode(
+            None, None, r.nominal_friction, r.nominal_damping, r.nominal_frictionloss, self.physics_dt
+        )
+        return dataclasses.replace(nominal, total_mass=self._mass)
+
+    def _draw_world(self) -> None:
+        """Draw this episode's world and apply it.
+
+        The draws (the world now, pushes and observation noise during the episode) come from a child of
+        ``np_random`` (``np_random.spawn``): the same seed gives the same world whatever the terrain
+        generator consumed, and the terrain and reset noise are those of the nominal env.
+        """
+        cfg, r = self.randomization, self.model_randomizer
+        if cfg is not None:
+            self._world_rng = self.np_random.spawn(1)[0]
+            draw = draw_episode(
+                cfg, self._world_rng, r.nominal_friction, r.nominal_damping, r.nominal_frictionloss, self.physics_dt
+            )
+            self._draw = r.apply(cfg, draw)
+            self._draw_info = self._draw.as_info()
+            self._mass = self._draw.total_mass
+            self._meas.mass = self._mass
+        k = self._latency = self._draw.latency_steps
+        self._ctrl_ring = np.repeat(self.data.ctrl[None, :], k + 1, axis=0)
+        self._ctrl_prev[:] = self.data.ctrl
+        self._physics_step = 0
+        self._push_force[:] = 0.0
+        self._push_schedule.reset(self._world_rng)
+
+    def _observe(self, obs: np.ndarray) -> np.ndarray:
+        """The float32 observation of the measured ``obs``, with this config's noise, clipped to the Box."""
+        if self._noise_scale is None:
+            return obs.astype(np.float32)
+        noisy = obs + self._noise_scale * self._world_rng.uniform(-1.0, 1.0, obs.shape[0])
+        np.clip(noisy, self._obs_low64, self._obs_high64, out=noisy)
+        return noisy.astype(np.float32)
 
     # ------------------------------------------------------------------ measurement
     def _measure(self) -> StepMeasurement:
@@ -566,6 +746,8 @@ class QuadUnevenEnv(gym.Env):
             "diverged": diverged,
             "termination_reason": reason,
             "reward_terms": dict(terms),
+            "randomization": dict(self._draw_info),
+            "push_force": self._push_force.copy(),
         }
 
     @staticmethod

@@ -59,6 +59,39 @@ def _tables(summary: Mapping[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def _factor_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """By randomization factor: one line per factor, its episodes in thirds by drawn value (success, mean index)."""
+    if not rows:
+        return []
+    by_factor: dict[str, list[Mapping[str, Any]]] = {}
+    for r in rows:
+        by_factor.setdefault(r["factor"], []).append(r)
+    n_cols = max(len(v) for v in by_factor.values())
+    names = [f"group {k + 1}" for k in range(n_cols)]
+    names[0], names[-1] = f"{names[0]} (lowest values)", f"{names[-1]} (highest values)"
+    head = "| factor | " + " | ".join(names) + " |"
+    lines = [
+        "## By randomization factor",
+        "",
+        "Randomized episodes sorted by each factor's drawn value (motor strength: the weakest joint; damping "
+        "and frictionloss: the mean over the joints; pushes: their count and the largest impulse, N s) and "
+        "split into thirds (one group per value for factors with at most three values); each cell: value range, "
+        "success rate (successes / episodes), mean index (N m).",
+        "",
+        head,
+        "|" + "---|" * (head.count("|") - 1),
+    ]
+    for factor, groups in by_factor.items():
+        cells = [
+            f"{g['low']:.3g}–{g['high']:.3g}: {g['success_rate']:.0%} ({g['successes']}/{g['episodes']}), "
+            f"{_f(g['mean_stability_index'])}"
+            for g in groups
+        ]
+        cells += ["–"] * (n_cols - len(cells))
+        lines.append(f"| {factor} | " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
+
 def _episode_table(records: Sequence[Mapping[str, Any]]) -> list[str]:
     head = (
         "| # | entry | seed | success | distance (m) | sim time (s) | speed (m/s) | min index (N m) "
@@ -175,6 +208,7 @@ def write_report(
         "",
         *_targets(results.get("targets", [])),
         *_tables(results["summary"]),
+        *_factor_table(results["summary"].get("by_factor", [])),
         *_failures(records, labels),
         *_episode_table(records),
         "## Plots",
