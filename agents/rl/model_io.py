@@ -47,6 +47,29 @@ def read_metadata(model_path: str | Path) -> dict[str, Any] | None:
         raise ModelError(f"{path}: unreadable metadata ({err})") from None
     if not isinstance(meta, dict) or meta.get("format") != META_FORMAT:
         raise ModelError(f"{path}: format must be {META_FORMAT!r}")
+    return _check_metadata(meta, path)
+
+
+def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
+    """``meta`` with the fields the evaluation uses checked (``algo``, ``residual``, ``residual_scale``, ...)."""
+    from agents.rl.config import ALGOS
+
+    if meta.get("algo") not in (None, *ALGOS):
+        raise ModelError(f"{path}: algo must be one of {list(ALGOS)}, got {meta.get('algo')!r}")
+    if not isinstance(meta.get("residual", False), bool):
+        raise ModelError(f"{path}: residual must be true or false, got {meta.get('residual')!r}")
+    if meta.get("residual"):
+        scale = meta.get("residual_scale")
+        if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0.0 < scale <= 1.0:
+            raise ModelError(
+                f"{path}: residual_scale must be a number in (0, 1] (fraction of the torque limit) for a residual "
+                f"model, got {scale!r}" + (" (missing)" if "residual_scale" not in meta else "")
+            )
+    env_kwargs = meta.get("env_kwargs")
+    if env_kwargs is not None and not isinstance(env_kwargs, dict):
+        raise ModelError(f"{path}: env_kwargs must be a mapping of QuadUneven-v0 arguments, got {env_kwargs!r}")
+    if not isinstance(meta.get("normalize_obs", False), bool):
+        raise ModelError(f"{path}: normalize_obs must be true or false, got {meta.get('normalize_obs')!r}")
     return meta
 
 
@@ -129,10 +152,46 @@ def _load_normalizer(model_path: Path, meta: dict[str, Any] | None) -> Any:
                 f"{model_path.stem}_vecnormalize.pkl is missing next to it"
             )
         return None
-    with path.open("rb") as f:
-        normalizer = pickle.load(f)  # our own file, written by VecNormalize.save
-    normalizer.training = False
-    return normalizer if normalizer.norm_obs else None
+    try:
+        with path.open("rb") as f:
+            normalizer = pickle.load(f)  # our own file, written by VecNormalize.save
+        normalizer.training = False
+        norm_obs = normalizer.norm_obs
+    except Exception as err:  # a truncated or foreign pickle raises anything from EOFError to AttributeError
+        raise ModelError(
+            f"policy: {path} is not readable VecNormalize statistics ({type(err).__name__}: {err})"
+        ) from None
+    return normalizer if norm_obs else None
+
+
+def _load_model(path: Path, algo: str) -> Any:
+    """``algo``'s ``load`` of ``path``, any failure of a corrupt or truncated file as a :class:`ModelError`."""
+    import stable_baselines3
+
+    try:
+        return getattr(stable_baselines3, algo.upper()).load(path, device="cpu")
+    except Exception as err:  # zipfile, pickle, torch and SB3 each raise their own types for a bad file
+        msg = " ".join(str(err).split())[:200]
+        raise ModelError(
+            f"policy: {path} is not a readable SB3 {algo.upper()} model ({type(err).__name__}: {msg})"
+        ) from None
+
+
+def check_spaces(model: Any, env: gym.Env, path: Path) -> None:
+    """Refuse a model whose observation or action space is not ``env``'s (it was trained for another env).
+
+    :raises ModelError: naming the space and both shapes.
+    """
+    for name in ("observation_space", "action_space"):
+        want, got = getattr(env, name), getattr(model, name, None)
+        same = got is not None and type(got) is type(want) and getattr(got, "shape", None) == want.shape
+        if same and isinstance(want, gym.spaces.Box):
+            same = bool(np.array_equal(got.low, want.low) and np.array_equal(got.high, want.high))
+        if not same:
+            raise ModelError(
+                f"policy: {path} was trained for another {name} ({got}) than this env's ({want}); "
+                "evaluate it with the env kwargs it was trained with"
+            )
 
 
 def load_sb3_policy(path: str | Path, env: gym.Env, algo: str) -> SB3Policy:
@@ -142,16 +201,16 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str) -> SB3Policy:
     (:func:`agents.rl.residual_env.install_residual_controller`) on ``env.unwrapped``.
 
     :param algo: ``"ppo"`` or ``"sac"``; must match the metadata's ``algo`` if there is one.
-    :raises ModelError: on an algo mismatch, bad metadata or missing normalisation statistics.
+    :raises ModelError: on an algo mismatch, bad metadata, missing or unreadable normalisation statistics, a
+        corrupt or truncated model file, or a model for another observation or action space.
     """
-    import stable_baselines3
-
     path = Path(path)
     meta = read_metadata(path)
     if meta is not None and meta.get("algo") not in (None, algo):
         raise ModelError(f"algo: {path} was trained with {meta['algo']!r}; pass --algo {meta['algo']}, got {algo!r}")
     normalizer = _load_normalizer(path, meta)
-    model = getattr(stable_baselines3, algo.upper()).load(path, device="cpu")
+    model = _load_model(path, algo)
+    check_spaces(model, env, path)
     expert = None
     if meta is not None and meta.get("residual"):
         from agents.rl.residual_env import install_residual_controller
@@ -165,6 +224,7 @@ __all__ = [
     "META_FORMAT",
     "ModelError",
     "SB3Policy",
+    "check_spaces",
     "load_sb3_policy",
     "metadata_env_kwargs",
     "read_metadata",
