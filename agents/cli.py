@@ -174,6 +174,8 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
     if args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    if not args.episode_wall_limit > 0:  # also refuses nan
+        raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
     try:
         suite = load_suite(args.suite)
     except SuiteError as e:

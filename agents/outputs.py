@@ -24,6 +24,12 @@ MAX_NAMED = 5
 """At most this many stale entries are named in an error message."""
 
 
+OVERWRITE_HINT = (
+    "pass --overwrite to delete the outputs of the earlier run (other files are kept) or choose another directory"
+)
+"""What the refusal of a non-empty output directory suggests by default."""
+
+
 class OutputError(ValueError):
     """An output directory that cannot be used (a file, not creatable, or holding an older run's files)."""
 
@@ -53,6 +59,7 @@ def prepare_output_dir(
     overwrite: bool = False,
     keep: bool = False,
     field: str = "out",
+    hint: str = OVERWRITE_HINT,
 ) -> Path:
     """Check and create the output directory ``out``; refuse a non-empty one, or delete the ``owned`` entries.
 
@@ -61,6 +68,7 @@ def prepare_output_dir(
     :param overwrite: delete the existing ``owned`` entries instead of refusing a non-empty directory.
     :param keep: accept a non-empty directory as it is (resuming a run; the caller checks its files).
     :param field: the name the messages use for ``out`` (e.g. ``--out``).
+    :param hint: what the refusal of a non-empty directory suggests.
     :return: ``out`` as a Path (it exists afterwards).
     :raises OutputError: if ``out`` is a file or cannot be created or written, or is not empty while neither
         ``overwrite`` nor ``keep`` is set (the message names its entries).
@@ -78,10 +86,7 @@ def prepare_output_dir(
         else:
             present = sorted(path.iterdir())
             if present:
-                raise OutputError(
-                    f"{field} {str(path)!r} is not empty ({_names(present)}); pass --overwrite to delete the "
-                    "outputs of the earlier run (other files are kept) or choose another directory"
-                )
+                raise OutputError(f"{field} {str(path)!r} is not empty ({_names(present)}); {hint}")
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:

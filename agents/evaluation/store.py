@@ -109,7 +109,11 @@ def open_output_dir(out: Path, resume: bool, overwrite: bool) -> Path:
             f"--resume: {str(out)!r} holds no {RUN_FILE} (not an evaluation directory, or one that never "
             "started); pass --overwrite to start a new run there"
         )
-    return prepare_output_dir(out, EVAL_OUTPUTS, overwrite=overwrite, keep=resume, field="--out")
+    hint = (
+        "pass --resume to continue the run recorded there, --overwrite to delete its outputs (other files are "
+        "kept), or choose another directory"
+    )
+    return prepare_output_dir(out, EVAL_OUTPUTS, overwrite=overwrite, keep=resume, field="--out", hint=hint)
 
 
 def check_resume(out: Path, identity: Mapping[str, Any]) -> bool:

@@ -177,20 +177,29 @@ def _load_model(path: Path, algo: str) -> Any:
         ) from None
 
 
+def _describe(space: Any) -> str:
+    shape = getattr(space, "shape", None)
+    return f"{type(space).__name__} of shape {shape}" if space is not None else "none"
+
+
 def check_spaces(model: Any, env: gym.Env, path: Path) -> None:
     """Refuse a model whose observation or action space is not ``env``'s (it was trained for another env).
 
-    :raises ModelError: naming the space and both shapes.
+    :raises ModelError: naming the space and both shapes (or that the bounds differ).
     """
     for name in ("observation_space", "action_space"):
         want, got = getattr(env, name), getattr(model, name, None)
-        same = got is not None and type(got) is type(want) and getattr(got, "shape", None) == want.shape
-        if same and isinstance(want, gym.spaces.Box):
-            same = bool(np.array_equal(got.low, want.low) and np.array_equal(got.high, want.high))
-        if not same:
+        if got is None or type(got) is not type(want) or getattr(got, "shape", None) != want.shape:
             raise ModelError(
-                f"policy: {path} was trained for another {name} ({got}) than this env's ({want}); "
-                "evaluate it with the env kwargs it was trained with"
+                f"policy: {path} was trained for another {name} ({_describe(got)}) than this env's "
+                f"({_describe(want)}); evaluate it with the env kwargs it was trained with"
+            )
+        if isinstance(want, gym.spaces.Box) and not (
+            np.array_equal(got.low, want.low) and np.array_equal(got.high, want.high)
+        ):
+            raise ModelError(
+                f"policy: {path} was trained for an {name} with other bounds than this env's "
+                f"({_describe(want)}); evaluate it with the env kwargs it was trained with"
             )
 
 

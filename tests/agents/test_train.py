@@ -151,7 +151,7 @@ def test_tiny_ppo_run_saves_a_model_that_evaluate_runs_with_the_expert(tmp_path,
         source="test",
     )
     for model in (run / "model.zip", run / "checkpoints" / "model_32_steps.zip", run / "best" / "best_model.zip"):
-        res = evaluate(suite, str(model), tmp_path / "eval", progress=False)
+        res = evaluate(suite, str(model), tmp_path / f"eval_{model.stem}", progress=False)
         e = res["episodes"][0]
         assert e["error"] is None and e["sim_time"] == pytest.approx(0.4)
         assert e["planner_calls"] >= 1  # the expert is in the loop
