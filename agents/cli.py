@@ -1,6 +1,6 @@
 """The ``quad-uneven`` command line: every argparse parser of the project, and the thin handlers behind them.
 
-Subcommands: ``demo``, ``evaluate``, ``train``, ``paper``, ``plan-paper`` (see ``--help`` of each). The
+Subcommands: ``demo``, ``evaluate``, ``train``, ``export``, ``paper``, ``plan-paper`` (see ``--help`` of each). The
 library modules expose typed functions only; this module turns arguments into their calls and their
 errors into one line on stderr with exit code 2: every validation error of the project is a ``ValueError``
 (``SuiteError``, ``PolicyError``, ``EnvArgumentError``, ``TrainConfigError``, ``OutputError``, ...) whose
@@ -143,6 +143,11 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         help="s of wall-clock time after which an episode is ended as 'wall_time_limit' "
         f"(default {DEFAULT_WALL_TIME_LIMIT:g})",
     )
+    p.add_argument(
+        "--allow-pickle",
+        action="store_true",
+        help="load pickled files of a model folder (older runs' *_vecnormalize.pkl); they can run code: trusted only",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_evaluate_command)
     return p
@@ -195,6 +200,7 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
             resume=args.resume,
             overwrite=args.overwrite,
             wall_time_limit=args.episode_wall_limit,
+            allow_pickle=args.allow_pickle,
         )
     for kind, g in results["summary"]["by_kind"].items():
         speed = g["mean_speed"]
@@ -237,6 +243,9 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         help="DIR may hold an earlier run: delete its outputs first (other files are kept); without it a "
         "non-empty DIR is refused",
     )
+    p.add_argument(
+        "--tensorboard", type=Path, default=None, help="log SB3's scalars and our episode figures here (TensorBoard)"
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_train_command)
     return p
@@ -256,7 +265,9 @@ def run_train_command(args: argparse.Namespace) -> int:
     cfg = load_train_config(args.config, overrides)
     from agents.rl.training import train  # deferred: SB3, torch and the expert's kernels
 
-    summary = train(cfg, args.out, progress=not args.no_progress, overwrite=args.overwrite)
+    summary = train(
+        cfg, args.out, progress=not args.no_progress, tensorboard=args.tensorboard, overwrite=args.overwrite
+    )
     if summary["interrupted"]:
         print(f"interrupted: the model trained so far is saved in {Path(summary['model']).resolve()}", file=sys.stderr)
     for key in ("timesteps", "wall_time", "steps_per_s", "episodes", "mean_return", "mean_stability_index",
@@ -266,6 +277,36 @@ def run_train_command(args: argparse.Namespace) -> int:
     print(f"model: {Path(summary['model']).resolve()}")
     print(f"learning curve: {(Path(args.out) / 'learning_curve.png').resolve()}")
     return EXIT_INTERRUPTED if summary["interrupted"] else 0
+
+
+# -------------------------------------------------------------------------------------------- export
+def add_export_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``export`` subcommand on ``sub``."""
+    p = sub.add_parser(
+        "export",
+        help="write a trained agent's deterministic policy as ONNX (observation normalisation folded in)",
+        description="Export DIR/model.zip (with its rl_meta.json and observation statistics) as an ONNX graph "
+        "obs (N, n_obs) -> action (N, 12), equal to the evaluation's predict; metadata in the ONNX metadata_props.",
+    )
+    p.add_argument("--policy", type=Path, required=True, help="the SB3 model .zip of a training run")
+    p.add_argument("--out", type=Path, required=True, help="the .onnx file to write")
+    p.add_argument("--algo", choices=SB3_ALGOS, default=None, help="SB3 class (default: the run's metadata)")
+    p.add_argument("--allow-pickle", action="store_true", help="load pickled files of older runs (trusted only)")
+    p.set_defaults(func=run_export_command)
+    return p
+
+
+def run_export_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven export``: 0 on success, 2 on an unusable model folder."""
+    from agents.rl.export import export_onnx
+    from agents.rl.model_io import ModelError
+
+    try:
+        path = export_onnx(args.policy, args.out, args.algo, args.allow_pickle)
+    except ImportError as err:
+        raise ModelError(f"export needs the 'export' extra (pip install -e \".[export]\"): {err}") from None
+    print(f"onnx: {path.resolve()}")
+    return 0
 
 
 # --------------------------------------------------------------------------------------------- paper
@@ -340,7 +381,10 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``quad-uneven`` parser with every subcommand."""
     parser = argparse.ArgumentParser(prog="quad-uneven", description="Quadruped locomotion on uneven terrain")
     sub = parser.add_subparsers(dest="command", required=True)
-    for add in (add_demo_parser, add_evaluate_parser, add_train_parser, add_paper_parser, add_plan_paper_parser):
+    for add in (
+        add_demo_parser, add_evaluate_parser, add_train_parser, add_export_parser, add_paper_parser,
+        add_plan_paper_parser,
+    ):  # fmt: skip
         add(sub)
     return parser
 

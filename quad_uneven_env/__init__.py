@@ -26,7 +26,12 @@ def register_envs() -> None:
     from gymnasium.envs.registration import register, registry
 
     if ENV_ID not in registry:
-        register(id=ENV_ID, entry_point="quad_uneven_env.env:QuadUnevenEnv", max_episode_steps=1000)
+        register(
+            id=ENV_ID,
+            entry_point="quad_uneven_env.env:QuadUnevenEnv",
+            vector_entry_point="quad_uneven_env.vector:make_vector_env",
+            max_episode_steps=1000,
+        )
 
 
 class _RegisterOnGymnasiumImport(importlib.abc.MetaPathFinder):

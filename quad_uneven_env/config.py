@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from quad_uneven_env.fields import check_fields, from_mapping, param
+from quad_uneven_env.fields import Param, check_fields, from_mapping, param
 
 CONFIG_DIR = Path(os.environ.get("QUAD_UNEVEN_CONFIGS", Path(__file__).resolve().parents[1] / "configs"))
 """Directory of the shipped YAML configs (override with ``$QUAD_UNEVEN_CONFIGS``)."""
@@ -91,17 +91,11 @@ class RobotConfig:
 
 
 def _positive(value: Any, field: str) -> float:
-    v = float(value)
-    if not np.isfinite(v) or v <= 0.0:
-        raise ValueError(f"{field} must be a finite number > 0, got {value!r}")
-    return v
+    return Param(field, None, "", "", lo=0.0, lo_open=True).check(value, "")
 
 
 def _non_negative(value: Any, field: str) -> float:
-    v = float(value)
-    if not np.isfinite(v) or v < 0.0:
-        raise ValueError(f"{field} must be a finite number >= 0, got {value!r}")
-    return v
+    return Param(field, None, "", "", lo=0.0).check(value, "")
 
 
 def _triple(value: Any, field: str, allow_zero: bool = False) -> tuple[float, float, float]:

@@ -29,7 +29,7 @@ from quad_uneven_env.observations import (
     observation_table,
 )
 from quad_uneven_env.physics import RobotIndex, instability_warnings
-from quad_uneven_env.rewards import reward_terms
+from quad_uneven_env.rewards import REWARD_TERMS, reward_terms
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT, PhysicsOptions, scene_mjcf
 from quad_uneven_env.termination import FallCheck
@@ -83,11 +83,30 @@ class QuadUnevenEnv(gym.Env):
     MuJoCo bad qpos/qvel/qacc warning; ``info["diverged"] = True``); the reason is in
     ``info["termination_reason"]``. Truncation by ``max_episode_steps`` (1000 = 20 s by default).
 
-    **Info** every step: ``stability_index`` (N m), ``stability_index_normalized`` (m),
-    ``edge_moments`` (N m), ``contact_forces`` (4 x 3, N, world), ``foot_contact`` (4,),
-    ``cog``, ``cog_vel``, ``cog_acc`` (whole robot, world, the acceleration from Newton's law with
-    the contact forces), ``feet_pos`` (4 x 3 foot sites, world), ``terrain_height_under_base``,
-    ``diverged``, ``termination_reason``, ``reward_terms``, ``distance`` (COG x travelled, m).
+    **Info** (the same keys, shapes and dtypes at every step and reset, so that Gymnasium's vector
+    envs can stack them; ``gym.make_vec("QuadUneven-v0", num_envs=N)`` gives N copies):
+
+    ==============================  ==========  ===========================================================
+    key                             shape       content
+    ==============================  ==========  ===========================================================
+    ``stability_index``             float       N m; ``-inf`` with fewer than 3 stance feet
+    ``stability_index_normalized``  float       m (index / m g)
+    ``edge_moments``                (4,)        N m, the clockwise support edges' tumbling moments, padded
+                                                with +inf beyond the number of stance feet (an absent edge
+                                                never tips, so the index is still their minimum; NaN would
+                                                fail Gymnasium's env checker); ``-inf`` entries if < 3 feet
+    ``contact_forces``              (4, 3)      N, terrain on each foot, world frame, leg order
+    ``foot_contact``                (4,) bool   the foot touches the terrain
+    ``cog``, ``cog_vel``,           (3,)        whole-robot COG (m), velocity (m/s), acceleration (m/s^2,
+    ``cog_acc``                                 Newton's law with the contact forces), world frame
+    ``feet_pos``                    (4, 3)      m, foot sites, world frame
+    ``terrain_height_under_base``   float       m
+    ``distance``                    float       m, COG x travelled since the reset
+    ``diverged``                    bool        the episode ended by numerical divergence
+    ``termination_reason``          str / None  why the episode ended (None while it runs)
+    ``reward_terms``                dict        the named reward terms of this step (zeros at reset)
+    ==============================  ==========  ===========================================================
+
     Measured quantities (contacts, COG, feet, stability) are those of the last physics step's
     constraint solve, i.e. at the start of that 2 ms step.
 
@@ -256,7 +275,9 @@ class QuadUnevenEnv(gym.Env):
         self._start_x = float(meas.cog[0])
         self._last_index_norm = meas.index / (self._mass * self._g)
         self._last_obs = meas.obs.astype(np.float32)
-        return self._last_obs.copy(), self._info(meas, terms={}, diverged=False, reason=None)
+        return self._last_obs.copy(), self._info(
+            meas, terms=dict.fromkeys(REWARD_TERMS, 0.0), diverged=False, reason=None
+        )
 
     def _spawn_qpos(self) -> np.ndarray:
         """Standing pose over the spawn point: each foot on the terrain below its hip."""
@@ -358,7 +379,7 @@ class QuadUnevenEnv(gym.Env):
         return {
             "stability_index": index,
             "stability_index_normalized": index / (self._mass * self._g),
-            "edge_moments": meas.moments.copy(),
+            "edge_moments": self._padded_moments(meas),
             "contact_forces": meas.foot_forces.copy(),
             "foot_contact": meas.foot_contact.copy(),
             "cog": meas.cog.copy(),
@@ -371,6 +392,14 @@ class QuadUnevenEnv(gym.Env):
             "termination_reason": reason,
             "reward_terms": dict(terms),
         }
+
+    @staticmethod
+    def _padded_moments(meas: StepMeasurement) -> np.ndarray:
+        """(4,) edge moments (N m) of the clockwise support edges, +inf beyond the number of stance feet."""
+        out = np.full(C.N_LEGS, np.inf)
+        m = meas.moments
+        out[: m.shape[0]] = m
+        return out
 
     # ------------------------------------------------------------------ actuators
     def _make_servos(self, kp: float, kd: float) -> None:

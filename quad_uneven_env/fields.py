@@ -51,9 +51,13 @@ class Param:
     """True: the upper bound is excluded."""
     choices: tuple[str, ...] = ()
     """allowed values of a ``"choice"`` parameter."""
+    none_ok: bool = False
+    """None is allowed too (meaning "not set"; the owner documents what that means)."""
 
     def allowed(self) -> str:
-        """Human-readable allowed values, e.g. ``"(0, 30]"`` or ``"one of ['up', 'down']"``."""
+        """Human-readable allowed values, e.g. ``"number in (0, 30]"`` or ``"one of ['up', 'down']"``."""
+        if self.none_ok:
+            return dataclasses.replace(self, none_ok=False).allowed() + " or null"
         if self.kind == "choice":
             return f"one of {list(self.choices)}"
         if self.kind == "xy":
@@ -75,6 +79,8 @@ class Param:
         Booleans are not numbers, and a number must be finite and in range before anything else uses it.
         """
         field = f"{where}.{self.name}" if where else self.name
+        if value is None and self.none_ok:
+            return None
         if self.kind == "bool":
             if not isinstance(value, bool | np.bool_):
                 raise ValueError(f"{field} must be {self.allowed()}, got {value!r} of type {type(value).__name__}")

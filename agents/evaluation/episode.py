@@ -87,6 +87,8 @@ class EvalConfig:
     """directory for MP4s of the first episode of each terrain entry (None: no video)."""
     wall_time_limit: float = DEFAULT_WALL_TIME_LIMIT
     """s of wall-clock time per episode (env and policy construction included); the episode then ends."""
+    allow_pickle: bool = False
+    """load pickled files of a model folder (they can run code: trusted files only)."""
 
 
 @dataclasses.dataclass
@@ -141,7 +143,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     video = cfg.video_dir is not None and task.first_of_entry
     env = make_env(task, cfg, render=video)
     u = env.unwrapped
-    policy = make_policy(cfg.policy, env, cfg.algo)
+    policy = make_policy(cfg.policy, env, cfg.algo, cfg.allow_pickle)
     dt = u.dt
     mass, g = float(u.idx.total_mass), float(-u.model.opt.gravity[2])
     writer, video_path, frame_every = None, None, max(1, round(1.0 / (VIDEO_FPS * dt)))

@@ -63,7 +63,7 @@ def _expert(env: gym.Env) -> Policy:
     return attach_expert(env)
 
 
-def _sb3(path: str, env: gym.Env, algo: str) -> Policy:
+def _sb3(path: str, env: gym.Env, algo: str, allow_pickle: bool) -> Policy:
     if algo not in SB3_ALGOS:
         raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {algo!r}")
     if not Path(path).is_file():
@@ -71,18 +71,19 @@ def _sb3(path: str, env: gym.Env, algo: str) -> Policy:
     from agents.rl.model_io import ModelError, load_sb3_policy
 
     try:
-        return load_sb3_policy(path, env, algo)
+        return load_sb3_policy(path, env, algo, allow_pickle)
     except ModelError as err:
         raise PolicyError(str(err)) from None
 
 
-def make_policy(name: str, env: gym.Env, algo: str = "ppo") -> Policy:
+def make_policy(name: str, env: gym.Env, algo: str = "ppo", allow_pickle: bool = False) -> Policy:
     """A policy with SB3's ``predict`` for ``env`` (built with :func:`policy_env_kwargs` of ``name``).
 
     :param name: ``"zero"`` (the zero action), ``"expert"`` (``agents.expert.ExpertPolicy(env)``, which installs
         its physics-rate controller into ``env.unwrapped``), or the path of an SB3 model ``.zip`` (a residual
         model, per its ``rl_meta.json``, installs the expert plus residual: :mod:`agents.rl.model_io`).
     :param algo: ``"ppo"`` or ``"sac"``: the class an SB3 model file is loaded with.
+    :param allow_pickle: unpickle files of the model folder (trusted files only; default: refused).
     :raises PolicyError: on an unknown name, a missing model file or expert module, or an unknown algo.
     """
     kind = policy_kind(name)
@@ -90,4 +91,4 @@ def make_policy(name: str, env: gym.Env, algo: str = "ppo") -> Policy:
         return ZeroActionPolicy(env.action_space)
     if kind == "expert":
         return _expert(env)
-    return _sb3(name, env, algo)
+    return _sb3(name, env, algo, allow_pickle)

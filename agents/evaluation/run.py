@@ -100,7 +100,7 @@ def _preflight(task: EpisodeTask, cfg: EvalConfig) -> None:
         msg = str(err).split(" was raised from the environment creator")[0]  # gymnasium's suffix repeats kwargs
         raise EnvArgumentError(msg if msg.startswith("env_kwargs") else f"env_kwargs: {msg}") from None
     try:
-        make_policy(cfg.policy, env, cfg.algo)
+        make_policy(cfg.policy, env, cfg.algo, cfg.allow_pickle)
     finally:
         env.close()
 
@@ -132,6 +132,7 @@ def evaluate(
     resume: bool = False,
     overwrite: bool = False,
     wall_time_limit: float = DEFAULT_WALL_TIME_LIMIT,
+    allow_pickle: bool = False,
 ) -> dict[str, Any]:
     """Run ``policy`` on every (terrain entry, seed) of ``suite``; write ``out/results.json``, ``report.md``, PNGs.
 
@@ -149,6 +150,7 @@ def evaluate(
     :param resume: continue the run recorded in ``out`` (its finished episodes are kept, not run again).
     :param overwrite: delete an earlier run's outputs in ``out`` first (other files are kept).
     :param wall_time_limit: s of wall-clock time per episode before it is ended (``wall_time_limit``).
+    :param allow_pickle: unpickle files of an SB3 model folder (trusted files only).
     :return: the results.json content.
     :raises SuiteError: on an invalid suite; ``PolicyError`` on an unusable policy; ``EnvArgumentError`` on env
         arguments the environment rejects; ``OutputError`` on an unusable ``out`` (a file, an earlier run's
@@ -177,6 +179,7 @@ def evaluate(
         env_kwargs=env_kwargs,
         video_dir=str(out / "videos") if video else None,
         wall_time_limit=float(wall_time_limit),
+        allow_pickle=allow_pickle,
     )
     _preflight(tasks[0], cfg)
     if not resuming:

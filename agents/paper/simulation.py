@@ -31,6 +31,7 @@ from planners.reference import Reference, aim_feet_below_footholds
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env import physics
+from quad_uneven_env.fields import check_fields, param
 
 DISTRIBUTIONS = ("qp", "pinv")
 """Torque distributions offered on the command line ("qp": friction-cone aware; "pinv": the paper's)."""
@@ -40,34 +41,25 @@ DISTRIBUTIONS = ("qp", "pinv")
 class PaperRunConfig:
     """Settings of the simulated §6 run (SI units)."""
 
-    distribution: str = "qp"
+    distribution: str = param("qp", kind="choice", choices=DISTRIBUTIONS)
     """inverse-dynamics torque distribution: "qp" (friction cones) or "pinv" (the paper's pseudo-inverse)."""
-    epsilon: float = 10.0
+    epsilon: float = param(10.0, "N m", lo=0.0, hi=1000.0)
     """N m: stability margin of the planned COG path. The paper's Table 1 has 0.1 N m; with it the COG ends
     the short four-leg support on the LF-RH diagonal and the simulated robot rocks on that edge (see
     docs/paper.md): 10 N m (2 cm of static margin at 50 kg) is the default, ``--epsilon 0.1`` the paper's."""
-    duration: float | None = None
+    duration: float | None = param(None, "s", lo=0.0, hi=100.0, lo_open=True, none_ok=True)
     """s of the cycle to run (None: the whole 6.1 s cycle); a shorter run stops early (tests)."""
-    hold: float = 0.5
+    hold: float = param(0.5, "s", lo=0.0, hi=100.0)
     """s: holding the final planned pose after the cycle (only when the whole cycle is run)."""
-    settle: float = 0.1
+    settle: float = param(0.1, "s", lo=0.0, hi=100.0)
     """s: holding the initial planned pose before the cycle starts (not recorded)."""
-    touchdown_depth: float = 0.015
+    touchdown_depth: float = param(0.015, "m", lo=0.0, hi=0.1)
     """m: a planned-stance foot without contact is aimed this far below its foothold (0: off)."""
-    seed: int = 0
+    seed: int = param(0, kind="int", lo=0)
     """seed of the env reset (the paper terrain's field beyond x = 0.6 m only)."""
 
     def __post_init__(self) -> None:
-        if self.distribution not in DISTRIBUTIONS:
-            raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {self.distribution!r}")
-        if not (np.isfinite(self.epsilon) and self.epsilon >= 0.0):
-            raise ValueError(f"epsilon must be a finite number >= 0 (N m), got {self.epsilon!r}")
-        if self.duration is not None and not (np.isfinite(self.duration) and self.duration > 0.0):
-            raise ValueError(f"duration must be None or a finite number > 0 (s), got {self.duration!r}")
-        for name in ("hold", "settle", "touchdown_depth"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v >= 0.0):
-                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+        check_fields(self, where="")
 
 
 @dataclasses.dataclass

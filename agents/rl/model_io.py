@@ -7,20 +7,24 @@ A training run writes ``DIR/rl_meta.json`` (and a copy in ``DIR/checkpoints/`` a
 
 :func:`load_sb3_policy` reads it for a model ``.zip`` in the same folder: a residual model gets the
 expert plus residual installed as the env's physics-rate controller (so ``quad-uneven evaluate`` runs
-the expert in the loop), and observations are normalised with the saved VecNormalize statistics.
+the expert in the loop), and observations are normalised with the saved statistics
+(:mod:`agents.rl.normalization`). Nothing from the folder is unpickled unless the user opts in.
 A model without metadata is loaded as a plain SB3 policy on the env as given.
 """
 
 from __future__ import annotations
 
+import collections
 import json
 import pickle
-import re
+import zipfile
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+
+from agents.rl.normalization import ObsNormalization, norm_path, pickle_path
 
 META_FILE = "rl_meta.json"
 """Name of the metadata file next to the model(s) of a training run."""
@@ -60,11 +64,10 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
         raise ModelError(f"{path}: residual must be true or false, got {meta.get('residual')!r}")
     if meta.get("residual"):
         scale = meta.get("residual_scale")
+        if "residual_scale" not in meta:
+            raise ModelError(f"{path}: residual_scale is missing (a residual model needs a number in (0, 1])")
         if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0.0 < scale <= 1.0:
-            raise ModelError(
-                f"{path}: residual_scale must be a number in (0, 1] (fraction of the torque limit) for a residual "
-                f"model, got {scale!r}" + (" (missing)" if "residual_scale" not in meta else "")
-            )
+            raise ModelError(f"{path}: residual_scale must be a number in (0, 1] (of the torque limit), got {scale!r}")
     env_kwargs = meta.get("env_kwargs")
     if env_kwargs is not None and not isinstance(env_kwargs, dict):
         raise ModelError(f"{path}: env_kwargs must be a mapping of QuadUneven-v0 arguments, got {env_kwargs!r}")
@@ -79,19 +82,6 @@ def write_metadata(folder: Path, meta: dict[str, Any]) -> Path:
     path = folder / META_FILE
     path.write_text(json.dumps({"format": META_FORMAT, **meta}, indent=2, allow_nan=False))
     return path
-
-
-def vecnormalize_path(model_path: str | Path) -> Path | None:
-    """The VecNormalize statistics saved with ``model_path``, if any.
-
-    ``X.zip`` -> ``X_vecnormalize.pkl``; an SB3 checkpoint ``P_N_steps.zip`` -> ``P_vecnormalize_N_steps.pkl``.
-    """
-    p = Path(model_path)
-    candidates = [p.with_name(f"{p.stem}_vecnormalize.pkl")]
-    m = re.fullmatch(r"(.*)_(\d+)_steps", p.stem)
-    if m:
-        candidates.append(p.with_name(f"{m[1]}_vecnormalize_{m[2]}_steps.pkl"))
-    return next((c for c in candidates if c.is_file()), None)
 
 
 def metadata_env_kwargs(model_path: str | Path) -> dict[str, Any]:
@@ -112,7 +102,7 @@ class SB3Policy:
     """An SB3 model with its observation normalisation (and, for a residual model, the expert it rides on).
 
     :param model: the loaded SB3 algorithm.
-    :param obs_normalizer: a VecNormalize whose ``normalize_obs`` is applied before ``model.predict``, or None.
+    :param obs_normalizer: the :class:`ObsNormalization` applied before ``model.predict``, or None.
     :param expert: the :class:`agents.expert.ExpertPolicy` in the loop of a residual model, or None.
     """
 
@@ -139,51 +129,142 @@ class SB3Policy:
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
         """SB3's predict on the (normalised) observation; :return: action in [-1, 1]^12 and the state."""
-        obs = observation if self.obs_normalizer is None else self.obs_normalizer.normalize_obs(observation)
+        obs = observation if self.obs_normalizer is None else self.obs_normalizer.normalize(observation)
         return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
 
 
-def _load_normalizer(model_path: Path, meta: dict[str, Any] | None) -> Any:
-    path = vecnormalize_path(model_path)
-    if path is None:
-        if meta is not None and meta.get("normalize_obs"):
+def load_obs_normalization(model_path: Path, meta: dict[str, Any] | None, allow_pickle: bool = False) -> Any:
+    """The observation statistics saved with ``model_path`` (an :class:`ObsNormalization`), or None.
+
+    Reads ``X_obs_norm.npz`` (arrays only). A run from before that format has SB3's pickled
+    ``X_vecnormalize.pkl``: unpickling can run code from the file, so it is read only with
+    ``allow_pickle`` (``quad-uneven evaluate --allow-pickle``), for files you trust.
+
+    :raises ModelError: when the statistics are missing, unreadable, or a pickle without ``allow_pickle``.
+    """
+    npz = norm_path(model_path)
+    if npz.is_file():
+        try:
+            return ObsNormalization.load(npz)
+        except ValueError as err:
+            raise ModelError(f"policy: {err}") from None
+    pkl = pickle_path(model_path)
+    if pkl is not None:
+        if not allow_pickle:
             raise ModelError(
-                f"policy: {model_path} was trained with normalised observations but "
-                f"{model_path.stem}_vecnormalize.pkl is missing next to it"
+                f"policy: {pkl.name} is a pickle, and unpickling runs code from the file; re-save the statistics "
+                f"as {npz.name} (quad-uneven train writes it), or pass --allow-pickle if you trust the file"
             )
-        return None
-    try:
-        with path.open("rb") as f:
-            normalizer = pickle.load(f)  # our own file, written by VecNormalize.save
-        normalizer.training = False
-        norm_obs = normalizer.norm_obs
-    except Exception as err:  # a truncated or foreign pickle raises anything from EOFError to AttributeError
+        try:
+            with pkl.open("rb") as f:
+                vn = pickle.load(f)  # the user opted in for this file
+            return ObsNormalization.from_vecnormalize(vn) if vn.norm_obs else None
+        except Exception as err:  # a truncated or foreign pickle raises anything from EOFError to AttributeError
+            raise ModelError(f"policy: {pkl} is not readable VecNormalize statistics ({type(err).__name__})") from None
+    if meta is not None and meta.get("normalize_obs"):
         raise ModelError(
-            f"policy: {path} is not readable VecNormalize statistics ({type(err).__name__}: {err})"
-        ) from None
-    return normalizer if norm_obs else None
+            f"policy: {model_path} was trained with normalised observations but {npz.name} is missing next to it"
+        )
+    return None
 
 
-def _load_model(path: Path, algo: str) -> Any:
-    """``algo``'s ``load`` of ``path``, any failure of a corrupt or truncated file as a :class:`ModelError`."""
+_CONSTANT_KEYS = ("lr_schedule", "clip_range", "clip_range_vf", "exploration_schedule")
+"""Pickled schedules in an SB3 zip: not used for prediction, replaced by constants on a safe load."""
+
+_TRAINING_STATE_KEYS = ("_last_obs", "_last_episode_starts", "_last_original_obs", "action_noise")
+"""Pickled training state in an SB3 zip (last rollout observations, exploration noise): None on a safe load."""
+
+_BUFFER_KEYS = ("ep_info_buffer", "ep_success_buffer")
+"""Pickled episode-statistics deques: empty on a safe load."""
+
+
+def _zip_data(path: Path) -> dict[str, Any]:
+    """The ``data`` JSON of an SB3 model zip, without deserialising anything."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return json.loads(z.read("data"))
+    except (zipfile.BadZipFile, KeyError, OSError, json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise ModelError(f"policy: {path} is not an SB3 model zip ({type(err).__name__}: {err})") from None
+
+
+def _safe_custom_objects(path: Path, cls: Any, env: gym.Env) -> dict[str, Any]:
+    """Replacements for every pickled entry of the zip's ``data``, so that SB3 unpickles nothing.
+
+    The observation and action spaces come from ``env`` (their recorded shapes must match), the policy
+    and buffer classes are the algorithm's own, schedules are constants (unused by ``predict``).
+
+    :raises ModelError: on a shape mismatch or a pickled entry this loader does not know.
+    """
+    from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
+    from stable_baselines3.common.utils import ConstantSchedule
+
+    data = _zip_data(path)
+    custom: dict[str, Any] = {}
+    for key, entry in data.items():
+        if not (isinstance(entry, dict) and ":serialized:" in entry):
+            continue
+        if key in ("observation_space", "action_space"):
+            space = getattr(env, key)
+            shape = entry.get("_shape")
+            if shape is not None and tuple(shape) != tuple(space.shape):
+                raise ModelError(
+                    f"policy: {path} was trained for an {key.replace('_', ' ')} of shape {tuple(shape)}, "
+                    f"the env has {tuple(space.shape)}"
+                )
+            custom[key] = space
+        elif key == "policy_class":
+            custom[key] = cls.policy_aliases["MlpPolicy"]
+            if entry.get("__module__") not in (None, custom[key].__module__):
+                raise ModelError(
+                    f"policy: {path} holds a policy class from {entry['__module__']!r}, not {cls.__name__}'s "
+                    f"MlpPolicy (a model of another algo? --algo loads {cls.__name__} models)"
+                )
+        elif key in ("rollout_buffer_class", "replay_buffer_class"):
+            custom[key] = RolloutBuffer if key == "rollout_buffer_class" else ReplayBuffer
+        elif key in _CONSTANT_KEYS:
+            custom[key] = ConstantSchedule(0.0)
+        elif key == "train_freq":
+            custom[key] = (1, "step")
+        elif key in _TRAINING_STATE_KEYS:
+            custom[key] = None
+        elif key in _BUFFER_KEYS:
+            custom[key] = collections.deque(maxlen=100)
+        else:
+            raise ModelError(
+                f"policy: {path} holds a pickled {key!r}, which this loader does not unpickle (it could run code); "
+                "pass --allow-pickle if you trust the file"
+            )
+    return custom
+
+
+def load_sb3_model(path: str | Path, algo: str, env: gym.Env, allow_pickle: bool = False) -> Any:
+    """An SB3 model loaded for prediction on ``env``'s spaces, without running code from the file.
+
+    SB3 zips hold cloudpickled entries (spaces, schedules, classes) beside the weights; they are replaced
+    (:func:`_safe_custom_objects`), and the weights are read by ``torch.load(weights_only=True)``.
+    ``allow_pickle`` loads the file as SB3 does (trusted files only).
+
+    :raises ModelError: on an unreadable zip, a space mismatch or an unknown pickled entry.
+    """
     import stable_baselines3
 
+    path = Path(path)
+    cls = getattr(stable_baselines3, algo.upper())
+    custom = None if allow_pickle else _safe_custom_objects(path, cls, env)
     try:
-        return getattr(stable_baselines3, algo.upper()).load(path, device="cpu")
-    except Exception as err:  # zipfile, pickle, torch and SB3 each raise their own types for a bad file
-        msg = " ".join(str(err).split())[:200]
-        raise ModelError(
-            f"policy: {path} is not a readable SB3 {algo.upper()} model ({type(err).__name__}: {msg})"
-        ) from None
+        return cls.load(path, device="cpu", custom_objects=custom)
+    except (ValueError, KeyError, RuntimeError, zipfile.BadZipFile, EOFError, OSError) as err:
+        raise ModelError(f"policy: {path} cannot be loaded as {algo.upper()} ({type(err).__name__}: {err})") from None
 
 
 def _describe(space: Any) -> str:
-    shape = getattr(space, "shape", None)
-    return f"{type(space).__name__} of shape {shape}" if space is not None else "none"
+    return f"{type(space).__name__} of shape {getattr(space, 'shape', None)}" if space is not None else "none"
 
 
 def check_spaces(model: Any, env: gym.Env, path: Path) -> None:
     """Refuse a model whose observation or action space is not ``env``'s (it was trained for another env).
+
+    Also after an ``allow_pickle`` load, which takes the spaces from the file.
 
     :raises ModelError: naming the space and both shapes (or that the bounds differ).
     """
@@ -203,11 +284,12 @@ def check_spaces(model: Any, env: gym.Env, path: Path) -> None:
             )
 
 
-def load_sb3_policy(path: str | Path, env: gym.Env, algo: str) -> SB3Policy:
+def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: bool = False) -> SB3Policy:
     """Load the SB3 model ``path`` as a policy for ``env`` (a ``QuadUneven-v0`` env, before ``reset``).
 
     With ``rl_meta.json`` saying ``residual``, installs the expert plus the residual
-    (:func:`agents.rl.residual_env.install_residual_controller`) on ``env.unwrapped``.
+    (:func:`agents.rl.residual_env.install_residual_controller`) on ``env.unwrapped``. Nothing in the
+    model folder is unpickled unless ``allow_pickle`` (see :func:`load_sb3_model`).
 
     :param algo: ``"ppo"`` or ``"sac"``; must match the metadata's ``algo`` if there is one.
     :raises ModelError: on an algo mismatch, bad metadata, missing or unreadable normalisation statistics, a
@@ -217,8 +299,8 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str) -> SB3Policy:
     meta = read_metadata(path)
     if meta is not None and meta.get("algo") not in (None, algo):
         raise ModelError(f"algo: {path} was trained with {meta['algo']!r}; pass --algo {meta['algo']}, got {algo!r}")
-    normalizer = _load_normalizer(path, meta)
-    model = _load_model(path, algo)
+    normalizer = load_obs_normalization(path, meta, allow_pickle)
+    model = load_sb3_model(path, algo, env, allow_pickle)
     check_spaces(model, env, path)
     expert = None
     if meta is not None and meta.get("residual"):
@@ -234,9 +316,10 @@ __all__ = [
     "ModelError",
     "SB3Policy",
     "check_spaces",
+    "load_obs_normalization",
+    "load_sb3_model",
     "load_sb3_policy",
     "metadata_env_kwargs",
     "read_metadata",
-    "vecnormalize_path",
     "write_metadata",
 ]

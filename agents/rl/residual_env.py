@@ -71,7 +71,8 @@ class ResidualController:
         self.expert = expert
         self.residual_scale = check_residual_scale(residual_scale)
         self.torque_limit = np.asarray(torque_limit, dtype=np.float64).copy()
-        self._gain = self.residual_scale * self.torque_limit
+        self.gain = self.residual_scale * self.torque_limit
+        """(12,) N m of residual torque per unit action."""
         self._tau = np.zeros_like(self.torque_limit)
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any) -> None:
@@ -85,7 +86,7 @@ class ResidualController:
         :param action: (12,) residual action in [-1, 1] (the env has clipped it).
         """
         tau_expert = self.expert(model, data, action)
-        np.multiply(action, self._gain, out=self._tau)
+        np.multiply(action, self.gain, out=self._tau)
         self._tau += tau_expert
         np.clip(self._tau, -self.torque_limit, self.torque_limit, out=self._tau)
         return self._tau
@@ -118,7 +119,9 @@ def install_residual_controller(
 class ResidualExpertEnv(gym.Wrapper):
     """``QuadUneven-v0`` with the expert in the loop; the action is a residual on the expert's torques.
 
-    Spaces, reward, termination and info are the wrapped env's. ``info["residual_scale"]`` is added.
+    Spaces, reward, termination and info are the wrapped env's, plus ``info["residual_scale"]`` and
+    ``info["residual_torque"]`` (N m: mean over the 12 joints of |residual torque| commanded this step,
+    before the motor limit).
 
     :param env: a ``QuadUneven-v0`` env in torque mode, without a controller of its own.
     :param residual_scale: residual torque per unit action as a fraction of the torque limit, in (0, 1].
@@ -132,10 +135,19 @@ class ResidualExpertEnv(gym.Wrapper):
         self.expert, self.controller = install_residual_controller(env, residual_scale, expert_config)
         self.residual_scale = self.controller.residual_scale
 
+    def reset(self, **kwargs: Any):
+        """Reset the env (the expert plans its first cycle); the info has the step's keys (residual zero)."""
+        obs, info = self.env.reset(**kwargs)
+        info["residual_scale"] = self.residual_scale
+        info["residual_torque"] = 0.0
+        return obs, info
+
     def step(self, action: np.ndarray):
         """One control step of expert + residual ``action``; see :meth:`QuadUnevenEnv.step`."""
         obs, reward, terminated, truncated, info = self.env.step(action)
         info["residual_scale"] = self.residual_scale
+        a = np.asarray(action, dtype=float)
+        info["residual_torque"] = float(np.mean(np.abs(np.clip(a, -1.0, 1.0) * self.controller.gain)))
         return obs, reward, terminated, truncated, info
 
 

@@ -4,7 +4,7 @@ Typical use::
 
     quad-uneven train --algo ppo --terrain rough --timesteps 200000 --out runs/ppo_rough
 
-Writes to ``--out`` DIR: ``model.zip`` (+ ``model_vecnormalize.pkl``), ``rl_meta.json`` (what
+Writes to ``--out`` DIR: ``model.zip`` (+ ``model_obs_norm.npz``), ``rl_meta.json`` (what
 ``quad-uneven evaluate`` needs to rebuild the residual env), ``train_config.json``,
 ``learning_curve.png``, ``train_summary.json``, ``monitor/*.monitor.csv`` (one line per training
 episode), ``eval/evaluations.npz`` with ``best/best_model.zip``, and ``checkpoints/``. Details: docs/rl.md.
@@ -19,7 +19,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback, EvalCallback
@@ -30,13 +30,24 @@ from agents.outputs import prepare_output_dir
 from agents.rl.config import TrainConfig, TrainConfigError
 from agents.rl.learning_curve import plot_learning_curve
 from agents.rl.model_io import write_metadata
+from agents.rl.normalization import ObsNormalization, norm_path
 from agents.rl.residual_env import RESIDUAL_ENV_ID
 from agents.rl.vec_env import EVAL_SEED_OFFSET, build_vec_env, normalize
 
-__all__ = ["TRAIN_OUTPUTS", "ProgressCallback", "SaveVecNormalizeCallback", "WallClockLimitCallback", "train"]
+__all__ = [
+    "TRAIN_OUTPUTS",
+    "CheckpointWithStatsCallback",
+    "EpisodeMetricsCallback",
+    "ProgressCallback",
+    "SaveObsNormalizationCallback",
+    "WallClockLimitCallback",
+    "save_obs_normalization",
+    "train",
+]
 
 TRAIN_OUTPUTS = (
     "model.zip",
+    "model_obs_norm.npz",
     "model_vecnormalize.pkl",
     "rl_meta.json",
     "train_config.json",
@@ -90,29 +101,69 @@ class WallClockLimitCallback(BaseCallback):
         return not self.reached
 
 
-class SaveVecNormalizeCallback(BaseCallback):
-    """Saves the VecNormalize statistics to ``path`` (run by EvalCallback on a new best model)."""
+def save_obs_normalization(model: Any, model_path: Path) -> Path | None:
+    """Write ``model``'s observation statistics next to ``model_path`` as ``.npz`` (None without VecNormalize)."""
+    vn = model.get_vec_normalize_env()
+    if vn is None or not vn.norm_obs:
+        return None
+    return ObsNormalization.from_vecnormalize(vn).save(norm_path(model_path))
 
-    def __init__(self, path: Path) -> None:
+
+class SaveObsNormalizationCallback(BaseCallback):
+    """Saves the observation statistics for the model at ``model_path`` (run by EvalCallback on a new best)."""
+
+    def __init__(self, model_path: Path) -> None:
         super().__init__()
-        self.path = path
+        self.model_path = model_path
 
     def _on_step(self) -> bool:
-        vn = self.model.get_vec_normalize_env()
-        if vn is not None:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            vn.save(str(self.path))
+        save_obs_normalization(self.model, self.model_path)
+        return True
+
+
+class CheckpointWithStatsCallback(CheckpointCallback):
+    """SB3's CheckpointCallback, with the observation statistics as ``.npz`` instead of a pickle."""
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.save_freq == 0:
+            save_obs_normalization(self.model, Path(self._checkpoint_path(extension="zip")))
+        return super()._on_step()
+
+
+class EpisodeMetricsCallback(BaseCallback):
+    """Logs our per-episode figures (:data:`EPISODE_KEYS`) through SB3's logger (TensorBoard, CSV, stdout).
+
+    At every ended episode: ``episode/stability_mean`` and ``episode/stability_min`` (N m),
+    ``episode/distance`` (m), ``episode/fall_rate`` and ``episode/divergence_rate`` (0-1, averaged over
+    the episodes of the logging interval), ``episode/residual_torque`` (N m).
+    """
+
+    NAMES: ClassVar[dict[str, str]] = {
+        "ep_stability_mean": "episode/stability_mean",
+        "ep_stability_min": "episode/stability_min",
+        "ep_distance": "episode/distance",
+        "ep_fell": "episode/fall_rate",
+        "ep_diverged": "episode/divergence_rate",
+        "ep_residual_torque": "episode/residual_torque",
+    }
+
+    def _on_step(self) -> bool:
+        for info in self.locals.get("infos", ()):
+            if "ep_fell" not in info:
+                continue
+            for key, name in self.NAMES.items():
+                value = float(info.get(key, math.nan))
+                if math.isfinite(value):
+                    self.logger.record_mean(name, value)
         return True
 
 
 def _save_model(model: Any, out: Path) -> None:
-    """``out/model.zip`` and its VecNormalize statistics; a second interrupt while saving is ignored."""
+    """``out/model.zip`` and its observation statistics; a second Ctrl-C while saving is ignored."""
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if _in_main_thread() else None
     try:
         model.save(out / "model.zip")
-        vn = model.get_vec_normalize_env()
-        if vn is not None:
-            vn.save(str(out / "model_vecnormalize.pkl"))
+        save_obs_normalization(model, out / "model.zip")
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
@@ -139,7 +190,7 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
     }
 
 
-def _make_model(cfg: TrainConfig, venv: Any) -> Any:
+def _make_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) -> Any:
     import stable_baselines3
 
     cls = getattr(stable_baselines3, cfg.algo.upper())
@@ -150,6 +201,7 @@ def _make_model(cfg: TrainConfig, venv: Any) -> Any:
             seed=cfg.seed,
             device="cpu",
             verbose=0,
+            tensorboard_log=None if tensorboard is None else str(tensorboard),
             policy_kwargs=dict(cfg.policy_kwargs),
             **cfg.hyperparams,
         )
@@ -176,7 +228,7 @@ def _zero_mean_action(model: Any) -> None:
 
 
 def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCallback], Any]:
-    callbacks: list[BaseCallback] = [ProgressCallback(progress)]
+    callbacks: list[BaseCallback] = [ProgressCallback(progress), EpisodeMetricsCallback()]
     if cfg.time_limit_min > 0:
         callbacks.append(WallClockLimitCallback(cfg.time_limit_min))
     eval_env = None
@@ -192,23 +244,28 @@ def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCa
                 log_path=str(out / "eval"),
                 best_model_save_path=str(out / "best"),
                 deterministic=True,
-                callback_on_new_best=SaveVecNormalizeCallback(out / "best" / "best_model_vecnormalize.pkl"),
+                callback_on_new_best=SaveObsNormalizationCallback(out / "best" / "best_model.zip"),
                 verbose=0,
             )
         )
     if cfg.checkpoint_freq > 0:
         callbacks.append(
-            CheckpointCallback(
+            CheckpointWithStatsCallback(
                 save_freq=max(1, cfg.checkpoint_freq // cfg.n_envs),
                 save_path=str(out / "checkpoints"),
                 name_prefix="model",
-                save_vecnormalize=True,
             )
         )
     return callbacks, eval_env
 
 
-def train(cfg: TrainConfig, out: str | Path, progress: bool = True, overwrite: bool = False) -> dict[str, Any]:
+def train(
+    cfg: TrainConfig,
+    out: str | Path,
+    progress: bool = True,
+    tensorboard: str | Path | None = None,
+    overwrite: bool = False,
+) -> dict[str, Any]:
     """Train a residual agent with ``cfg``; write the model, its metadata and the learning curve to ``out``.
 
     Numerical divergence or a fall ends an episode (``info["diverged"]``), never the run. Ctrl-C, SIGTERM
@@ -219,6 +276,8 @@ def train(cfg: TrainConfig, out: str | Path, progress: bool = True, overwrite: b
     :param out: output directory (created), checked before anything starts: a non-empty one is refused
         unless ``overwrite``, so a new model is never paired with an older run's checkpoints.
     :param progress: show a progress bar.
+    :param tensorboard: directory for TensorBoard logs (SB3's scalars plus :class:`EpisodeMetricsCallback`'s),
+        one run subfolder per training run; None: none.
     :param overwrite: delete an earlier run's outputs in ``out`` (``TRAIN_OUTPUTS``; other files are kept).
     :return: the ``train_summary.json`` content: ``timesteps`` done, ``wall_time`` (s), ``steps_per_s``,
         ``episodes``, ``mean_return``, ``mean_stability_index`` (N m), ``mean_distance`` (m), ``fall_rate``
@@ -238,12 +297,16 @@ def train(cfg: TrainConfig, out: str | Path, progress: bool = True, overwrite: b
     venv = normalize(build_vec_env(cfg, cfg.n_envs, cfg.seed, out / "monitor"), cfg, training=True)
     eval_env = None
     try:
-        model = _make_model(cfg, venv)
+        model = _make_model(cfg, venv, None if tensorboard is None else Path(tensorboard))
         callbacks, eval_env = _callbacks(cfg, out, progress)
         wall0, interrupted = time.perf_counter(), False
         with sigterm_as_keyboard_interrupt():
             try:
-                model.learn(total_timesteps=cfg.timesteps, callback=CallbackList(callbacks))
+                model.learn(
+                    total_timesteps=cfg.timesteps,
+                    callback=CallbackList(callbacks),
+                    tb_log_name=f"{cfg.algo}_{out.name}",
+                )
             except KeyboardInterrupt:
                 interrupted = True
                 print("\ninterrupted: saving the model trained so far", file=sys.stderr)

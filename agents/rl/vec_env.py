@@ -17,7 +17,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv,
 from agents.rl.config import TrainConfig
 from agents.rl.residual_env import RESIDUAL_ENV_ID
 
-EPISODE_KEYS = ("ep_stability_mean", "ep_stability_min", "ep_distance", "ep_diverged", "ep_fell")
+EPISODE_KEYS = ("ep_stability_mean", "ep_stability_min", "ep_distance", "ep_diverged", "ep_fell", "ep_residual_torque")
 """Keys :class:`EpisodeStats` puts in the last info of an episode (and Monitor writes to its CSV)."""
 
 EVAL_SEED_OFFSET = 1000
@@ -30,16 +30,19 @@ class EpisodeStats(gym.Wrapper):
     ``ep_stability_mean`` and ``ep_stability_min`` (N m): mean and minimum of ``info["stability_index"]``
     over the steps with >= 3 feet in contact (NaN if none); ``ep_distance`` (m): COG x travelled;
     ``ep_diverged`` and ``ep_fell`` (0 or 1): the episode ended by numerical divergence / by a fall or
-    divergence (not by the time limit).
+    divergence (not by the time limit); ``ep_residual_torque`` (N m): mean of ``info["residual_torque"]``
+    (NaN without a residual).
     """
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
         self._sum, self._n, self._min = 0.0, 0, math.inf
+        self._res_sum, self._res_n = 0.0, 0
 
     def reset(self, **kwargs: Any):
         """Reset the env and the episode statistics."""
         self._sum, self._n, self._min = 0.0, 0, math.inf
+        self._res_sum, self._res_n = 0.0, 0
         return self.env.reset(**kwargs)
 
     def step(self, action: np.ndarray):
@@ -50,12 +53,16 @@ class EpisodeStats(gym.Wrapper):
             self._sum += index
             self._n += 1
             self._min = min(self._min, index)
+        if "residual_torque" in info:
+            self._res_sum += float(info["residual_torque"])
+            self._res_n += 1
         if terminated or truncated:
             info["ep_stability_mean"] = self._sum / self._n if self._n else math.nan
             info["ep_stability_min"] = self._min if self._n else math.nan
             info["ep_distance"] = float(info.get("distance", math.nan))
             info["ep_diverged"] = int(bool(info.get("diverged", False)))
             info["ep_fell"] = int(bool(terminated))
+            info["ep_residual_torque"] = self._res_sum / self._res_n if self._res_n else math.nan
         return obs, reward, terminated, truncated, info
 
 

@@ -16,6 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -154,11 +155,18 @@ CASES: dict[str, Case] = {
     "model zip missing": Case(lambda t, m: model_case(m, t, "missing.zip"), ("policy", "missing.zip")),
     "metadata without residual_scale": Case(lambda t, m: model_case(m, t, "noscale/model.zip"), ("residual_scale",)),
     "metadata not JSON": Case(lambda t, m: model_case(m, t, "badmeta/model.zip"), ("rl_meta.json",)),
-    "vecnormalize corrupt": Case(lambda t, m: model_case(m, t, "badnorm/model.zip"), ("vecnormalize",)),
-    "model for another observation space": Case(
-        lambda t, m: model_case(m, t, "pendulum.zip"), ("policy", "observation_space", "(3,)")
+    "pickled statistics": Case(lambda t, m: model_case(m, t, "badnorm/model.zip"), ("vecnormalize", "--allow-pickle")),
+    "pickled statistics corrupt": Case(
+        lambda t, m: model_case(m, t, "badnorm/model.zip", "--allow-pickle"), ("model_vecnormalize.pkl",)
     ),
-    "model for another height scan": Case(lambda t, m: model_case(m, t, "scan.zip"), ("policy", "observation_space")),
+    "statistics npz truncated": Case(lambda t, m: model_case(m, t, "badnpz/model.zip"), ("model_obs_norm.npz",)),
+    "model for another observation space": Case(
+        lambda t, m: model_case(m, t, "pendulum.zip"), ("policy", "observation", "(3,)")
+    ),
+    "model for another observation space, pickled": Case(
+        lambda t, m: model_case(m, t, "pendulum.zip", "--allow-pickle"), ("policy", "observation", "(3,)")
+    ),
+    "model for another height scan": Case(lambda t, m: model_case(m, t, "scan.zip"), ("policy", "observation")),
     "model with the wrong algo": Case(lambda t, m: model_case(m, t, "flat.zip", "--algo", "sac"), ("policy", "SAC")),
     # -- output directories, checked before any work
     "evaluate out is a file": Case(lambda t, m: evaluate_argv(t, out=a_file(t)), ("--out", "is a file")),
@@ -207,11 +215,15 @@ def models(tmp_path_factory) -> Path:
         ("noscale", json.dumps({"format": "quad-uneven-rl/1", "algo": "ppo", "residual": True, "env_kwargs": {}})),
         ("badmeta", '{"format": "quad-uneven-rl/1", '),
         ("badnorm", json.dumps({"format": "quad-uneven-rl/1", "algo": "ppo", "residual": False})),
+        ("badnpz", json.dumps({"format": "quad-uneven-rl/1", "algo": "ppo", "residual": False})),
     ):
         (folder / sub).mkdir()
         shutil.copy(folder / "flat.zip", folder / sub / "model.zip")
         (folder / sub / "rl_meta.json").write_text(meta)
     (folder / "badnorm" / "model_vecnormalize.pkl").write_bytes(b"\x80\x04truncated")
+    np.savez(folder / "stats.npz", mean=np.zeros(3), var=np.ones(3), epsilon=1e-8, clip=10.0)
+    stats = (folder / "stats.npz").read_bytes()
+    (folder / "badnpz" / "model_obs_norm.npz").write_bytes(stats[: len(stats) // 2])
     return folder
 
 

@@ -132,12 +132,24 @@ def test_tiny_ppo_run_saves_a_model_that_evaluate_runs_with_the_expert(tmp_path,
     from agents.rl.learning_curve import read_monitor
 
     run = tmp_path / "run"
-    rc = main(["train", "--config", str(write_config(tmp_path / "c.yaml")), "--out", str(run), "--no-progress"])
+    tb = tmp_path / "tb"
+    rc = main(["train", "--config", str(write_config(tmp_path / "c.yaml")), "--out", str(run), "--no-progress",
+               "--tensorboard", str(tb)])  # fmt: skip
     assert rc == 0, capsys.readouterr().err
-    for name in ("model.zip", "model_vecnormalize.pkl", "rl_meta.json", "learning_curve.png", "train_config.json"):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(next(tb.iterdir()))).Reload()
+    scalars = set(events.Tags()["scalars"])
+    assert {"episode/stability_mean", "episode/distance", "episode/fall_rate", "episode/residual_torque"} <= scalars
+    assert "train/value_loss" in scalars  # SB3's own
+    for name in ("model.zip", "model_obs_norm.npz", "rl_meta.json", "learning_curve.png", "train_config.json"):
         assert (run / name).is_file(), name
     assert (run / "eval" / "evaluations.npz").is_file()
     assert sorted(p.name for p in (run / "checkpoints").glob("*.zip")) == ["model_32_steps.zip", "model_64_steps.zip"]
+    assert (run / "checkpoints" / "model_obs_norm_32_steps.npz").is_file() and (
+        run / "best" / "best_model_obs_norm.npz"
+    ).is_file()
+    assert not list(run.rglob("*.pkl")), "a training run writes no pickles"
     meta = json.loads((run / "rl_meta.json").read_text())
     assert meta["residual"] is True and meta["algo"] == "ppo" and meta["residual_scale"] == 0.1
     summary = json.loads((run / "train_summary.json").read_text())
@@ -180,10 +192,10 @@ def test_residual_policy_installs_expert_and_normalizes(tmp_path):
     obs, _ = env.reset(seed=0)
     action, _ = policy.predict(obs)
     assert action.shape == (12,) and np.all(np.abs(action) <= 1)
-    (tmp_path / "run" / "model_vecnormalize.pkl").unlink()
+    (tmp_path / "run" / "model_obs_norm.npz").unlink()
     from agents.evaluation.policies import PolicyError
 
-    with pytest.raises(PolicyError, match="vecnormalize"):
+    with pytest.raises(PolicyError, match=r"obs_norm\.npz is missing"):
         make_policy(path, gym.make("QuadUneven-v0", terrain="flat"))
 
 
@@ -231,7 +243,7 @@ def test_sigterm_stops_training_and_still_saves(tmp_path, monkeypatch):
     monkeypatch.setattr(training.ProgressCallback, "_on_step", step_then_terminate)
     summary = training.train(cfg, tmp_path / "run", progress=False)
     assert summary["interrupted"] is True and summary["timesteps"] < 10_000
-    assert (tmp_path / "run" / "model.zip").is_file() and (tmp_path / "run" / "model_vecnormalize.pkl").is_file()
+    assert (tmp_path / "run" / "model.zip").is_file() and (tmp_path / "run" / "model_obs_norm.npz").is_file()
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the handler is removed after training
 
 

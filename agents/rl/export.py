@@ -1,0 +1,118 @@
+"""A trained agent's deterministic policy as an ONNX file, observation normalisation folded in.
+
+``quad-uneven export --policy DIR/model.zip --out policy.onnx`` writes a graph ``obs (N, n_obs) float32 ->
+action (N, 12) float32`` that computes exactly what :class:`agents.rl.model_io.SB3Policy.predict` returns
+(normalisation, the network, and SB3's action post-processing: PPO clips to the action bounds, SAC
+squashes with tanh and rescales), the format Isaac Lab, MuJoCo Playground and mjlab users deploy. The
+metadata travels in the ONNX ``metadata_props``: ``observation_layout`` (JSON name -> [start, stop]),
+``action_low``/``action_high``, ``residual`` and ``residual_scale`` (a residual action is added to the
+expert's torques as ``residual_scale x action x torque_limit``), ``torque_limit`` (N m), ``algo``,
+``env_id``, ``env_kwargs``, ``observation_normalization`` ("folded" or "none").
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.rl.model_io import ModelError, load_obs_normalization, load_sb3_model, metadata_env_kwargs, read_metadata
+
+
+def _policy_module(model: Any, norm: Any, low: np.ndarray, high: np.ndarray) -> Any:
+    """A torch module: normalised observation -> SB3's deterministic action, post-processed as ``predict`` does."""
+    import torch
+
+    policy = model.policy
+    if getattr(policy, "use_sde", False):
+        raise ModelError("policy: gSDE policies are not exported")
+
+    class DeterministicPolicy(torch.nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.policy = policy
+            f32 = torch.float32
+            self.register_buffer("low", torch.as_tensor(low, dtype=f32))
+            self.register_buffer("high", torch.as_tensor(high, dtype=f32))
+            n_obs = policy.observation_space.shape[0]
+            self.normalized = norm is not None
+            mean = np.zeros(n_obs) if norm is None else norm.mean
+            scale = np.ones(n_obs) if norm is None else 1.0 / np.sqrt(norm.var + norm.epsilon)
+            self.register_buffer("mean", torch.as_tensor(mean, dtype=f32))
+            self.register_buffer("scale", torch.as_tensor(scale, dtype=f32))
+            self.clip = 0.0 if norm is None else float(norm.clip)
+
+        def forward(self, obs: torch.Tensor) -> torch.Tensor:
+            x = obs
+            if self.normalized:
+                x = torch.clamp((x - self.mean) * self.scale, -self.clip, self.clip)
+            if hasattr(self.policy, "action_net"):  # PPO / A2C: Gaussian mean, then clipped to the bounds
+                features = self.policy.extract_features(x, self.policy.pi_features_extractor)
+                action = self.policy.action_net(self.policy.mlp_extractor.forward_actor(features))
+                return torch.maximum(torch.minimum(action, self.high), self.low)
+            actor = self.policy.actor  # SAC: tanh-squashed mean, rescaled to the bounds
+            features = actor.extract_features(x, actor.features_extractor)
+            squashed = torch.tanh(actor.mu(actor.latent_pi(features)))
+            return self.low + 0.5 * (squashed + 1.0) * (self.high - self.low)
+
+    return DeterministicPolicy().eval()
+
+
+def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None, allow_pickle: bool = False) -> Path:
+    """Write the ONNX file of the SB3 model ``model_path`` (with its ``rl_meta.json`` and statistics) to ``out``.
+
+    :param algo: ``"ppo"`` or ``"sac"`` (default: the metadata's, else ppo).
+    :param allow_pickle: load pickled files of older runs (trusted files only; see :mod:`agents.rl.model_io`).
+    :return: the path written.
+    :raises ModelError: on an unusable model folder.
+    """
+    import gymnasium as gym
+    import onnx
+    import torch
+
+    import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+
+    model_path, out = Path(model_path), Path(out)
+    if not model_path.is_file():
+        raise ModelError(f"policy: SB3 model file {str(model_path)!r} does not exist")
+    meta = read_metadata(model_path) or {}
+    algo = algo or meta.get("algo") or "ppo"
+    env = gym.make("QuadUneven-v0", **metadata_env_kwargs(model_path))
+    try:
+        model = load_sb3_model(model_path, algo, env, allow_pickle)
+        norm = load_obs_normalization(model_path, meta or None, allow_pickle)
+        space = env.action_space
+        module = _policy_module(model, norm, np.asarray(space.low, float), np.asarray(space.high, float))
+        n_obs = env.observation_space.shape[0]
+        layout = {k: [s.start, s.stop] for k, s in env.unwrapped.observation_structure.items()}
+        torque_limit = env.unwrapped.idx.torque_limit.tolist()
+    finally:
+        env.close()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    dummy = torch.zeros(1, n_obs, dtype=torch.float32)
+    batch = torch.export.Dim("batch", min=1)
+    torch.onnx.export(
+        module, (dummy,), str(out), input_names=["obs"], output_names=["action"],
+        dynamic_shapes=({0: batch},), dynamo=True, verbose=False,
+    )  # fmt: skip
+    graph = onnx.load(str(out))
+    props = {
+        "observation_layout": json.dumps(layout),
+        "observation_normalization": "folded" if norm is not None else "none",
+        "action_low": json.dumps(np.asarray(space.low, float).tolist()),
+        "action_high": json.dumps(np.asarray(space.high, float).tolist()),
+        "residual": json.dumps(bool(meta.get("residual", False))),
+        "residual_scale": json.dumps(meta.get("residual_scale")),
+        "torque_limit": json.dumps(torque_limit),
+        "algo": algo,
+        "env_id": str(meta.get("env_id", "QuadUneven-v0")),
+        "env_kwargs": json.dumps(meta.get("env_kwargs", {})),
+    }
+    onnx.helper.set_model_props(graph, props)
+    onnx.save(graph, str(out))
+    return out
+
+
+__all__ = ["export_onnx"]

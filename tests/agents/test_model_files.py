@@ -1,0 +1,140 @@
+"""Model folders are data: loading them runs no code from the files; exported ONNX equals SB3's predict."""
+
+from __future__ import annotations
+
+import base64
+import json
+import pickle
+import zipfile
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import quad_uneven_env  # noqa: F401
+from agents.rl.model_io import ModelError, load_sb3_model, load_sb3_policy, write_metadata
+from agents.rl.normalization import ObsNormalization
+
+
+class _Boom:
+    """Unpickling this sets a flag: proof that a loader ran code from a file."""
+
+    def __reduce__(self):
+        return (exec, ("import builtins; builtins.QUAD_UNEVEN_PWNED = True",))
+
+
+def _model_folder(tmp_path, algo: str, rng: np.random.Generator, residual: bool = False):
+    """An untrained SB3 model on QuadUneven-v0 with random weights and random observation statistics."""
+    import stable_baselines3
+    import torch
+
+    env = gym.make("QuadUneven-v0", terrain="flat")
+    cls = getattr(stable_baselines3, algo.upper())
+    kw = {"n_steps": 64, "batch_size": 32} if algo == "ppo" else {"learning_starts": 10, "buffer_size": 100}
+    model = cls("MlpPolicy", env, policy_kwargs={"net_arch": [32, 32]}, device="cpu", seed=0, **kw)
+    with torch.no_grad():  # non-trivial outputs: the default init gives a near-zero mean action
+        for p in model.policy.parameters():
+            p.add_(0.3 * torch.randn_like(p))
+    model.save(tmp_path / "model.zip")
+    n = env.observation_space.shape[0]
+    norm = ObsNormalization(rng.normal(0, 0.3, n), rng.uniform(0.01, 2.0, n), 1e-8, 10.0)
+    norm.save(tmp_path / "model_obs_norm.npz")
+    meta = {"algo": algo, "residual": residual, "normalize_obs": True, "env_kwargs": {"terrain": "flat"}}
+    if residual:
+        meta["residual_scale"] = 0.1
+    write_metadata(tmp_path, meta)
+    return tmp_path / "model.zip", env, norm
+
+
+def _recorded_observations(env, n: int = 200) -> np.ndarray:
+    rng = np.random.default_rng(4)
+    obs, _ = env.reset(seed=4)
+    out = []
+    for _ in range(n):
+        out.append(obs)
+        obs, _, term, trunc, _ = env.step(rng.uniform(-1, 1, 12).astype(np.float32))
+        if term or trunc:
+            obs, _ = env.reset()
+    return np.array(out, dtype=np.float32)
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_onnx_export_matches_predict(tmp_path, algo):
+    import onnx
+    import onnxruntime as ort
+
+    from agents.cli import main
+
+    path, env, _ = _model_folder(tmp_path, algo, np.random.default_rng(0))
+    assert main(["export", "--policy", str(path), "--out", str(tmp_path / "p.onnx")]) == 0
+    policy = load_sb3_policy(path, gym.make("QuadUneven-v0", terrain="flat"), algo)
+    obs = _recorded_observations(env)
+    want = np.array([policy.predict(o)[0] for o in obs])
+    assert np.abs(want).max() > 0.05, "a degenerate policy would not test the graph"
+    session = ort.InferenceSession(str(tmp_path / "p.onnx"), providers=["CPUExecutionProvider"])
+    got = session.run(None, {"obs": obs})[0]
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
+    props = {p.key: p.value for p in onnx.load(str(tmp_path / "p.onnx")).metadata_props}
+    layout = json.loads(props["observation_layout"])
+    assert layout["stability_index"] == [38, 39] and props["observation_normalization"] == "folded"
+    assert props["algo"] == algo and json.loads(props["action_low"]) == [-1.0] * 12
+
+
+def test_pickled_statistics_are_refused_unless_allowed(tmp_path):
+    import builtins
+
+    path, env, _ = _model_folder(tmp_path, "ppo", np.random.default_rng(1))
+    (tmp_path / "model_obs_norm.npz").unlink()
+    (tmp_path / "model_vecnormalize.pkl").write_bytes(pickle.dumps(_Boom()))
+    with pytest.raises(ModelError, match="pickle"):
+        load_sb3_policy(path, env, "ppo")
+    assert not getattr(builtins, "QUAD_UNEVEN_PWNED", False)
+
+
+def test_a_crafted_pickle_inside_the_model_zip_is_not_run(tmp_path):
+    import builtins
+
+    path, env, _ = _model_folder(tmp_path, "ppo", np.random.default_rng(2))
+    with zipfile.ZipFile(path) as z:
+        files = {n: z.read(n) for n in z.namelist()}
+    data = json.loads(files["data"])
+    # where SB3 keeps its cloudpickled entries: a known key, and one this loader does not know
+    payload = base64.b64encode(pickle.dumps(_Boom())).decode()
+    data["lr_schedule"] = {":type:": "<class 'function'>", ":serialized:": payload}
+    files["data"] = json.dumps(data).encode()
+    with zipfile.ZipFile(path, "w") as z:
+        for n, b in files.items():
+            z.writestr(n, b)
+    load_sb3_model(path, "ppo", env)  # the known key is replaced, not unpickled
+    assert not getattr(builtins, "QUAD_UNEVEN_PWNED", False)
+    data["my_hook"] = {":type:": "<class 'function'>", ":serialized:": payload}
+    files["data"] = json.dumps(data).encode()
+    with zipfile.ZipFile(path, "w") as z:
+        for n, b in files.items():
+            z.writestr(n, b)
+    with pytest.raises(ModelError, match="my_hook"):
+        load_sb3_model(path, "ppo", env)
+    assert not getattr(builtins, "QUAD_UNEVEN_PWNED", False)
+
+
+def test_a_model_for_another_observation_space_is_refused(tmp_path):
+    path, _, _ = _model_folder(tmp_path, "ppo", np.random.default_rng(3))
+    other = gym.make("QuadUneven-v0", terrain="flat", height_scan={"size_x": 0.4, "size_y": 0.4})
+    with pytest.raises(ModelError, match="observation space of shape"):
+        load_sb3_model(path, "ppo", other)
+
+
+def test_statistics_round_trip_and_match_vecnormalize(tmp_path):
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make("QuadUneven-v0", terrain="flat")]), norm_reward=False)
+    venv.reset()
+    rng = np.random.default_rng(5)
+    for _ in range(30):
+        venv.step(rng.uniform(-1, 1, (1, 12)).astype(np.float32))
+    norm = ObsNormalization.load(ObsNormalization.from_vecnormalize(venv).save(tmp_path / "s.npz"))
+    obs = venv.get_original_obs()
+    np.testing.assert_array_equal(norm.normalize(obs), venv.normalize_obs(obs))
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="unreadable"):
+        ObsNormalization.load(tmp_path / "bad.npz")
