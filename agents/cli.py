@@ -301,6 +301,9 @@ def run_export_command(args: argparse.Namespace) -> int:
     from agents.rl.export import export_onnx
     from agents.rl.model_io import ModelError
 
+    if args.out.is_dir():
+        raise ModelError(f"--out {str(args.out)!r} is a directory; give the .onnx file to write")
+    prepare_output_dir(args.out.parent, keep=True, field="--out's folder")
     try:
         path = export_onnx(args.policy, args.out, args.algo, args.allow_pickle)
     except ImportError as err:

@@ -183,6 +183,12 @@ CASES: dict[str, Case] = {
     "evaluate episodes": Case(lambda t, m: evaluate_argv(t, "--episodes", "0"), ("--episodes",)),
     "paper out is a file": Case(lambda t, m: ["paper", "--out", str(a_file(t)), "--no-progress"], ("--out",)),
     "plan-paper out is a file": Case(lambda t, m: ["plan-paper", "--out", str(a_file(t))], ("--out",)),
+    "export out is a directory": Case(
+        lambda t, m: ["export", "--policy", str(m / "flat.zip"), "--out", str(t)], ("--out", "directory")
+    ),
+    "export out under a file": Case(
+        lambda t, m: ["export", "--policy", str(m / "flat.zip"), "--out", str(a_file(t) / "p.onnx")], ("--out",)
+    ),
     "train out is a file": Case(lambda t, m: ["train", "--out", str(a_file(t)), "--no-progress"], ("--out",)),
     "train out not empty": Case(
         lambda t, m: ["train", "--out", str(non_empty(t, "rl_meta.json")), "--no-progress"],
