@@ -44,10 +44,10 @@ bench: venv
 # expert and the trained model on the rough suite.
 rl-baseline: venv
 	nice -n 10 $(PY) -m agents.cli train --algo ppo --terrain rough --timesteps 1000000 --time-limit-min 18 \
-	  --out runs/ppo_rough --seed 0 --n-envs 2
-	nice -n 10 $(PY) -m agents.cli evaluate --policy expert --suite rough --out runs/eval_rough_expert --workers 2
+	  --out runs/ppo_rough --seed 0 --n-envs 2 --overwrite
+	nice -n 10 $(PY) -m agents.cli evaluate --policy expert --suite rough --out runs/eval_rough_expert --workers 2 --overwrite
 	nice -n 10 $(PY) -m agents.cli evaluate --policy runs/ppo_rough/model.zip --algo ppo --suite rough \
-	  --out runs/eval_rough_ppo --workers 2
+	  --out runs/eval_rough_ppo --workers 2 --overwrite
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

@@ -2,7 +2,10 @@
 
 Subcommands: ``demo``, ``evaluate``, ``train``, ``export``, ``paper``, ``plan-paper`` (see ``--help`` of each). The
 library modules expose typed functions only; this module turns arguments into their calls and their
-errors into one line on stderr with exit code 2.
+errors into one line on stderr with exit code 2: every validation error of the project is a ``ValueError``
+(``SuiteError``, ``PolicyError``, ``EnvArgumentError``, ``TrainConfigError``, ``OutputError``, ...) whose
+message names the field. An interrupt (Ctrl-C, or SIGTERM during ``evaluate`` and ``train``) exits with 130
+after the command has kept what it finished.
 """
 
 from __future__ import annotations
@@ -12,17 +15,27 @@ import json
 import sys
 from pathlib import Path
 
-from agents.evaluation.policies import SB3_ALGOS, PolicyError
+from agents.evaluation.episode import DEFAULT_WALL_TIME_LIMIT
+from agents.evaluation.policies import SB3_ALGOS
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import SuiteError, load_suite, suite_from_dict, suite_names
+from agents.interrupts import sigterm_as_keyboard_interrupt
+from agents.outputs import prepare_output_dir
 from agents.paper.simulation import DISTRIBUTIONS as PAPER_DISTRIBUTIONS
-from agents.rl.config import ALGOS, TrainConfigError, load_train_config
+from agents.rl.config import ALGOS, load_train_config
+
+EXIT_USAGE = 2
+"""Exit code of an invalid argument, file or output directory (argparse's own code for bad options)."""
+
+EXIT_INTERRUPTED = 130
+"""Exit code after Ctrl-C or SIGTERM (128 + SIGINT), once the finished work has been kept."""
 
 
 def demo(out: Path, terrain: str, seed: int, distance: float, video: bool) -> dict:
-    """The expert walks ``distance`` m over ``terrain``; report, plots and video go to ``out``.
+    """The expert walks ``distance`` m over ``terrain``; report, plots and video go to ``out`` (replaced).
 
     :return: the episode record of results.json.
+    :raises SuiteError: on an unknown terrain, a negative seed or an unreachable distance (field named).
     """
     suite = suite_from_dict(
         {
@@ -33,15 +46,30 @@ def demo(out: Path, terrain: str, seed: int, distance: float, video: bool) -> di
         },
         source="demo",
     )
-    results = evaluate(suite, "expert", out, video=video)
+    results = evaluate(suite, "expert", out, video=video, overwrite=True)
     return results["episodes"][0]
 
 
 # ---------------------------------------------------------------------------------------------- demo
+DEMO_OPTIONS = (
+    ("terrains[0].seeds[0]", "--seed"),
+    ("terrains[0].params.length", "the terrain's length"),
+    ("terrains[0].kind", "--terrain"),
+    ("terrains[0]", "--terrain"),
+    ("goal_distance", "--distance"),
+)
+"""Suite fields of the demo's one-entry suite and the options they come from (for error messages)."""
+
+
 def add_demo_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register the ``demo`` subcommand on ``sub``."""
     p = sub.add_parser("demo", help="the scripted expert walks the default rough terrain; writes a report")
-    p.add_argument("--out", type=Path, default=Path("out/demo"), help="output directory (default out/demo)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("out/demo"),
+        help="output directory (default out/demo; a previous demo there is replaced)",
+    )
     p.add_argument("--terrain", default="rough", help="terrain kind with its defaults (default: rough)")
     p.add_argument("--seed", type=int, default=0, help="terrain seed")
     p.add_argument("--distance", type=float, default=2.0, help="goal distance along +x (m)")
@@ -52,7 +80,13 @@ def add_demo_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run_demo_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven demo``."""
-    ep = demo(args.out, args.terrain, args.seed, args.distance, not args.no_video)
+    try:
+        ep = demo(args.out, args.terrain, args.seed, args.distance, not args.no_video)
+    except SuiteError as err:  # name the demo's options, not the suite fields it builds from them
+        msg = str(err)
+        for field, option in DEMO_OPTIONS:
+            msg = msg.replace(field, option)
+        raise SuiteError(msg) from None
     keys = ("terrain", "seed", "success", "distance", "sim_time", "mean_speed", "min_stability_index",
             "mean_stability_index", "time_index_negative", "cost_of_transport", "fall_reason",
             "planner_ms_median")  # fmt: skip
@@ -70,8 +104,10 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
     p = sub.add_parser(
         "evaluate",
         help="run a policy over a terrain suite and write results.json, report.md, plots (and videos)",
-        description="Run a policy over every (terrain, seed) of a suite; write DIR/results.json, DIR/report.md, "
-        "PNG plots and per-episode traces (DIR/traces/*.npz). Exit code 2 on an invalid suite or policy.",
+        description="Run a policy over every (terrain, seed) of a suite; write each episode's record as it finishes "
+        "(DIR/episodes/, DIR/traces/), then DIR/results.json, DIR/report.md and PNG plots built from them. "
+        "Exit code 2 on an invalid suite, policy, env kwargs or output directory; 130 when interrupted (the "
+        "finished episodes are kept: continue with --resume).",
     )
     p.add_argument("--policy", required=True, help="'zero', 'expert', or the path of an SB3 model .zip")
     p.add_argument("--suite", required=True, help=f"shipped suite name {suite_names()} or the path of a suite .yaml")
@@ -89,6 +125,25 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         "--env-kwargs", default="{}", help="JSON object of extra QuadUneven-v0 arguments, e.g. '{\"frame_skip\": 5}'"
     )
     p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the run recorded in DIR: its finished episodes are kept, the others run (refused if the "
+        "suite, policy, env kwargs, --episodes or --seed differ)",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="DIR may hold an earlier evaluation: delete its outputs first (other files are kept); without it, "
+        "or --resume, a non-empty DIR is refused",
+    )
+    p.add_argument(
+        "--episode-wall-limit",
+        type=float,
+        default=DEFAULT_WALL_TIME_LIMIT,
+        help="s of wall-clock time after which an episode is ended as 'wall_time_limit' "
+        f"(default {DEFAULT_WALL_TIME_LIMIT:g})",
+    )
+    p.add_argument(
         "--allow-pickle",
         action="store_true",
         help="load pickled files of a model folder (older runs' *_vecnormalize.pkl); they can run code: trusted only",
@@ -98,17 +153,39 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
     return p
 
 
+def _json_object(text: str, option: str) -> dict:
+    """``text`` parsed as a JSON object with distinct keys; :raises ValueError: naming ``option``."""
+
+    def no_duplicates(pairs: list) -> dict:
+        keys = [k for k, _ in pairs]
+        repeated = sorted({k for k in keys if keys.count(k) > 1})
+        if repeated:
+            raise ValueError(f"{option}: key(s) {repeated} given more than once")
+        return dict(pairs)
+
+    try:
+        value = json.loads(text, object_pairs_hook=no_duplicates)
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{option} is not valid JSON ({err}), got {text!r}") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{option} must be a JSON object, got {text!r}")
+    return value
+
+
 def run_evaluate_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven evaluate``: 0 on success, 2 on an invalid suite, policy or argument."""
+    env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
+    if args.episodes is not None and args.episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    if not args.episode_wall_limit > 0:  # also refuses nan
+        raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
     try:
-        env_kwargs = json.loads(args.env_kwargs)
-        if not isinstance(env_kwargs, dict):
-            raise ValueError(f"--env-kwargs must be a JSON object, got {args.env_kwargs!r}")
-        if args.episodes is not None and args.episodes < 1:
-            raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
-        if args.workers < 1:
-            raise ValueError(f"--workers must be >= 1, got {args.workers}")
         suite = load_suite(args.suite)
+    except SuiteError as e:
+        raise SuiteError(f"invalid suite {args.suite!r}: {e}") from None
+    with sigterm_as_keyboard_interrupt():
         results = evaluate(
             suite,
             args.policy,
@@ -120,14 +197,11 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
             algo=args.algo,
             env_kwargs=env_kwargs,
             progress=not args.no_progress,
+            resume=args.resume,
+            overwrite=args.overwrite,
+            wall_time_limit=args.episode_wall_limit,
             allow_pickle=args.allow_pickle,
         )
-    except SuiteError as e:
-        print(f"error: invalid suite {args.suite!r}: {e}", file=sys.stderr)
-        return 2
-    except (PolicyError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
     for kind, g in results["summary"]["by_kind"].items():
         speed = g["mean_speed"]
         print(
@@ -149,8 +223,8 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         help="train a residual RL agent (SB3 PPO or SAC) on top of the scripted expert",
         description="Train a residual agent on QuadUnevenResidual-v0 (expert torques + residual_scale x action x "
         "torque limit). Writes DIR/model.zip, DIR/rl_meta.json, DIR/learning_curve.png and more (docs/rl.md). "
-        "Options override single fields of the config (default configs/rl/ALGO_residual.yaml). Exit code 2 on "
-        "an invalid option or config.",
+        "Options override single fields of the config (default configs/rl/ALGO_residual.yaml). Ctrl-C or SIGTERM "
+        "stops training and saves the model (exit code 130). Exit code 2 on an invalid option, config or DIR.",
     )
     p.add_argument("--algo", choices=ALGOS, default=None, help="SB3 algorithm (default: the config's, else ppo)")
     p.add_argument("--terrain", default=None, help="terrain kind, preset or YAML path (default: the config's)")
@@ -163,6 +237,12 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         "--time-limit-min", type=float, default=None, help="stop (and save) after this many minutes of training"
     )
     p.add_argument("--config", default=None, help="training config YAML (default configs/rl/ALGO_residual.yaml)")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="DIR may hold an earlier run: delete its outputs first (other files are kept); without it a "
+        "non-empty DIR is refused",
+    )
     p.add_argument(
         "--tensorboard", type=Path, default=None, help="log SB3's scalars and our episode figures here (TensorBoard)"
     )
@@ -182,21 +262,21 @@ def run_train_command(args: argparse.Namespace) -> int:
         "residual_scale": args.residual_scale,
         "time_limit_min": args.time_limit_min,
     }
-    try:
-        cfg = load_train_config(args.config, overrides)
-        from agents.rl.training import train  # deferred: SB3, torch and the expert's kernels
+    cfg = load_train_config(args.config, overrides)
+    from agents.rl.training import train  # deferred: SB3, torch and the expert's kernels
 
-        summary = train(cfg, args.out, progress=not args.no_progress, tensorboard=args.tensorboard)
-    except TrainConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    summary = train(
+        cfg, args.out, progress=not args.no_progress, tensorboard=args.tensorboard, overwrite=args.overwrite
+    )
+    if summary["interrupted"]:
+        print(f"interrupted: the model trained so far is saved in {Path(summary['model']).resolve()}", file=sys.stderr)
     for key in ("timesteps", "wall_time", "steps_per_s", "episodes", "mean_return", "mean_stability_index",
                 "mean_distance", "fall_rate"):  # fmt: skip
         value = summary[key]
         print(f"{key:22s} {round(value, 3) if isinstance(value, float) else value}")
     print(f"model: {Path(summary['model']).resolve()}")
     print(f"learning curve: {(Path(args.out) / 'learning_curve.png').resolve()}")
-    return 0
+    return EXIT_INTERRUPTED if summary["interrupted"] else 0
 
 
 # -------------------------------------------------------------------------------------------- export
@@ -221,14 +301,13 @@ def run_export_command(args: argparse.Namespace) -> int:
     from agents.rl.export import export_onnx
     from agents.rl.model_io import ModelError
 
+    if args.out.is_dir():
+        raise ModelError(f"--out {str(args.out)!r} is a directory; give the .onnx file to write")
+    prepare_output_dir(args.out.parent, keep=True, field="--out's folder")
     try:
         path = export_onnx(args.policy, args.out, args.algo, args.allow_pickle)
     except ImportError as err:
-        print(f"error: export needs the 'export' extra (pip install -e \".[export]\"): {err}", file=sys.stderr)
-        return 2
-    except ModelError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        raise ModelError(f"export needs the 'export' extra (pip install -e \".[export]\"): {err}") from None
     print(f"onnx: {path.resolve()}")
     return 0
 
@@ -236,21 +315,17 @@ def run_export_command(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------------------------- paper
 def run_paper_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven paper``: 0 on success (also when the robot fell: see paper.json), 2 on bad input."""
-    try:
-        from agents.paper.simulation import PaperRunConfig
+    from agents.paper.simulation import PaperRunConfig, run_paper_sim, write_paper_outputs
 
-        config = PaperRunConfig(
-            distribution=args.distribution,
-            epsilon=args.epsilon,
-            duration=args.duration,
-            hold=args.hold,
-            settle=args.settle,
-            seed=args.seed,
-        )
-    except ValueError as err:
-        print(f"quad-uneven paper: {err}")
-        return 2
-    from agents.paper.simulation import run_paper_sim, write_paper_outputs
+    config = PaperRunConfig(
+        distribution=args.distribution,
+        epsilon=args.epsilon,
+        duration=args.duration,
+        hold=args.hold,
+        settle=args.settle,
+        seed=args.seed,
+    )
+    prepare_output_dir(args.out, keep=True, field="--out")  # a file or an uncreatable path fails before the run
 
     run = run_paper_sim(config, progress=not args.no_progress)
     info = write_paper_outputs(run, args.out, fps=args.fps)
@@ -298,6 +373,7 @@ def run_plan_paper_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven plan-paper``."""
     from agents.paper.planned import write_planned_outputs
 
+    prepare_output_dir(args.out, keep=True, field="--out")
     info = write_planned_outputs(args.out)
     print(json.dumps({k: info[k] for k in ("min_stability_index_Nm", "junction_jump_max", "swing_min_clearance_m")}))
     return 0
@@ -316,10 +392,21 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``quad-uneven``."""
+    """Entry point of ``quad-uneven``: the subcommand's exit code; 2 (one line on stderr) on invalid input."""
     args = build_parser().parse_args(argv)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except ValueError as err:  # every validation error of the library (SuiteError, PolicyError, OutputError, ...)
+        print(f"error: {_one_line(err)}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt as err:
+        print(_one_line(err) if str(err).startswith("interrupted") else "interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

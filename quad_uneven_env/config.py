@@ -106,7 +106,27 @@ def _triple(value: Any, field: str, allow_zero: bool = False) -> tuple[float, fl
     return tuple(float(x) for x in arr)  # type: ignore[return-value]
 
 
+JOINT_RANGE_KEYS = ("HAA", "HFE", "KFE_front", "KFE_hind")
+"""Joints of ``robot.joint_range`` (the knee's range differs between front and hind legs)."""
+
+TORQUE_LIMIT_KEYS = ("HAA", "HFE", "KFE")
+"""Joints of ``robot.torque_limit``."""
+
+
+def _range_pair(value: Any, field: str) -> tuple[float, float]:
+    """``[low, high]`` as two finite floats (the order is checked by the caller)."""
+    try:
+        lo, hi = (float(x) for x in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{field} must be [low, high] (two numbers, rad), got {value!r}") from None
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise ValueError(f"{field} must be [low, high] (two finite numbers, rad), got {value!r}")
+    return lo, hi
+
+
 def _require(raw: Mapping[str, Any], keys: set[str], where: str) -> None:
+    if not isinstance(raw, Mapping):
+        raise ValueError(f"{where} must be a mapping with fields {sorted(keys)}, got {raw!r}")
     missing = keys - set(raw)
     unknown = set(raw) - keys
     if missing:
@@ -135,15 +155,17 @@ def robot_config_from_dict(raw: Mapping[str, Any]) -> RobotConfig:
     _require(raw, keys, "robot")
     body = raw["body"]
     _require(body, {"mass", "size", "inertia"}, "robot.body")
+    _require(raw["joint_range"], set(JOINT_RANGE_KEYS), "robot.joint_range")
+    _require(raw["torque_limit"], set(TORQUE_LIMIT_KEYS), "robot.torque_limit")
     ranges = {}
-    for k in ("HAA", "HFE", "KFE_front", "KFE_hind"):
-        lo, hi = (float(x) for x in raw["joint_range"][k])
+    for k in JOINT_RANGE_KEYS:
+        lo, hi = _range_pair(raw["joint_range"][k], f"robot.joint_range.{k}")
         if not lo < hi:
             raise ValueError(f"robot.joint_range.{k} must be [low, high] with low < high, got {[lo, hi]}")
         ranges[k] = (lo, hi)
     if ranges["KFE_front"][1] >= 0.0 or ranges["KFE_hind"][0] <= 0.0:
         raise ValueError("robot.joint_range: KFE_front must stay < 0 and KFE_hind > 0 (no stretched knee)")
-    limits = {k: _positive(raw["torque_limit"][k], f"robot.torque_limit.{k}") for k in ("HAA", "HFE", "KFE")}
+    limits = {k: _positive(raw["torque_limit"][k], f"robot.torque_limit.{k}") for k in TORQUE_LIMIT_KEYS}
     return RobotConfig(
         name=str(raw["name"]),
         body=BodyParams(
@@ -168,8 +190,16 @@ def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"config file {str(p)!r} does not exist")
-    with p.open() as f:
-        data = yaml.safe_load(f)
+    try:
+        with p.open() as f:
+            data = yaml.safe_load(f)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(err, "problem", None) or type(err).__name__
+        raise ValueError(f"config file {str(p)!r} is not valid YAML{where}: {problem}") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise ValueError(f"config file {str(p)!r} cannot be read: {err}") from None
     if not isinstance(data, dict):
         raise ValueError(f"config file {str(p)!r} must hold a mapping at the top level")
     return data

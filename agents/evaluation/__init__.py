@@ -6,9 +6,9 @@ Typical use::
     results = evaluate(load_suite("rough"), "expert", "out/rough", workers=2)
 """
 
-from agents.evaluation.episode import EpisodeResult, EvalConfig, run_task
+from agents.evaluation.episode import EnvArgumentError, EpisodeResult, EvalConfig, run_task
 from agents.evaluation.policies import PolicyError, make_policy
-from agents.evaluation.run import evaluate
+from agents.evaluation.run import EvaluationInterrupted, evaluate
 from agents.evaluation.suites import (
     EpisodeTask,
     Suite,
@@ -20,9 +20,11 @@ from agents.evaluation.suites import (
 )
 
 __all__ = [
+    "EnvArgumentError",
     "EpisodeResult",
     "EpisodeTask",
     "EvalConfig",
+    "EvaluationInterrupted",
     "PolicyError",
     "Suite",
     "SuiteError",

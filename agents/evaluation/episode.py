@@ -31,6 +31,44 @@ VIDEO_SIZE = (480, 360)
 MAX_FAILURE_LOG = 200
 """At most this many entries of the policy's ``failure_log`` go into an episode record."""
 
+DEFAULT_WALL_TIME_LIMIT = 3600.0
+"""s of wall-clock time after which an episode ends (``end_reason = "wall_time_limit"``), whatever its sim time."""
+
+EVALUATION_ENV_KWARGS = {
+    "terrain": "the suite's terrains[i] entry",
+    "max_episode_steps": "the suite's time_limit",
+    "controller": "the policy (the expert installs its own)",
+    "render_mode": "--video",
+}
+"""QuadUneven-v0 arguments the evaluation sets itself, with who owns each; ``env_kwargs`` may not set them."""
+
+
+class EnvArgumentError(ValueError):
+    """Environment arguments the evaluation cannot use; the message starts with ``env_kwargs``."""
+
+
+def check_env_kwargs(env_kwargs: Any) -> dict[str, Any]:
+    """``env_kwargs`` checked for names: a mapping of QuadUneven-v0 arguments the evaluation does not set itself.
+
+    The values are checked by the environment when the preflight builds it.
+
+    :raises EnvArgumentError: on a non-mapping, an unknown argument or one of ``EVALUATION_ENV_KWARGS``.
+    """
+    import inspect
+
+    from quad_uneven_env.env import QuadUnevenEnv
+
+    if not isinstance(env_kwargs, dict) or not all(isinstance(k, str) for k in env_kwargs):
+        raise EnvArgumentError(f"env_kwargs must be a JSON object of QuadUneven-v0 arguments, got {env_kwargs!r}")
+    allowed = [n for n in inspect.signature(QuadUnevenEnv.__init__).parameters if n != "self"]
+    for key in env_kwargs:
+        if key in EVALUATION_ENV_KWARGS:
+            raise EnvArgumentError(f"env_kwargs.{key} is set by {EVALUATION_ENV_KWARGS[key]}; remove it")
+        if key not in allowed:
+            settable = [n for n in allowed if n not in EVALUATION_ENV_KWARGS]
+            raise EnvArgumentError(f"env_kwargs.{key}: unknown QuadUneven-v0 argument; allowed: {settable}")
+    return dict(env_kwargs)
+
 
 @dataclasses.dataclass(frozen=True)
 class EvalConfig:
@@ -48,6 +86,8 @@ class EvalConfig:
     """extra QuadUneven-v0 arguments (override the policy's own)."""
     video_dir: str | None = None
     """directory for MP4s of the first episode of each terrain entry (None: no video)."""
+    wall_time_limit: float = DEFAULT_WALL_TIME_LIMIT
+    """s of wall-clock time per episode (env and policy construction included); the episode then ends."""
     allow_pickle: bool = False
     """load pickled files of a model folder (they can run code: trusted files only)."""
 
@@ -113,7 +153,8 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     """Run one episode; never raises for a policy or env error inside the episode (recorded as ``error``).
 
     Success: the COG has travelled ``goal_distance`` along +x (``info["distance"]``) before any fall and
-    within the time limit. Energy for the cost of transport is |tau . qd| sampled once per control step.
+    within the time limit; ``cfg.wall_time_limit`` s of wall-clock time end it as ``wall_time_limit``.
+    Energy for the cost of transport is |tau . qd| sampled once per control step.
     """
     wall0 = time.perf_counter()
     video = cfg.video_dir is not None and task.first_of_entry
@@ -169,6 +210,9 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
                 success, end_reason = True, "goal"
                 break
             if truncated:
+                break
+            if time.perf_counter() - wall0 > cfg.wall_time_limit:
+                end_reason = "wall_time_limit"
                 break
     except Exception as e:  # a crashing policy must not lose the other episodes of a suite
         end_reason, error = "error", f"{type(e).__name__}: {e}"

@@ -12,6 +12,12 @@ from agents.evaluation.plots import plot_distance_per_episode, plot_stability_ov
 MAX_STABILITY_PANELS = 6
 """At most this many episodes (the first of each terrain entry) in the stability plot."""
 
+END_REASON_TEXT = {
+    "time_limit": "time limit reached short of the goal",
+    "wall_time_limit": "wall-clock limit of the episode reached short of the goal",
+}
+"""Wording of the failures that have no fall reason."""
+
 
 def _f(value: Any, fmt: str = ".3g") -> str:
     if value is None:
@@ -150,9 +156,7 @@ def _failures(records: Sequence[Mapping[str, Any]], labels: Sequence[str]) -> li
         return [*lines, "Every episode reached the goal.", ""]
     for r in failed:
         x, y, z = r["end_position"]
-        how = r["fall_reason"] or {"time_limit": "time limit reached short of the goal"}.get(
-            r["end_reason"], r["end_reason"]
-        )
+        how = r["fall_reason"] or END_REASON_TEXT.get(r["end_reason"], r["end_reason"])
         lines.append(
             f"- episode {r['index']} ([{r['entry']}] {labels[r['entry']]}, seed {r['seed']}): **{how}** at "
             f"t = {r['sim_time']:.2f} s, COG at x = {x:.2f} m (distance {r['distance']:.2f} m), y = {y:.2f} m, "

@@ -10,69 +10,120 @@ Python API: :func:`evaluate` (returns the results dict) and :func:`make_policy` 
 
 from __future__ import annotations
 
-import concurrent.futures as cf
-import json
+import functools
 import multiprocessing
-from collections.abc import Mapping
+import signal
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from tqdm.auto import tqdm
 
-from agents.evaluation.episode import EpisodeResult, EvalConfig, make_env, run_task
+from agents.evaluation.episode import (
+    DEFAULT_WALL_TIME_LIMIT,
+    EnvArgumentError,
+    EpisodeResult,
+    EvalConfig,
+    check_env_kwargs,
+    make_env,
+    run_task,
+)
 from agents.evaluation.metrics import factor_summary, json_safe, summarize
 from agents.evaluation.policies import SB3_ALGOS, PolicyError, make_policy, policy_kind
 from agents.evaluation.report import write_report
+from agents.evaluation.store import (
+    check_resume,
+    load_records,
+    load_results_for_report,
+    open_output_dir,
+    run_identity,
+    start_run,
+    write_episode,
+)
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite
 from agents.evaluation.targets import check_targets
+from agents.outputs import OutputError, write_json_atomic
 
-__all__ = ["evaluate", "make_policy"]
+__all__ = ["EvaluationInterrupted", "evaluate", "make_policy", "write_results"]
 
 
-def _run_all(tasks: list[EpisodeTask], cfg: EvalConfig, workers: int, progress: bool) -> list[EpisodeResult]:
-    """Run every task, in ``workers`` spawned processes if > 1; results in task order."""
-    results: list[EpisodeResult | None] = [None] * len(tasks)
+def _ignore_sigint() -> None:
+    """Worker initializer: Ctrl-C is the parent's to handle (it keeps the finished episodes, then stops us)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _run_all(
+    tasks: list[EpisodeTask],
+    cfg: EvalConfig,
+    workers: int,
+    progress: bool,
+    on_result: Callable[[EpisodeResult], None],
+) -> None:
+    """Run every task, in ``workers`` spawned processes if > 1, handing each result to ``on_result`` as it ends.
+
+    An interrupt (Ctrl-C, or SIGTERM under :func:`agents.interrupts.sigterm_as_keyboard_interrupt`)
+    stops the workers at once; the results already handed on are kept by the caller.
+    """
     bar = tqdm(total=len(tasks), desc="episodes", unit="ep", disable=not progress)
-    if workers <= 1:
-        for t in tasks:
-            results[t.index] = run_task(t, cfg)
-            bar.update(1)
-    else:
-        ctx = multiprocessing.get_context("spawn")  # MuJoCo (and its GL contexts) + fork is fragile
-        pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
-        try:
-            futures = {pool.submit(run_task, t, cfg): t.index for t in tasks}
-            for fut in cf.as_completed(futures):
-                results[futures[fut]] = fut.result()
+    try:
+        if workers <= 1:
+            for t in tasks:
+                on_result(run_task(t, cfg))
                 bar.update(1)
-        except BaseException:  # an error or Ctrl-C: do not wait for the queued episodes
-            pool.shutdown(wait=False, cancel_futures=True)
-            bar.close()
+            return
+        ctx = multiprocessing.get_context("spawn")  # MuJoCo (and its GL contexts) + fork is fragile
+        pool = ctx.Pool(workers, initializer=_ignore_sigint)
+        try:
+            for result in pool.imap_unordered(functools.partial(run_task, cfg=cfg), tasks, chunksize=1):
+                on_result(result)
+                bar.update(1)
+        except BaseException:  # an error or an interrupt: do not wait for the running episodes
+            pool.terminate()
             raise
-        pool.shutdown()
-    bar.close()
-    return results  # type: ignore[return-value]
+        else:
+            pool.close()
+        finally:
+            pool.join()
+    finally:
+        bar.close()
 
 
 def _preflight(tasks: list[EpisodeTask], cfg: EvalConfig) -> None:
-    """Build the first episode's env and policy, and every entry's env, here: bad env kwargs, randomization
-    (e.g. a latency beyond the control period) or policies fail before any worker starts."""
-    env = make_env(tasks[0], cfg)
+    """Build the first episode's env and policy, and every randomized entry's env, here: bad env kwargs,
+    randomization (e.g. a latency beyond the control period) or policies fail before any episode.
+
+    :raises EnvArgumentError: if the environment rejects an argument (its ValueError or TypeError).
+    :raises PolicyError: if the policy cannot be built for that env (missing or unreadable model, other spaces).
+    """
+
+    def build(task: EpisodeTask):
+        try:
+            return make_env(task, cfg)
+        except (ValueError, TypeError) as err:
+            msg = str(err).split(" was raised from the environment creator")[0]  # gymnasium's suffix repeats kwargs
+            raise EnvArgumentError(msg if msg.startswith("env_kwargs") else f"env_kwargs: {msg}") from None
+
+    env = build(tasks[0])
     try:
         make_policy(cfg.policy, env, cfg.algo, cfg.allow_pickle)
     finally:
         env.close()
     for t in tasks[1:]:
         if t.first_of_entry and t.randomization is not None:
-            make_env(t, cfg).close()
+            build(t).close()
 
 
-def _save_traces(episodes: list[EpisodeResult], out: Path) -> None:
-    folder = out / "traces"
-    folder.mkdir(exist_ok=True)
-    for e in episodes:
-        np.savez_compressed(folder / f"ep{e.record['index']:03d}.npz", **e.trace)
+def _results(suite: Suite, policy: str, records: list[dict[str, Any]], meta: dict[str, Any]) -> dict[str, Any]:
+    labels = [e.label for e in suite.terrains]
+    summary = json_safe({**summarize(records, labels), "by_factor": factor_summary(records)})
+    return {
+        "suite": suite.name,
+        "policy": str(policy),
+        "episodes": records,
+        "summary": summary,
+        "targets": json_safe(check_targets(suite.terrains, summary["by_entry"], suite.goal_distance)),
+        "meta": json_safe(meta),
+    }
 
 
 def evaluate(
@@ -86,9 +137,16 @@ def evaluate(
     algo: str = "ppo",
     env_kwargs: Mapping[str, Any] | None = None,
     progress: bool = True,
+    resume: bool = False,
+    overwrite: bool = False,
+    wall_time_limit: float = DEFAULT_WALL_TIME_LIMIT,
     allow_pickle: bool = False,
 ) -> dict[str, Any]:
     """Run ``policy`` on every (terrain entry, seed) of ``suite``; write ``out/results.json``, ``report.md``, PNGs.
+
+    ``out`` is checked and created before the first episode; every episode's record is written as it
+    finishes (``out/episodes/``), and results.json and the report are rebuilt from them at the end
+    (docs/evaluation.md, "The output directory"). An interrupt keeps the finished episodes.
 
     :param suite: a :class:`Suite`, a shipped suite name or a suite YAML path.
     :param policy: ``"zero"``, ``"expert"`` or the path of an SB3 model ``.zip`` (loaded with ``algo``).
@@ -97,56 +155,97 @@ def evaluate(
     :param workers: episodes run in this many spawned processes (1: in this process).
     :param video: MP4 of the first episode of each terrain entry in ``out/videos/``.
     :param env_kwargs: extra QuadUneven-v0 arguments (override the policy's own).
+    :param resume: continue the run recorded in ``out`` (its finished episodes are kept, not run again).
+    :param overwrite: delete an earlier run's outputs in ``out`` first (other files are kept).
+    :param wall_time_limit: s of wall-clock time per episode before it is ended (``wall_time_limit``).
     :param allow_pickle: unpickle files of an SB3 model folder (trusted files only).
     :return: the results.json content.
-    :raises SuiteError: on an invalid suite; ``PolicyError`` on an unusable policy; ValueError on bad arguments.
+    :raises SuiteError: on an invalid suite; ``PolicyError`` on an unusable policy; ``EnvArgumentError`` on env
+        arguments the environment rejects; ``OutputError`` on an unusable ``out`` (a file, an earlier run's
+        files without ``resume``/``overwrite``, a run to resume that differs, results.json not writable).
+    :raises ValueError: on other bad arguments.
     """
     if not isinstance(suite, Suite):
         suite = load_suite(suite)
-    policy_kind(policy)
+    kind = policy_kind(policy)
     if algo not in SB3_ALGOS:
         raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {algo!r}")
-    if workers < 1:
-        raise ValueError(f"workers must be an integer >= 1, got {workers}")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    if isinstance(wall_time_limit, bool) or not (isinstance(wall_time_limit, int | float) and wall_time_limit > 0):
+        raise ValueError(f"wall_time_limit must be a number > 0 (s), got {wall_time_limit!r}")
+    env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
     tasks = episode_tasks(suite, episodes, seed)
+    out = open_output_dir(Path(out), resume=resume, overwrite=overwrite)
+    identity = run_identity(suite, str(policy), algo if kind == "sb3" else None, env_kwargs, episodes, seed, len(tasks))
+    resuming = resume and check_resume(out, identity)
     cfg = EvalConfig(
         policy=str(policy),
         goal_distance=suite.goal_distance,
         time_limit=suite.time_limit,
         algo=algo,
-        env_kwargs=dict(env_kwargs or {}),
+        env_kwargs=env_kwargs,
         video_dir=str(out / "videos") if video else None,
+        wall_time_limit=float(wall_time_limit),
         allow_pickle=allow_pickle,
     )
     _preflight(tasks, cfg)
-    runs = _run_all(tasks, cfg, min(workers, len(tasks)), progress)
-    records = [json_safe(r.record) for r in runs]
-    labels = [e.label for e in suite.terrains]
-    summary = json_safe({**summarize(records, labels), "by_factor": factor_summary(records)})
-    results = {
-        "suite": suite.name,
-        "policy": str(policy),
-        "episodes": records,
-        "summary": summary,
-        "targets": json_safe(check_targets(suite.terrains, summary["by_entry"], suite.goal_distance)),
-        "meta": json_safe(
-            {
-                "suite_file": suite.source,
-                "goal_distance": suite.goal_distance,
-                "time_limit": suite.time_limit,
-                "episodes_per_entry": episodes,
-                "seed_offset": seed,
-                "workers": workers,
-                "algo": algo if policy_kind(policy) == "sb3" else None,
-                "env_kwargs": dict(env_kwargs or {}),
-                "entries": labels,
-                "randomization": [e.randomization for e in suite.terrains],
-            }
-        ),
+    if not resuming:
+        start_run(out, identity)
+    done = load_records(out, tasks) if resuming else {}
+    todo = [t for t in tasks if t.index not in done]
+
+    def keep(result: EpisodeResult) -> None:
+        record = json_safe(result.record)
+        try:
+            write_episode(out, EpisodeResult(record, result.trace, result.terrain))
+        except OSError as err:
+            raise OutputError(f"--out {str(out)!r}: cannot write episode {record['index']} ({err})") from None
+        done[int(record["index"])] = record
+
+    try:
+        _run_all(todo, cfg, min(workers, max(1, len(todo))), progress, keep)
+    except KeyboardInterrupt:
+        raise EvaluationInterrupted(out, len(done), len(tasks)) from None
+
+    records = [done[t.index] for t in tasks]
+    meta = {
+        "suite_file": suite.source,
+        "goal_distance": suite.goal_distance,
+        "time_limit": suite.time_limit,
+        "episodes_per_entry": episodes,
+        "seed_offset": seed,
+        "workers": workers,
+        "algo": algo if kind == "sb3" else None,
+        "env_kwargs": env_kwargs,
+        "entries": [e.label for e in suite.terrains],
+        "randomization": [e.randomization for e in suite.terrains],
+        "wall_time_limit": float(wall_time_limit),
+        "resumed_episodes": len(tasks) - len(todo),
     }
-    (out / "results.json").write_text(json.dumps(results, indent=2, allow_nan=False))
-    _save_traces(runs, out)
-    write_report(results, runs, labels, out)
+    results = _results(suite, str(policy), records, meta)
+    try:
+        write_results(out, results)
+        write_report(results, load_results_for_report(out, records, tasks), meta["entries"], out)
+    except OSError as err:
+        raise OutputError(
+            f"--out {str(out)!r}: cannot write results.json or report.md ({err}); the {len(records)} episode "
+            f"records are kept in {out / 'episodes'} (fix the cause and rerun with --resume to rebuild them)"
+        ) from None
     return results
+
+
+class EvaluationInterrupted(KeyboardInterrupt):
+    """An evaluation stopped by Ctrl-C or SIGTERM; its finished episodes are on disk (``--resume`` continues)."""
+
+    def __init__(self, out: Path, finished: int, total: int) -> None:
+        super().__init__(
+            f"interrupted: {finished} of {total} episodes finished and kept in {out / 'episodes'}; "
+            "rerun the same command with --resume to continue"
+        )
+        self.out, self.finished, self.total = out, finished, total
+
+
+def write_results(out: Path, results: Mapping[str, Any]) -> Path:
+    """Write ``out/results.json`` (strict JSON, atomically: a reader never sees half a file)."""
+    return write_json_atomic(out / "results.json", dict(results))

@@ -51,6 +51,28 @@ def read_metadata(model_path: str | Path) -> dict[str, Any] | None:
         raise ModelError(f"{path}: unreadable metadata ({err})") from None
     if not isinstance(meta, dict) or meta.get("format") != META_FORMAT:
         raise ModelError(f"{path}: format must be {META_FORMAT!r}")
+    return _check_metadata(meta, path)
+
+
+def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
+    """``meta`` with the fields the evaluation uses checked (``algo``, ``residual``, ``residual_scale``, ...)."""
+    from agents.rl.config import ALGOS
+
+    if meta.get("algo") not in (None, *ALGOS):
+        raise ModelError(f"{path}: algo must be one of {list(ALGOS)}, got {meta.get('algo')!r}")
+    if not isinstance(meta.get("residual", False), bool):
+        raise ModelError(f"{path}: residual must be true or false, got {meta.get('residual')!r}")
+    if meta.get("residual"):
+        scale = meta.get("residual_scale")
+        if "residual_scale" not in meta:
+            raise ModelError(f"{path}: residual_scale is missing (a residual model needs a number in (0, 1])")
+        if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0.0 < scale <= 1.0:
+            raise ModelError(f"{path}: residual_scale must be a number in (0, 1] (of the torque limit), got {scale!r}")
+    env_kwargs = meta.get("env_kwargs")
+    if env_kwargs is not None and not isinstance(env_kwargs, dict):
+        raise ModelError(f"{path}: env_kwargs must be a mapping of QuadUneven-v0 arguments, got {env_kwargs!r}")
+    if not isinstance(meta.get("normalize_obs", False), bool):
+        raise ModelError(f"{path}: normalize_obs must be true or false, got {meta.get('normalize_obs')!r}")
     return meta
 
 
@@ -133,9 +155,12 @@ def load_obs_normalization(model_path: Path, meta: dict[str, Any] | None, allow_
                 f"policy: {pkl.name} is a pickle, and unpickling runs code from the file; re-save the statistics "
                 f"as {npz.name} (quad-uneven train writes it), or pass --allow-pickle if you trust the file"
             )
-        with pkl.open("rb") as f:
-            vn = pickle.load(f)  # the user opted in for this file
-        return ObsNormalization.from_vecnormalize(vn) if vn.norm_obs else None
+        try:
+            with pkl.open("rb") as f:
+                vn = pickle.load(f)  # the user opted in for this file
+            return ObsNormalization.from_vecnormalize(vn) if vn.norm_obs else None
+        except Exception as err:  # a truncated or foreign pickle raises anything from EOFError to AttributeError
+            raise ModelError(f"policy: {pkl} is not readable VecNormalize statistics ({type(err).__name__})") from None
     if meta is not None and meta.get("normalize_obs"):
         raise ModelError(
             f"policy: {model_path} was trained with normalised observations but {npz.name} is missing next to it"
@@ -190,7 +215,10 @@ def _safe_custom_objects(path: Path, cls: Any, env: gym.Env) -> dict[str, Any]:
         elif key == "policy_class":
             custom[key] = cls.policy_aliases["MlpPolicy"]
             if entry.get("__module__") not in (None, custom[key].__module__):
-                raise ModelError(f"policy: {path} uses policy class from {entry['__module__']!r}; only MlpPolicy loads")
+                raise ModelError(
+                    f"policy: {path} holds a policy class from {entry['__module__']!r}, not {cls.__name__}'s "
+                    f"MlpPolicy (a model of another algo? --algo loads {cls.__name__} models)"
+                )
         elif key in ("rollout_buffer_class", "replay_buffer_class"):
             custom[key] = RolloutBuffer if key == "rollout_buffer_class" else ReplayBuffer
         elif key in _CONSTANT_KEYS:
@@ -229,6 +257,33 @@ def load_sb3_model(path: str | Path, algo: str, env: gym.Env, allow_pickle: bool
         raise ModelError(f"policy: {path} cannot be loaded as {algo.upper()} ({type(err).__name__}: {err})") from None
 
 
+def _describe(space: Any) -> str:
+    return f"{type(space).__name__} of shape {getattr(space, 'shape', None)}" if space is not None else "none"
+
+
+def check_spaces(model: Any, env: gym.Env, path: Path) -> None:
+    """Refuse a model whose observation or action space is not ``env``'s (it was trained for another env).
+
+    Also after an ``allow_pickle`` load, which takes the spaces from the file.
+
+    :raises ModelError: naming the space and both shapes (or that the bounds differ).
+    """
+    for name in ("observation_space", "action_space"):
+        want, got = getattr(env, name), getattr(model, name, None)
+        if got is None or type(got) is not type(want) or getattr(got, "shape", None) != want.shape:
+            raise ModelError(
+                f"policy: {path} was trained for another {name} ({_describe(got)}) than this env's "
+                f"({_describe(want)}); evaluate it with the env kwargs it was trained with"
+            )
+        if isinstance(want, gym.spaces.Box) and not (
+            np.array_equal(got.low, want.low) and np.array_equal(got.high, want.high)
+        ):
+            raise ModelError(
+                f"policy: {path} was trained for an {name} with other bounds than this env's "
+                f"({_describe(want)}); evaluate it with the env kwargs it was trained with"
+            )
+
+
 def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: bool = False) -> SB3Policy:
     """Load the SB3 model ``path`` as a policy for ``env`` (a ``QuadUneven-v0`` env, before ``reset``).
 
@@ -237,7 +292,8 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
     model folder is unpickled unless ``allow_pickle`` (see :func:`load_sb3_model`).
 
     :param algo: ``"ppo"`` or ``"sac"``; must match the metadata's ``algo`` if there is one.
-    :raises ModelError: on an algo mismatch, bad metadata or missing normalisation statistics.
+    :raises ModelError: on an algo mismatch, bad metadata, missing or unreadable normalisation statistics, a
+        corrupt or truncated model file, or a model for another observation or action space.
     """
     path = Path(path)
     meta = read_metadata(path)
@@ -245,12 +301,11 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
         raise ModelError(f"algo: {path} was trained with {meta['algo']!r}; pass --algo {meta['algo']}, got {algo!r}")
     normalizer = load_obs_normalization(path, meta, allow_pickle)
     model = load_sb3_model(path, algo, env, allow_pickle)
+    check_spaces(model, env, path)
     expert = None
     if meta is not None and meta.get("residual"):
         from agents.rl.residual_env import install_residual_controller
 
-        if "residual_scale" not in meta:
-            raise ModelError(f"policy: {Path(path).parent / META_FILE} has no residual_scale")
         expert, _ = install_residual_controller(env, float(meta["residual_scale"]))
     return SB3Policy(model, normalizer, expert)
 
@@ -260,6 +315,7 @@ __all__ = [
     "META_FORMAT",
     "ModelError",
     "SB3Policy",
+    "check_spaces",
     "load_obs_normalization",
     "load_sb3_model",
     "load_sb3_policy",

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -62,7 +63,7 @@ class ObsNormalization:
             with np.load(Path(path), allow_pickle=False) as z:
                 mean, var = np.asarray(z["mean"], dtype=float), np.asarray(z["var"], dtype=float)
                 epsilon, clip = float(z["epsilon"]), float(z["clip"])
-        except (OSError, KeyError, ValueError, EOFError) as err:
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as err:
             raise ValueError(f"observation statistics {str(path)!r} are unreadable: {err}") from None
         if mean.shape != var.shape or not (np.isfinite(mean).all() and np.isfinite(var).all() and (var >= 0).all()):
             raise ValueError(f"observation statistics {str(path)!r}: mean/var must be finite, var >= 0, same shape")

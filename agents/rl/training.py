@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import json
 import math
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any, ClassVar
@@ -23,6 +25,8 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback, EvalCallback
 from tqdm.auto import tqdm
 
+from agents.interrupts import sigterm_as_keyboard_interrupt
+from agents.outputs import prepare_output_dir
 from agents.rl.config import TrainConfig, TrainConfigError
 from agents.rl.learning_curve import plot_learning_curve
 from agents.rl.model_io import write_metadata
@@ -31,6 +35,7 @@ from agents.rl.residual_env import RESIDUAL_ENV_ID
 from agents.rl.vec_env import EVAL_SEED_OFFSET, build_vec_env, normalize
 
 __all__ = [
+    "TRAIN_OUTPUTS",
     "CheckpointWithStatsCallback",
     "EpisodeMetricsCallback",
     "ProgressCallback",
@@ -39,6 +44,21 @@ __all__ = [
     "save_obs_normalization",
     "train",
 ]
+
+TRAIN_OUTPUTS = (
+    "model.zip",
+    "model_obs_norm.npz",
+    "model_vecnormalize.pkl",
+    "rl_meta.json",
+    "train_config.json",
+    "train_summary.json",
+    "learning_curve.png",
+    "monitor",
+    "eval",
+    "best",
+    "checkpoints",
+)
+"""Top-level names a training run writes in its ``--out`` (what ``--overwrite`` deletes; nothing else is touched)."""
 
 
 class ProgressCallback(BaseCallback):
@@ -138,6 +158,21 @@ class EpisodeMetricsCallback(BaseCallback):
         return True
 
 
+def _save_model(model: Any, out: Path) -> None:
+    """``out/model.zip`` and its observation statistics; a second Ctrl-C while saving is ignored."""
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if _in_main_thread() else None
+    try:
+        model.save(out / "model.zip")
+        save_obs_normalization(model, out / "model.zip")
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _in_main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
 def _metadata(cfg: TrainConfig) -> dict[str, Any]:
     import stable_baselines3
 
@@ -225,28 +260,34 @@ def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCa
 
 
 def train(
-    cfg: TrainConfig, out: str | Path, progress: bool = True, tensorboard: str | Path | None = None
+    cfg: TrainConfig,
+    out: str | Path,
+    progress: bool = True,
+    tensorboard: str | Path | None = None,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Train a residual agent with ``cfg``; write the model, its metadata and the learning curve to ``out``.
 
-    Numerical divergence or a fall ends an episode (``info["diverged"]``), never the run. Ctrl-C or the
-    ``time_limit_min`` budget stops training early and still saves the model (``interrupted`` and
+    Numerical divergence or a fall ends an episode (``info["diverged"]``), never the run. Ctrl-C, SIGTERM
+    or the ``time_limit_min`` budget stops training early and still saves the model (``interrupted`` and
     ``time_limit_reached`` in the summary).
 
     :param cfg: a validated :class:`TrainConfig` (see :func:`load_train_config`).
-    :param out: output directory (created).
+    :param out: output directory (created), checked before anything starts: a non-empty one is refused
+        unless ``overwrite``, so a new model is never paired with an older run's checkpoints.
     :param progress: show a progress bar.
     :param tensorboard: directory for TensorBoard logs (SB3's scalars plus :class:`EpisodeMetricsCallback`'s),
         one run subfolder per training run; None: none.
+    :param overwrite: delete an earlier run's outputs in ``out`` (``TRAIN_OUTPUTS``; other files are kept).
     :return: the ``train_summary.json`` content: ``timesteps`` done, ``wall_time`` (s), ``steps_per_s``,
         ``episodes``, ``mean_return``, ``mean_stability_index`` (N m), ``mean_distance`` (m), ``fall_rate``
         (last 20 training episodes), ``interrupted``, ``time_limit_reached``, ``model`` path.
     :raises TrainConfigError: on hyperparameters the algorithm does not accept.
+    :raises OutputError: if ``out`` is a file, cannot be created, or is not empty without ``overwrite``.
     """
     import torch
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = prepare_output_dir(out, TRAIN_OUTPUTS, overwrite=overwrite, field="--out")
     torch.set_num_threads(1)  # small networks: threads only contend with the env processes on 2 cores
     (out / "train_config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
     meta = _metadata(cfg)
@@ -259,16 +300,18 @@ def train(
         model = _make_model(cfg, venv, None if tensorboard is None else Path(tensorboard))
         callbacks, eval_env = _callbacks(cfg, out, progress)
         wall0, interrupted = time.perf_counter(), False
-        try:
-            model.learn(
-                total_timesteps=cfg.timesteps, callback=CallbackList(callbacks), tb_log_name=f"{cfg.algo}_{out.name}"
-            )
-        except KeyboardInterrupt:
-            interrupted = True
-            print("\ninterrupted: saving the model trained so far", file=sys.stderr)
-        wall = time.perf_counter() - wall0
-        model.save(out / "model.zip")
-        save_obs_normalization(model, out / "model.zip")
+        with sigterm_as_keyboard_interrupt():
+            try:
+                model.learn(
+                    total_timesteps=cfg.timesteps,
+                    callback=CallbackList(callbacks),
+                    tb_log_name=f"{cfg.algo}_{out.name}",
+                )
+            except KeyboardInterrupt:
+                interrupted = True
+                print("\ninterrupted: saving the model trained so far", file=sys.stderr)
+            wall = time.perf_counter() - wall0
+            _save_model(model, out)
     finally:
         venv.close()
         if eval_env is not None:

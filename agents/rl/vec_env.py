@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import functools
 import math
+import signal
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -84,6 +86,17 @@ def make_train_env(
     return EpisodeStats(env)
 
 
+def _ignoring_interrupts(env_fn: Callable[[], gym.Env]) -> gym.Env:
+    """``env_fn()`` in a SubprocVecEnv worker that ignores SIGINT and SIGTERM from then on.
+
+    Ctrl-C or a SIGTERM sent to the whole process group is then the trainer's to handle: it stops
+    training, saves the model and closes the workers (which also end when the trainer's pipe closes).
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    return env_fn()
+
+
 def build_vec_env(
     cfg: TrainConfig, n_envs: int, seed: int, monitor_dir: Path | None, vec_env: str | None = None
 ) -> VecEnv:
@@ -99,6 +112,8 @@ def build_vec_env(
     env_fn = functools.partial(
         make_train_env, cfg.terrain, float(cfg.residual_scale), cfg.max_episode_steps, dict(cfg.env_kwargs)
     )
+    if kind == "subproc":
+        env_fn = functools.partial(_ignoring_interrupts, env_fn)
     return make_vec_env(
         env_fn,
         n_envs=n_envs,

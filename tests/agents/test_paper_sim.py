@@ -84,7 +84,8 @@ def test_config_rejects_bad_values(field, value):
 
 def test_cli_rejects_bad_epsilon(tmp_path, capsys):
     assert main(["paper", "--out", str(tmp_path), "--epsilon", "-2"]) == 2
-    assert "epsilon" in capsys.readouterr().out
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "epsilon" in err and err.count("\n") == 1
 
 
 def test_plan_paper_command_writes_pngs_and_json(tmp_path):

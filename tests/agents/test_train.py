@@ -163,7 +163,7 @@ def test_tiny_ppo_run_saves_a_model_that_evaluate_runs_with_the_expert(tmp_path,
         source="test",
     )
     for model in (run / "model.zip", run / "checkpoints" / "model_32_steps.zip", run / "best" / "best_model.zip"):
-        res = evaluate(suite, str(model), tmp_path / "eval", progress=False)
+        res = evaluate(suite, str(model), tmp_path / f"eval_{model.stem}", progress=False)
         e = res["episodes"][0]
         assert e["error"] is None and e["sim_time"] == pytest.approx(0.4)
         assert e["planner_calls"] >= 1  # the expert is in the loop
@@ -224,3 +224,38 @@ def test_untrained_agent_has_zero_residual(algo):
     assert np.abs(model.predict(obs, deterministic=True)[0]).max() > 0  # not zero by SB3's own init
     _zero_mean_action(model)
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], 0.0)
+
+
+def test_sigterm_stops_training_and_still_saves(tmp_path, monkeypatch):
+    import os
+    import signal
+
+    from agents.rl import training
+
+    cfg = load_train_config(write_config(tmp_path / "c.yaml", timesteps=10_000, eval_freq=0, checkpoint_freq=0))
+    original = training.ProgressCallback._on_step
+
+    def step_then_terminate(self):
+        if self.n_calls == 5:
+            os.kill(os.getpid(), signal.SIGTERM)  # as `kill PID` would
+        return original(self)
+
+    monkeypatch.setattr(training.ProgressCallback, "_on_step", step_then_terminate)
+    summary = training.train(cfg, tmp_path / "run", progress=False)
+    assert summary["interrupted"] is True and summary["timesteps"] < 10_000
+    assert (tmp_path / "run" / "model.zip").is_file() and (tmp_path / "run" / "model_obs_norm.npz").is_file()
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the handler is removed after training
+
+
+def test_a_non_empty_out_is_refused_and_overwrite_removes_the_old_run(tmp_path, capsys):
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "checkpoints" / "model_999_steps.zip").write_text("an older run's checkpoint")
+    (run / "notes.txt").write_text("mine")
+    argv = ["train", "--config", str(write_config(tmp_path / "c.yaml", timesteps=32, eval_freq=0)), "--out", str(run)]
+    assert main([*argv, "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and "checkpoints/" in err and "--overwrite" in err
+    assert main([*argv, "--no-progress", "--overwrite"]) == 0
+    assert sorted(p.name for p in (run / "checkpoints").glob("*.zip")) == ["model_32_steps.zip"]
+    assert (run / "notes.txt").read_text() == "mine"

@@ -1,0 +1,234 @@
+"""The evaluation's output directory: the run's identity, one record per finished episode, resuming.
+
+Layout of ``DIR`` (docs/evaluation.md, "The output directory"):
+
+- ``run.json``: what defines the run (suite content, policy and its file hash, algo, env kwargs,
+  episode cap, seed offset), written once the preflight check has passed, before the first episode;
+- per finished episode, in this order: ``traces/epNNN.npz``, for an entry's first episode
+  ``episodes/epNNN_terrain.npz`` (the surface the report plots), and last ``episodes/epNNN.json``
+  (the results.json record). Each is written to a temporary name and renamed, so the record exists
+  only once everything of its episode is on disk: a record file means a finished episode;
+- at the end, ``results.json``, ``report.md`` and the PNGs are rebuilt from the records.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.evaluation.episode import EpisodeResult
+from agents.evaluation.suites import EpisodeTask, Suite
+from agents.outputs import OutputError, prepare_output_dir, write_json_atomic
+
+__all__ = [
+    "EVAL_OUTPUTS",
+    "RUN_FILE",
+    "RUN_FORMAT",
+    "check_resume",
+    "load_records",
+    "load_results_for_report",
+    "open_output_dir",
+    "run_identity",
+    "start_run",
+    "write_episode",
+]
+
+RUN_FILE = "run.json"
+"""The run's identity in ``DIR``."""
+
+RUN_FORMAT = "quad-uneven-eval/1"
+"""Value of ``run.json``'s ``format`` field."""
+
+EVAL_OUTPUTS = (RUN_FILE, "results.json", "report.md", "*.png", "episodes", "traces", "videos", ".*.tmp")
+"""Top-level names an evaluation writes in ``DIR`` (what ``--overwrite`` deletes; nothing else is touched)."""
+
+IDENTITY_KEYS = ("suite", "policy", "policy_sha256", "algo", "env_kwargs", "episodes_per_entry", "seed_offset")
+"""Fields of ``run.json`` that must be equal for ``--resume`` to continue a run."""
+
+
+def _sha256(path: str | os.PathLike[str]) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def run_identity(
+    suite: Suite,
+    policy: str,
+    algo: str | None,
+    env_kwargs: Mapping[str, Any],
+    episodes: int | None,
+    seed: int,
+    n_tasks: int,
+) -> dict[str, Any]:
+    """The ``run.json`` content: everything that decides which episodes run and how (JSON-safe).
+
+    :param algo: the SB3 class of a model file, None for a named policy.
+    :param n_tasks: number of episodes of the run.
+    """
+    is_file = policy not in ("zero", "expert") and Path(policy).is_file()
+    return {
+        "format": RUN_FORMAT,
+        "suite": {
+            "name": suite.name,
+            "goal_distance": suite.goal_distance,
+            "time_limit": suite.time_limit,
+            "terrains": [{"kind": e.kind, "params": dict(e.params), "seeds": list(e.seeds)} for e in suite.terrains],
+        },
+        "suite_file": suite.source,
+        "policy": str(policy),
+        "policy_sha256": _sha256(policy) if is_file else None,
+        "algo": algo,
+        "env_kwargs": json.loads(json.dumps(dict(env_kwargs))),
+        "episodes_per_entry": episodes,
+        "seed_offset": seed,
+        "episodes": n_tasks,
+    }
+
+
+def open_output_dir(out: Path, resume: bool, overwrite: bool) -> Path:
+    """Check and create ``out`` before any work: a file fails, an earlier run's outputs are refused.
+
+    With ``resume``, a directory holding an earlier run is kept (:func:`check_resume` compares it);
+    with ``overwrite``, that run's outputs (``EVAL_OUTPUTS``) are deleted and other files kept.
+
+    :raises OutputError: naming the directory and what is wrong with it.
+    """
+    if resume and overwrite:
+        raise OutputError("--resume and --overwrite exclude each other (continue a run, or start it again)")
+    if resume and out.is_dir() and any(out.iterdir()) and not (out / RUN_FILE).is_file():
+        raise OutputError(
+            f"--resume: {str(out)!r} holds no {RUN_FILE} (not an evaluation directory, or one that never "
+            "started); pass --overwrite to start a new run there"
+        )
+    hint = (
+        "pass --resume to continue the run recorded there, --overwrite to delete its outputs (other files are "
+        "kept), or choose another directory"
+    )
+    return prepare_output_dir(out, EVAL_OUTPUTS, overwrite=overwrite, keep=resume, field="--out", hint=hint)
+
+
+def check_resume(out: Path, identity: Mapping[str, Any]) -> bool:
+    """Whether ``out`` holds a run to continue; refuse one that differs from ``identity``.
+
+    :return: False if ``out`` has no ``run.json`` (a fresh run), True if it has a matching one.
+    :raises OutputError: if ``run.json`` is unreadable or differs in a field of ``IDENTITY_KEYS`` (named).
+    """
+    path = out / RUN_FILE
+    if not path.is_file():
+        return False
+    try:
+        recorded = json.loads(path.read_text())
+    except (OSError, ValueError) as err:
+        raise OutputError(f"--resume: {path} is unreadable ({err}); pass --overwrite to start over") from None
+    if not isinstance(recorded, dict) or recorded.get("format") != RUN_FORMAT:
+        raise OutputError(f"--resume: {path} is not a {RUN_FORMAT} run file; pass --overwrite to start over")
+    for key in IDENTITY_KEYS:
+        if recorded.get(key) != identity.get(key):
+            raise OutputError(
+                f"--resume: {key} differs from the run recorded in {path} (recorded {recorded.get(key)!r}, "
+                f"now {identity.get(key)!r}); pass --overwrite to start over or choose another --out"
+            )
+    return True
+
+
+def start_run(out: Path, identity: Mapping[str, Any]) -> None:
+    """Write ``run.json`` and create ``episodes/`` and ``traces/`` (after the preflight check)."""
+    try:
+        (out / "episodes").mkdir(exist_ok=True)
+        (out / "traces").mkdir(exist_ok=True)
+        write_json_atomic(out / RUN_FILE, dict(identity))
+    except OSError as err:
+        raise OutputError(f"--out {str(out)!r}: cannot write {RUN_FILE} ({err})") from None
+
+
+def _savez_atomic(path: Path, arrays: Mapping[str, Any]) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        with tmp.open("wb") as f:
+            np.savez_compressed(f, **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _record_path(out: Path, index: int) -> Path:
+    return out / "episodes" / f"ep{index:03d}.json"
+
+
+def _terrain_path(out: Path, index: int) -> Path:
+    return out / "episodes" / f"ep{index:03d}_terrain.npz"
+
+
+def _trace_path(out: Path, index: int) -> Path:
+    return out / "traces" / f"ep{index:03d}.npz"
+
+
+def write_episode(out: Path, result: EpisodeResult) -> Path:
+    """Write one finished episode: its trace, its terrain (first of an entry), then its record (the commit).
+
+    :return: the record's path ``episodes/epNNN.json``.
+    :raises OSError: if a file cannot be written (the episode then counts as unfinished).
+    """
+    index = int(result.record["index"])
+    _savez_atomic(_trace_path(out, index), result.trace)
+    if result.terrain is not None:
+        t = result.terrain
+        _savez_atomic(
+            _terrain_path(out, index),
+            {"heights": t["heights"], "origin": np.asarray(t["origin"]), "cell_size": np.asarray(t["cell_size"])},
+        )
+    return write_json_atomic(_record_path(out, index), result.record)
+
+
+def load_records(out: Path, tasks: Sequence[EpisodeTask]) -> dict[int, dict[str, Any]]:
+    """The records of the finished episodes of ``tasks`` in ``out`` (index -> record).
+
+    An episode counts as finished if its record parses, matches its task (entry, terrain, seed) and its
+    trace exists; anything else (a missing, partial or foreign file) is run again.
+    """
+    done: dict[int, dict[str, Any]] = {}
+    for t in tasks:
+        path = _record_path(out, t.index)
+        if not path.is_file() or not _trace_path(out, t.index).is_file():
+            continue
+        if t.first_of_entry and not _terrain_path(out, t.index).is_file():
+            continue
+        try:
+            record = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if not isinstance(record, dict):
+            continue
+        if (record.get("index"), record.get("entry"), record.get("terrain"), record.get("seed")) != (
+            t.index,
+            t.entry,
+            t.kind,
+            t.seed,
+        ):
+            continue
+        done[t.index] = record
+    return done
+
+
+def load_results_for_report(out: Path, records: Sequence[Mapping[str, Any]], tasks: Sequence[EpisodeTask]) -> list:
+    """:class:`EpisodeResult` of every entry's first episode (record, trace, terrain), read back for the plots."""
+    firsts = []
+    for t in tasks:
+        if not t.first_of_entry:
+            continue
+        with np.load(_trace_path(out, t.index)) as z:
+            trace = {k: z[k] for k in z.files}
+        with np.load(_terrain_path(out, t.index)) as z:
+            terrain = {"heights": z["heights"], "origin": tuple(z["origin"]), "cell_size": float(z["cell_size"])}
+        firsts.append(EpisodeResult(dict(records[t.index]), trace, terrain))
+    return firsts
