@@ -68,6 +68,9 @@ BAD = [
     ("termination", {"trunk_contact": "false"}, "termination.trunk_contact must be true or false, got 'false'"),
     ("termination", {"min_base_height": None}, "termination.min_base_height must be a number in [0, 2] (m)"),
     ("height_scan", {"resolution": 0}, "height_scan.resolution must be a number in [0.005, 1] (m), got 0"),
+    ("randomization", {"friction": [0.8, 0.4]}, "randomization.friction must be null or a [low, high] pair"),
+    ("randomization", "nonsense", "randomization: unknown randomization config 'nonsense'"),
+    ("randomization", {"bogus": 1}, "randomization: unknown field(s) ['bogus']"),
     ("height_scan", {"size_x": "1"}, "height_scan.size_x must be a number in [0, 10] (m), got '1' of type str"),
     (
         "height_scan",
