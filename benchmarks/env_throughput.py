@@ -1,21 +1,47 @@
 """Env throughput of QuadUneven-v0 against raw mj_step and Gymnasium's Ant-v5, in one run.
 
-Prints env steps/s, mj_step/s and the overhead ratio env_step_time / (frame_skip x mj_step_time)
-for both environments, QuadUneven-v0 also with the ``mild`` randomization preset (the replay runs on the
-same randomized model, so the ratio is the env's overhead over the physics it steps).
-Usage: ``python benchmarks/env_throughput.py [--steps N]``.
+Three protocols, each printing ratios measured in the same run:
+
+1. **Overhead** (zero action / standing): env steps/s, mj_step/s and the overhead ratio
+   env_step_time / (frame_skip x mj_step_time) for both environments (resets excluded).
+2. **Random actions** (``--random-steps``): uniform random actions from the action space
+   (QuadUneven-v0 in torque mode on rough terrain, i.e. uniform torques over the full motor range;
+   Ant-v5 as registered), resets included in the timing, per env step and per physics step.
+   ``--legacy`` adds the same rows for the collision/solver model before the stiffer contacts (elliptic cones,
+   contact time constant 20 ms), applied to the compiled model at run time.
+3. **SB3 PPO training** (``--ppo-steps``, 0 to skip): ``PPO.learn`` wall time for QuadUneven-v0,
+   QuadUnevenResidual-v0 and Ant-v5 with the same PPO settings (2 envs in a DummyVecEnv, the
+   hyperparameters of configs/rl/ppo_residual.yaml, torch on 1 thread), env steps/s.
+
+Usage: ``python benchmarks/env_throughput.py [--steps N] [--random-steps N] [--ppo-steps N] [--legacy]``.
+No assertions: the figures and the targets are in docs/results.md.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 
 import gymnasium as gym
 import mujoco
 import numpy as np
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+
+RANDOM_SEED = 0
+
+
+def legacy_contacts(env: gym.Env) -> None:
+    """Turn the compiled model into the collision/solver model before the stiffer contacts (20 ms; in place).
+
+    Elliptic cones and MuJoCo's default contact time constant (0.02 s) on every geom; everything
+    else (geometry, impratio 10, friction, solimp) was and is the same.
+    """
+    m = env.unwrapped.model
+    m.opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    m.geom_solref[:, 0] = 0.02
+    m.geom_solref[:, 1] = 1.0
 
 
 def measure(env_id: str, steps: int, **kwargs) -> dict[str, float]:
@@ -65,34 +91,154 @@ def measure(env_id: str, steps: int, **kwargs) -> dict[str, float]:
     }
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Run the benchmark and print a table."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=2000, help="env steps per measurement")
-    args = parser.parse_args(argv)
-    rows = {
-        "QuadUneven-v0 (rough, torque, zero action)": measure("QuadUneven-v0", args.steps, terrain="rough"),
-        "QuadUneven-v0 (rough, joint_pd, standing)": measure(
-            "QuadUneven-v0", args.steps, terrain="rough", action_mode="joint_pd"
-        ),
-        "QuadUneven-v0 (rough, torque, zero, mild)": measure(
-            "QuadUneven-v0", args.steps, terrain="rough", randomization="mild"
-        ),
-        "QuadUneven-v0 (rough, joint_pd, standing, mild)": measure(
-            "QuadUneven-v0", args.steps, terrain="rough", action_mode="joint_pd", randomization="mild"
-        ),
-        "Ant-v5 (Gymnasium reference)": measure("Ant-v5", args.steps),
+def measure_random(
+    env_id: str, steps: int, seed: int = RANDOM_SEED, setup: Callable[[gym.Env], None] | None = None, **kwargs
+) -> dict[str, float]:
+    """Uniform random actions for ``steps`` env steps, resets included in the timing.
+
+    The actions are drawn (seeded) before the clock starts; an ended episode is reset inside
+    the timed loop, as an RL rollout does. Also counts the contacts after each env step and the
+    episodes.
+
+    :param setup: called with the env after ``gym.make`` (e.g. :func:`legacy_contacts`).
+    :return: env steps/s, physics steps/s (env steps x frame_skip / wall), mean contacts, episodes.
+    """
+    env = gym.make(env_id, **kwargs)
+    u = env.unwrapped
+    if setup is not None:
+        setup(env)
+    env.action_space.seed(seed)
+    env.reset(seed=seed)
+    for _ in range(20):  # warm-up (compiled kernels)
+        env.step(env.action_space.sample())
+    env.reset(seed=seed)
+    actions = [env.action_space.sample() for _ in range(steps)]
+    data = u.data
+    ncon = 0
+    episodes = 1
+    t0 = time.perf_counter()
+    for a in actions:
+        _, _, terminated, truncated, _ = env.step(a)
+        ncon += data.ncon
+        if terminated or truncated:
+            env.reset()
+            episodes += 1
+    wall = time.perf_counter() - t0
+    env.close()
+    return {
+        "env_steps_per_s": steps / wall,
+        "physics_steps_per_s": steps * u.frame_skip / wall,
+        "frame_skip": u.frame_skip,
+        "contacts": ncon / steps,
+        "episodes": episodes,
     }
-    print(f"{'env':46s} {'env steps/s':>12s} {'mj_step/s':>12s} {'frame_skip':>10s} {'overhead ratio':>15s}")
-    for name, r in rows.items():
-        print(
-            f"{name:46s} {r['env_steps_per_s']:12.0f} {r['mj_steps_per_s']:12.0f} "
-            f"{r['frame_skip']:10d} {r['ratio']:15.2f}"
-        )
-    print(
-        "overhead ratio = env_step_time / (frame_skip x mj_step_time); target for QuadUneven-v0 <= 1.25, "
-        "<= 1.3 with randomization (mild: latency, pushes and observation noise on)"
+
+
+def measure_ppo(env_id: str, steps: int, seed: int = RANDOM_SEED, **kwargs) -> dict[str, float]:
+    """Wall time of SB3 ``PPO.learn(steps)`` on 2 envs (DummyVecEnv), env steps/s (updates included)."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+
+    if env_id.startswith("QuadUnevenResidual"):
+        import agents.residual  # noqa: F401  (registers QuadUnevenResidual-v0)
+    torch.set_num_threads(1)
+    venv = make_vec_env(env_id, n_envs=2, seed=seed, env_kwargs=kwargs)
+    # configs/rl/ppo_residual.yaml's hyperparameters, n_steps shortened so a short run holds 2 updates.
+    n_steps = max(64, steps // 4)
+    model = PPO(
+        "MlpPolicy",
+        venv,
+        learning_rate=3e-4,
+        n_steps=n_steps,
+        batch_size=min(256, 2 * n_steps),
+        n_epochs=10,
+        gamma=0.99,
+        gae_lambda=0.95,
+        clip_range=0.2,
+        max_grad_norm=0.5,
+        policy_kwargs={"net_arch": [128, 128]},
+        seed=seed,
+        device="cpu",
+        verbose=0,
     )
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=steps)
+    wall = time.perf_counter() - t0
+    done = int(model.num_timesteps)
+    venv.close()
+    return {"env_steps_per_s": done / wall, "steps": done}
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run the benchmarks and print the tables."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=2000, help="env steps per overhead measurement (0: skip)")
+    parser.add_argument("--random-steps", type=int, default=3000, help="env steps of random actions (0: skip)")
+    parser.add_argument("--ppo-steps", type=int, default=4096, help="PPO env steps per env (0: skip)")
+    parser.add_argument("--legacy", action="store_true", help="also measure the former contact model (20 ms)")
+    args = parser.parse_args(argv)
+
+    if args.steps > 0:
+        rows = {
+            "QuadUneven-v0 (rough, torque, zero action)": measure("QuadUneven-v0", args.steps, terrain="rough"),
+            "QuadUneven-v0 (rough, joint_pd, standing)": measure(
+                "QuadUneven-v0", args.steps, terrain="rough", action_mode="joint_pd"
+            ),
+            "QuadUneven-v0 (rough, torque, zero, mild)": measure(
+                "QuadUneven-v0", args.steps, terrain="rough", randomization="mild"
+            ),
+            "QuadUneven-v0 (rough, joint_pd, standing, mild)": measure(
+                "QuadUneven-v0", args.steps, terrain="rough", action_mode="joint_pd", randomization="mild"
+            ),
+            "Ant-v5 (Gymnasium reference)": measure("Ant-v5", args.steps),
+        }
+        print(f"{'env':46s} {'env steps/s':>12s} {'mj_step/s':>12s} {'frame_skip':>10s} {'overhead ratio':>15s}")
+        for name, r in rows.items():
+            print(
+                f"{name:46s} {r['env_steps_per_s']:12.0f} {r['mj_steps_per_s']:12.0f} "
+                f"{r['frame_skip']:10d} {r['ratio']:15.2f}"
+            )
+        print(
+            "overhead ratio = env_step_time / (frame_skip x mj_step_time); target for QuadUneven-v0 <= 1.25, "
+            "<= 1.3 with randomization (mild: latency, pushes and observation noise on; the replay runs on the "
+            "same randomized model)\n"
+        )
+
+    if args.random_steps > 0:
+        rows = {}
+        if args.legacy:
+            rows["QuadUneven-v0 (rough, torque), pre-13 contacts"] = measure_random(
+                "QuadUneven-v0", args.random_steps, setup=legacy_contacts, terrain="rough"
+            )
+        rows["QuadUneven-v0 (rough, torque)"] = measure_random("QuadUneven-v0", args.random_steps, terrain="rough")
+        rows["Ant-v5"] = measure_random("Ant-v5", args.random_steps)
+        ant = rows["Ant-v5"]
+        print(f"random actions, resets included, {args.random_steps} env steps each")
+        print(
+            f"{'env':46s} {'env steps/s':>12s} {'physics/s':>10s} {'x Ant env':>9s} {'x Ant phys':>10s} "
+            f"{'contacts':>8s} {'episodes':>8s}"
+        )
+        for name, r in rows.items():
+            print(
+                f"{name:46s} {r['env_steps_per_s']:12.0f} {r['physics_steps_per_s']:10.0f} "
+                f"{r['env_steps_per_s'] / ant['env_steps_per_s']:9.2f} "
+                f"{r['physics_steps_per_s'] / ant['physics_steps_per_s']:10.2f} {r['contacts']:8.1f} {r['episodes']:8d}"
+            )
+        print("targets for QuadUneven-v0: >= 1000 env steps/s and >= 0.5 x Ant-v5's physics steps/s\n")
+
+    if args.ppo_steps > 0:
+        rows = {
+            "QuadUneven-v0 (rough)": measure_ppo("QuadUneven-v0", args.ppo_steps, terrain="rough"),
+            "QuadUnevenResidual-v0 (rough)": measure_ppo("QuadUnevenResidual-v0", args.ppo_steps, terrain="rough"),
+            "Ant-v5": measure_ppo("Ant-v5", args.ppo_steps),
+        }
+        ant = rows["Ant-v5"]["env_steps_per_s"]
+        print(f"SB3 PPO training, 2 envs (DummyVecEnv), {args.ppo_steps} env steps each, torch 1 thread")
+        print(f"{'env':46s} {'env steps/s':>12s} {'x Ant-v5':>9s}")
+        for name, r in rows.items():
+            print(f"{name:46s} {r['env_steps_per_s']:12.0f} {r['env_steps_per_s'] / ant:9.2f}")
+        print("target for QuadUneven-v0: >= 0.5 x Ant-v5")
 
 
 if __name__ == "__main__":

@@ -31,9 +31,21 @@ class PhysicsOptions:
     integrator: str = "implicitfast"
     """MuJoCo integrator."""
     cone: str = "elliptic"
-    """friction cone model; elliptic with a high impratio keeps stance feet from creeping."""
+    """friction cone model; elliptic with a high impratio keeps stance feet from creeping (pyramidal
+    cones make the solver ~3 x cheaper per contact but let the expert's stance feet slide out of
+    reach: docs/results.md section 7)."""
     impratio: float = 10.0
-    """ratio of frictional to normal constraint impedance."""
+    """ratio of frictional to normal constraint impedance (stiff friction: the paper assumes no slip)."""
+    contact_timeconst: float = 0.0075
+    """s: time constant of every contact (MJCF geom ``solref[0]``; MuJoCo's default is 0.02).
+    At 0.02 s an impacting foot or shank sinks 1-3 cm into the 2 cm height field; the prisms
+    around it then add contacts with horizontal normals whose (vertical) friction holds the leg
+    in the ground, so flailing states carry 100-200 contacts. Stiffer contacts keep standing
+    penetration at ~0.3 mm (1-2 contacts a foot) and halve the random-action contacts. 5 ms
+    (the stiffest tried; MuJoCo's bound is 2 steps = 4 ms) was faster still but made the "pinv"
+    expert tip over on rough seed 0 (docs/results.md section 7)."""
+    contact_dampratio: float = 1.0
+    """damping ratio of every contact (MJCF geom ``solref[1]``; 1 = critical, MuJoCo's default)."""
 
 
 def _fmt(values) -> str:
@@ -153,6 +165,9 @@ def scene_mjcf(
     return f"""<mujoco model="{cfg.name}_on_terrain">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{p.timestep:.6g}" integrator="{p.integrator}" cone="{p.cone}" impratio="{p.impratio:.6g}"/>
+  <default>
+    <geom solref="{p.contact_timeconst:.6g} {p.contact_dampratio:.6g}"/>
+  </default>
   <visual>
     <global offwidth="1280" offheight="720"/>
     <headlight ambient="0.35 0.35 0.35" diffuse="0.6 0.6 0.6"/>
