@@ -12,13 +12,20 @@ the clockwise order of eq. 19 is what makes an interior COG positive, and is use
 With fewer than three stance feet there is no support polygon: the index is ``-inf``
 (``NO_SUPPORT``) and so is every edge moment, so nothing downstream can read stability into it
 (and, unlike NaN, equal inputs give equal outputs).
+
+Degenerate polygons never divide by zero. Feet closer than ``MIN_EDGE`` (1e-9 m) to the next one in
+clockwise order are coincident: their joining "edge" has no direction and bounds nothing, so it is
+left out of the minimum and reports the index as its moment; with fewer than three real edges left
+(fewer than three distinct feet) there is no polygon and the result is ``NO_SUPPORT`` as above.
+Collinear feet span a polygon of zero area: its edges run both ways along the line, so their
+moments have opposite signs and the index is <= 0 (the robot tips about that line).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from quad_uneven_env.stability_kernels import edge_moments_into
+from quad_uneven_env.stability_kernels import MIN_EDGE, edge_moments_into
 
 NO_SUPPORT = -np.inf
 """Index returned when fewer than three feet are in stance (no support polygon)."""
@@ -66,14 +73,20 @@ def stability_index(
         return _stability_index_one(cog, cog_acc, np.ascontiguousarray(feet), float(mass), float(g))
     ordered = feet[order_clockwise(feet)]
     edges = ordered[np.r_[1:n, 0]] - ordered
-    kappa = edges / np.linalg.norm(edges, axis=1, keepdims=True)
+    length = np.linalg.norm(edges, axis=1, keepdims=True)
+    joined = length[:, 0] < MIN_EDGE  # coincident feet: not an edge
+    if np.count_nonzero(~joined) < 3:
+        return np.full(lead, NO_SUPPORT), np.full((*lead, n), NO_SUPPORT)
+    kappa = edges / np.where(joined[:, None], 1.0, length)
     fx, fy = -mass * cog_acc[..., 0:1], -mass * cog_acc[..., 1:2]
     fz = -mass * (g + cog_acc[..., 2:3])
     r = cog[..., None, :] - ordered  # (..., n, 3)
     rx, ry, rz = r[..., 0], r[..., 1], r[..., 2]
     # kappa . (r x F), written out: np.cross is slow on small arrays and this is a hot path.
     moments = kappa[:, 0] * (ry * fz - rz * fy) + kappa[:, 1] * (rz * fx - rx * fz) + kappa[:, 2] * (rx * fy - ry * fx)
-    return moments.min(axis=-1), moments
+    index = moments[..., ~joined].min(axis=-1)
+    moments[..., joined] = index[..., None]
+    return index, moments
 
 
 def normalized_stability_index(

@@ -8,6 +8,11 @@ import numba as nb
 import numpy as np
 
 
+MIN_EDGE = 1e-9
+"""m: a support polygon edge shorter than this joins coincident feet and is not an edge (see
+:func:`quad_uneven_env.stability.stability_index`)."""
+
+
 @nb.njit(cache=False, nogil=True)
 def edge_moments_into(cog, acc, feet, mass, g, out):  # pragma: no cover - compiled
     n = feet.shape[0]
@@ -27,4 +32,18 @@ def edge_moments_into(cog, acc, feet, mass, g, out):  # pragma: no cover - compi
         ex, ey, ez = feet[q, 0] - feet[p, 0], feet[q, 1] - feet[p, 1], feet[q, 2] - feet[p, 2]
         norm = math.sqrt(ex * ex + ey * ey + ez * ez)
         rx, ry, rz = cog[0] - feet[p, 0], cog[1] - feet[p, 1], cog[2] - feet[p, 2]
+        if norm < MIN_EDGE:  # coincident feet: the edge bounds nothing (filled in below)
+            out[k] = math.inf
+            continue
         out[k] = (ex * (ry * fz - rz * fy) + ey * (rz * fx - rx * fz) + ez * (rx * fy - ry * fx)) / norm
+    n_edges = 0
+    lowest = math.inf
+    for k in range(n):
+        if out[k] < math.inf:
+            n_edges += 1
+            lowest = min(lowest, out[k])
+    for k in range(n):
+        if n_edges < 3:
+            out[k] = -math.inf
+        elif out[k] == math.inf:
+            out[k] = lowest

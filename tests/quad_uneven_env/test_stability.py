@@ -105,3 +105,31 @@ def test_clockwise_order():
 def test_bad_shapes_raise():
     with pytest.raises(ValueError, match="cog"):
         stability_index([0, 0], [0, 0, 0], SQUARE, M)
+
+
+def test_coincident_feet_give_the_polygon_of_the_distinct_ones():
+    # Two feet report the same contact point: the polygon is the triangle of the three distinct
+    # points (1, 1), (1, -1), (-1, -1); with the COG at (0.2, -0.4) its nearest edge is the
+    # hypotenuse y = x, at |0.2 - (-0.4)| / sqrt(2) from the COG.
+    feet = np.array([[1.0, 1.0, 0.0], [1.0, -1.0, 0.0], [-1.0, -1.0, 0.0], [1.0, 1.0, 0.0]])
+    cog = [0.2, -0.4, 0.5]
+    expected = M * G * 0.6 / np.sqrt(2.0)
+    index, moments = stability_index(cog, [0, 0, 0], feet, M, G)  # compiled single-instant path
+    index_t, moments_t = stability_index(np.array([cog, cog]), np.zeros((2, 3)), feet, M, G)  # numpy path
+    assert index == pytest.approx(expected)
+    np.testing.assert_allclose(index_t, expected)
+    assert np.isfinite(moments).all() and moments.min() == pytest.approx(expected)
+    np.testing.assert_allclose(np.sort(moments_t[0]), np.sort(moments))
+
+
+def test_fewer_than_three_distinct_feet_is_no_support():
+    feet = np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, -1.0, 0.0]])
+    for cog, acc in (([0, 0, 0.5], [0, 0, 0]), (np.zeros((2, 3)), np.zeros((2, 3)))):
+        index, moments = stability_index(cog, acc, feet, M, G)
+        assert np.all(index == NO_SUPPORT) and np.all(moments == NO_SUPPORT)
+
+
+def test_collinear_feet_are_not_stable():
+    feet = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    index, moments = stability_index([0.0, 0.0, 0.5], [0, 0, 0], feet, M, G)
+    assert np.isfinite(moments).all() and index <= 1e-9
