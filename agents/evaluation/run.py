@@ -59,7 +59,7 @@ def _preflight(task: EpisodeTask, cfg: EvalConfig) -> None:
     """Build the first episode's env and policy here, so bad env kwargs or policies fail before any worker starts."""
     env = make_env(task, cfg)
     try:
-        make_policy(cfg.policy, env, cfg.algo)
+        make_policy(cfg.policy, env, cfg.algo, cfg.expert_config)
     finally:
         env.close()
 
@@ -82,6 +82,7 @@ def evaluate(
     algo: str = "ppo",
     env_kwargs: Mapping[str, Any] | None = None,
     progress: bool = True,
+    expert_config: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Run ``policy`` on every (terrain entry, seed) of ``suite``; write ``out/results.json``, ``report.md``, PNGs.
 
@@ -92,6 +93,8 @@ def evaluate(
     :param workers: episodes run in this many spawned processes (1: in this process).
     :param video: MP4 of the first episode of each terrain entry in ``out/videos/``.
     :param env_kwargs: extra QuadUneven-v0 arguments (override the policy's own).
+    :param expert_config: fields of :class:`agents.expert.ExpertConfig` for ``policy="expert"``, e.g.
+        ``{"model": "oracle"}`` (None: the defaults; a residual model keeps the expert of its training).
     :return: the results.json content.
     :raises SuiteError: on an invalid suite; ``PolicyError`` on an unusable policy; ValueError on bad arguments.
     """
@@ -112,6 +115,7 @@ def evaluate(
         algo=algo,
         env_kwargs=dict(env_kwargs or {}),
         video_dir=str(out / "videos") if video else None,
+        expert_config=dict(expert_config or {}),
     )
     _preflight(tasks[0], cfg)
     runs = _run_all(tasks, cfg, min(workers, len(tasks)), progress)
@@ -134,6 +138,8 @@ def evaluate(
                 "workers": workers,
                 "algo": algo if policy_kind(policy) == "sb3" else None,
                 "env_kwargs": dict(env_kwargs or {}),
+                "expert_config": dict(expert_config or {}),
+                "expert_model": sorted({str(r["expert_model"]) for r in records if r.get("expert_model")}) or None,
                 "entries": labels,
             }
         ),
