@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
@@ -29,6 +30,15 @@ from quad_uneven_env.observations import (
     observation_table,
 )
 from quad_uneven_env.physics import RobotIndex, instability_warnings
+from quad_uneven_env.randomization import (
+    EpisodeDraw,
+    ModelRandomizer,
+    Push,
+    PushSchedule,
+    RandomizationConfig,
+    draw_episode,
+    load_randomization,
+)
 from quad_uneven_env.rewards import reward_terms
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT, PhysicsOptions, scene_mjcf
@@ -87,7 +97,10 @@ class QuadUnevenEnv(gym.Env):
     ``edge_moments`` (N m), ``contact_forces`` (4 x 3, N, world), ``foot_contact`` (4,),
     ``cog``, ``cog_vel``, ``cog_acc`` (whole robot, world, the acceleration from Newton's law with
     the contact forces), ``feet_pos`` (4 x 3 foot sites, world), ``terrain_height_under_base``,
-    ``diverged``, ``termination_reason``, ``reward_terms``, ``distance`` (COG x travelled, m).
+    ``diverged``, ``termination_reason``, ``reward_terms``, ``distance`` (COG x travelled, m),
+    ``randomization`` (the episode's drawn world as a flat dict of floats, the same keys for every
+    config: nominal values where a factor is off), ``push_force`` ((3,) N, world: the mean push force
+    on the trunk over the step, zeros without a push).
     Measured quantities (contacts, COG, feet, stability) are those of the last physics step's
     constraint solve, i.e. at the start of that 2 ms step.
 
@@ -96,7 +109,17 @@ class QuadUnevenEnv(gym.Env):
     ``frame_skip`` (physics steps per control step, default 10), ``timestep`` (s, <= 0.002),
     ``action_mode``, ``controller``, ``reward_weights``, ``termination``, ``height_scan``,
     ``gait_period`` (s, default 6.1: the paper's cycle), ``reset_noise_scale`` (rad and rad/s of
-    uniform noise on the joints at reset, default 0.02), ``render_mode``, ``width``, ``height``.
+    uniform noise on the joints at reset, default 0.02), ``render_mode``, ``width``, ``height``,
+    ``randomization`` (None: the nominal world; a preset name of ``configs/randomization/``, a YAML path or
+    a mapping, see :class:`quad_uneven_env.randomization.RandomizationConfig` and docs/randomization.md).
+
+    **Randomization** (``randomization`` not None): drawn at every reset from ``np_random`` after the
+    terrain and the reset noise (so a seed gives the nominal env's terrain and start), written into
+    ``model`` and restored exactly before the next draw. Ground friction, payload and link masses
+    (``total_mass`` follows: stability index normalisation, COG acceleration), motor strength and joint
+    damping/friction are model parameters; actuation latency delays the applied command (``ctrl``) by k
+    physics steps in both action modes and for the controller hook; pushes are forces on the trunk's COM
+    (``xfrc_applied``); observation noise is added to the returned observation and clipped to the Box.
     """
 
     metadata = {"render_modes": ["human", "rgb_array", "depth_array"], "render_fps": 50}  # noqa: RUF012
@@ -120,6 +143,7 @@ class QuadUnevenEnv(gym.Env):
         render_mode: str | None = None,
         width: int = 640,
         height: int = 480,
+        randomization: str | Mapping[str, Any] | RandomizationConfig | None = None,
     ) -> None:
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode must be one of {ACTION_MODES}, got {action_mode!r}")
@@ -135,6 +159,7 @@ class QuadUnevenEnv(gym.Env):
         if not np.isfinite(reset_noise_scale) or reset_noise_scale < 0 or not np.isfinite(pd_kd) or pd_kd < 0:
             raise ValueError("reset_noise_scale and pd_kd must be finite numbers >= 0")
 
+        self.randomization: RandomizationConfig | None = load_randomization(randomization)
         self.robot_cfg: RobotConfig = load_robot_config(robot)
         self.terrain = Terrain(parse_terrain_spec(terrain))
         self.reward_weights: RewardWeights = dataclass_from_mapping(RewardWeights, reward_weights, "reward_weights")
@@ -198,6 +223,7 @@ class QuadUnevenEnv(gym.Env):
             self.observation_space.high,
         )
         self._last_obs = np.zeros(self.observation_space.shape, dtype=np.float32)
+        self._init_randomization()
         self._last_index_norm = 0.0
         self._start_x = 0.0
         self._warnings_at_reset = 0
@@ -217,6 +243,21 @@ class QuadUnevenEnv(gym.Env):
     def controller(self) -> PhysicsController | None:
         """The physics-rate controller, or None."""
         return self._controller
+
+    @property
+    def total_mass(self) -> float:
+        """kg, the simulated whole-robot mass of this episode (the nominal one unless masses are randomized)."""
+        return self._mass
+
+    @property
+    def episode_draw(self) -> EpisodeDraw:
+        """This episode's drawn world (nominal values where a factor is off)."""
+        return self._draw
+
+    @property
+    def pushes(self) -> list[Push]:
+        """The pushes started so far this episode (start time, impulse, direction, duration, force)."""
+        return self._push_schedule.pushes
 
     def set_controller(self, controller: PhysicsController | Callable[..., np.ndarray] | None) -> None:
         """Install (or remove, with None) the physics-rate controller; takes effect at the next step."""
@@ -246,6 +287,7 @@ class QuadUnevenEnv(gym.Env):
         self._home_joints = self.data.qpos[7:].copy()
         if self.action_mode == "joint_pd":
             self.data.ctrl[:] = self._home_joints
+        self._draw_world()
         mujoco.mj_forward(self.model, self.data)
         self._warnings_at_reset = instability_warnings(self._warning_counts)
         if self._controller is not None and hasattr(self._controller, "reset"):
@@ -255,7 +297,7 @@ class QuadUnevenEnv(gym.Env):
         meas = self._measure()
         self._start_x = float(meas.cog[0])
         self._last_index_norm = meas.index / (self._mass * self._g)
-        self._last_obs = meas.obs.astype(np.float32)
+        self._last_obs = self._observe(meas.obs)
         return self._last_obs.copy(), self._info(meas, terms={}, diverged=False, reason=None)
 
     def _spawn_qpos(self) -> np.ndarray:
@@ -289,27 +331,18 @@ class QuadUnevenEnv(gym.Env):
         x_before = float(self._meas.cog[0])
 
         reason = None
+        segments = self._push_segments()
         if self._controller is not None:
-            lim, ctrl, warnings = self.idx.torque_limit, d.ctrl, self._warning_counts
-            for _ in range(self.frame_skip):
-                mujoco.mj_step1(m, d)
-                if instability_warnings(warnings) > self._warnings_at_reset:
-                    break  # reported below; the controller must not see a garbage state
-                try:
-                    tau = np.asarray(self._controller(m, d, a), dtype=np.float64)
-                except (np.linalg.LinAlgError, ArithmeticError) as err:
-                    reason = f"diverged: controller failed ({type(err).__name__}: {err})"
-                    break
-                if tau.shape != (C.N_JOINTS,) or not clip_finite_into(tau, lim, ctrl):
-                    reason = "diverged: controller returned non-finite or mis-shaped torques"
-                    break
-                mujoco.mj_step2(m, d)  # a bad qacc here is caught by the next check (or the one below)
-        else:
+            reason = self._step_controller(a, segments)
+        elif segments is None and self._latency == 0:
             if self.action_mode == "torque":
                 np.multiply(a, self.idx.torque_limit, out=d.ctrl)
             else:
                 np.clip(self._home_joints + self.pd_action_scale * a, self._joint_lo, self._joint_hi, out=d.ctrl)
             mujoco.mj_step(m, d, self.frame_skip)
+        else:
+            self._step_open_loop(a, segments)
+        self._physics_step += self.frame_skip
 
         # MuJoCo's own checks (mj_checkPos/Vel/Acc) flag NaN, Inf and huge values in qpos, qvel
         # and qacc; with auto-reset disabled the bad state stays for us to see.
@@ -336,13 +369,145 @@ class QuadUnevenEnv(gym.Env):
         reward = float(sum(terms.values()))
         # After a divergence the state is garbage: repeat the last good observation.
         if not diverged:
-            self._last_obs = meas.obs.astype(np.float32)
+            self._last_obs = self._observe(meas.obs)
             self._last_index_norm = index_norm
         obs = self._last_obs.copy()
         info = self._info(meas, terms, diverged, reason)
         if self.render_mode == "human":
             self.render()
         return obs, reward, fell, False, info
+
+    # ------------------------------------------------------------------ physics loops
+    def _step_controller(self, a: np.ndarray, segments: list | None) -> str | None:
+        """``frame_skip`` physics steps under the physics-rate controller; the divergence reason or None.
+
+        With latency k > 0 the torque the controller returns at physics step n is applied at step n + k
+        (a ring of k + 1 commands); pushes set the trunk's ``xfrc_applied`` per step.
+        """
+        m, d = self.model, self.data
+        lim, ctrl, warnings = self.idx.torque_limit, d.ctrl, self._warning_counts
+        k, ring, n = self._latency, self._ctrl_ring, self._physics_step
+        forces = None if segments is None else [f for length, f in segments for _ in range(length)]
+        for j in range(self.frame_skip):
+            if forces is not None and (j == 0 or forces[j] is not forces[j - 1]):
+                self._set_push(forces[j])
+            mujoco.mj_step1(m, d)
+            if instability_warnings(warnings) > self._warnings_at_reset:
+                return None  # reported by the caller; the controller must not see a garbage state
+            try:
+                tau = np.asarray(self._controller(m, d, a), dtype=np.float64)
+            except (np.linalg.LinAlgError, ArithmeticError) as err:
+                return f"diverged: controller failed ({type(err).__name__}: {err})"
+            out = ctrl if k == 0 else ring[(n + j) % (k + 1)]
+            if tau.shape != (C.N_JOINTS,) or not clip_finite_into(tau, lim, out):
+                return "diverged: controller returned non-finite or mis-shaped torques"
+            if k:
+                ctrl[:] = ring[(n + j + 1) % (k + 1)]  # the command of k steps ago
+            mujoco.mj_step2(m, d)  # a bad qacc here is caught by the next check (or the caller's)
+        return None
+
+    def _step_open_loop(self, a: np.ndarray, segments: list | None) -> None:
+        """``frame_skip`` physics steps under action ``a`` with latency and/or pushes, as runs of ``mj_step``.
+
+        The command is constant over the control step, so latency k means: the previous command for the
+        first k physics steps, then this one; pushes split the runs where their force starts or stops.
+        """
+        m, d, cmd = self.model, self.data, self._cmd
+        if self.action_mode == "torque":
+            np.multiply(a, self.idx.torque_limit, out=cmd)
+        else:
+            np.clip(self._home_joints + self.pd_action_scale * a, self._joint_lo, self._joint_hi, out=cmd)
+        k = self._latency
+        runs = [(self.frame_skip, None)] if segments is None else segments
+        j = 0
+        for length, force in runs:
+            self._set_push(force)
+            for start, stop in ((j, min(j + length, k)), (max(j, k), j + length)):
+                if stop > start:
+                    d.ctrl[:] = self._ctrl_prev if start < k else cmd
+                    mujoco.mj_step(m, d, stop - start)
+            j += length
+        self._ctrl_prev[:] = cmd
+
+    def _push_segments(self) -> list | None:
+        """This control step's push runs (see :meth:`PushSchedule.segments`) and its mean push force, or None."""
+        if not self._push_schedule.on:
+            return None
+        segments = self._push_schedule.segments(self.np_random, self._physics_step, self.frame_skip)
+        mean = self._push_force
+        mean[:] = 0.0
+        for length, force in segments:
+            if force is not None:
+                mean += force * (length / self.frame_skip)
+        return segments
+
+    def _set_push(self, force: np.ndarray | None) -> None:
+        """Push force (N, world) on the trunk's centre of mass, zero for None."""
+        f = self.data.xfrc_applied[self.idx.trunk_body, :3]
+        if force is None:
+            f[:] = 0.0
+        else:
+            f[:] = force
+
+    # ------------------------------------------------------------------ randomization
+    def _init_randomization(self) -> None:
+        """Bind the randomizer to the model (after the servos are made: their gains are nominal)."""
+        cfg = self.randomization
+        if cfg is not None and cfg.latency is not None and cfg.latency[1] > self._dt * (1 + 1e-9):
+            raise ValueError(
+                f"randomization.latency must be a [low, high] pair with high <= the control period "
+                f"{self._dt:g} s (frame_skip x timestep), got {list(cfg.latency)}"
+            )
+        self.model_randomizer = ModelRandomizer(self.model, self.idx, servo=self.action_mode == "joint_pd")
+        """writes each episode's draw into ``model`` and restores the nominal model (``restore()``)."""
+        self._push_schedule = PushSchedule(cfg, self.physics_dt)
+        self._push_force = np.zeros(3)
+        self._cmd = np.zeros(C.N_JOINTS)
+        self._ctrl_prev = np.zeros(C.N_JOINTS)
+        self._ctrl_ring = np.zeros((1, C.N_JOINTS))
+        self._physics_step = 0
+        self._latency = 0
+        noise = cfg.observation_noise if cfg is not None else None
+        self._noise_scale = None
+        self._obs_low64 = self.observation_space.low.astype(np.float64)
+        self._obs_high64 = self.observation_space.high.astype(np.float64)
+        if noise is not None and noise.any():
+            self._noise_scale = np.concatenate([np.full(f.size, getattr(noise, f.name)) for f in self._fields])
+        self._draw = self._nominal_draw()
+        self._draw_info = self._draw.as_info()
+
+    def _nominal_draw(self) -> EpisodeDraw:
+        r = self.model_randomizer
+        nominal = draw_episode(
+            None, None, r.nominal_friction, r.nominal_damping, r.nominal_frictionloss, self.physics_dt
+        )
+        return dataclasses.replace(nominal, total_mass=self._mass)
+
+    def _draw_world(self) -> None:
+        """Draw this episode's world from ``np_random`` (after the terrain and the reset noise) and apply it."""
+        cfg, r = self.randomization, self.model_randomizer
+        if cfg is not None:
+            draw = draw_episode(
+                cfg, self.np_random, r.nominal_friction, r.nominal_damping, r.nominal_frictionloss, self.physics_dt
+            )
+            self._draw = r.apply(cfg, draw)
+            self._draw_info = self._draw.as_info()
+            self._mass = self._draw.total_mass
+            self._meas.mass = self._mass
+        k = self._latency = self._draw.latency_steps
+        self._ctrl_ring = np.repeat(self.data.ctrl[None, :], k + 1, axis=0)
+        self._ctrl_prev[:] = self.data.ctrl
+        self._physics_step = 0
+        self._push_force[:] = 0.0
+        self._push_schedule.reset(self.np_random)
+
+    def _observe(self, obs: np.ndarray) -> np.ndarray:
+        """The float32 observation of the measured ``obs``, with this config's noise, clipped to the Box."""
+        if self._noise_scale is None:
+            return obs.astype(np.float32)
+        noisy = obs + self._noise_scale * self.np_random.uniform(-1.0, 1.0, obs.shape[0])
+        np.clip(noisy, self._obs_low64, self._obs_high64, out=noisy)
+        return noisy.astype(np.float32)
 
     # ------------------------------------------------------------------ measurement
     def _measure(self) -> StepMeasurement:
@@ -370,6 +535,8 @@ class QuadUnevenEnv(gym.Env):
             "diverged": diverged,
             "termination_reason": reason,
             "reward_terms": dict(terms),
+            "randomization": dict(self._draw_info),
+            "push_force": self._push_force.copy(),
         }
 
     # ------------------------------------------------------------------ actuators

@@ -28,7 +28,8 @@ class Param:
     """One validated field: terrain parameter or config dataclass field.
 
     ``kind`` is ``"float"``, ``"int"``, ``"bool"``, ``"choice"`` (one of ``choices``), ``"xy"`` (a
-    finite (x, y) pair or None) or ``"array"`` (validated by its owner).
+    finite (x, y) pair or None), ``"range"`` (a ``[low, high]`` pair with low <= high, both within
+    ``lo``/``hi``, or None) or ``"array"`` (validated by its owner).
     """
 
     name: str
@@ -62,12 +63,17 @@ class Param:
             return "a 2-D array or the path of a .npy file"
         if self.kind == "bool":
             return "true or false"
+        if self.kind == "range":
+            return f"null or a [low, high] pair with low <= high, each a number in {self._interval()}"
+        return f"{'integer' if self.kind == 'int' else 'number'} in {self._interval()}"
+
+    def _interval(self) -> str:
+        """The allowed interval of a number, e.g. ``(0, 30]``."""
         lo = "-inf" if self.lo is None else f"{self.lo:g}"
         hi = "inf" if self.hi is None else f"{self.hi:g}"
         left = "(" if self.lo_open or self.lo is None else "["
         right = ")" if self.hi_open or self.hi is None else "]"
-        kind = "integer" if self.kind == "int" else "number"
-        return f"{kind} in {left}{lo}, {hi}{right}"
+        return f"{left}{lo}, {hi}{right}"
 
     def check(self, value: Any, where: str) -> Any:
         """Validated, normalised ``value`` (float, int, bool, str or tuple); ValueError naming ``where.name``.
@@ -93,6 +99,8 @@ class Param:
             if len(pair) != 2 or not all(math.isfinite(v) for v in pair):
                 raise ValueError(f"{field} must be {self.allowed()} (m), got {value!r}")
             return pair
+        if self.kind == "range":
+            return self._check_range(value, field)
         if self.kind == "array":
             return value
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
@@ -105,6 +113,21 @@ class Param:
         if not math.isfinite(v) or not self._in_range(v):
             raise ValueError(f"{field} must be {self._a()}{self._unit()}, got {value!r}")
         return v
+
+    def _check_range(self, value: Any, field: str) -> tuple[float, float] | None:
+        if value is None:
+            return None
+        bad = ValueError(f"{field} must be {self.allowed()}{self._unit()}, got {value!r}")
+        if isinstance(value, str | bytes | Mapping) or not hasattr(value, "__len__") or len(value) != 2:
+            raise bad
+        if any(isinstance(v, bool) or not isinstance(v, numbers.Real) for v in value):
+            raise bad
+        low, high = float(value[0]), float(value[1])
+        if not (math.isfinite(low) and math.isfinite(high)) or low > high:
+            raise bad
+        if not (self._in_range(low) and self._in_range(high)):
+            raise bad
+        return (low, high)
 
     def _a(self) -> str:
         text = self.allowed()
