@@ -72,6 +72,9 @@ from quad_uneven_env.robot.dynamics import BACKENDS
 EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
 """Allowed values of ``ExpertConfig.model``."""
 
+DISTURBANCE_CHECK_EVERY = 5
+"""physics steps between two checks of the base against its plan (``ExpertConfig.recovery``)."""
+
 MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
 
@@ -113,6 +116,14 @@ class ExpertConfig:
     4-sided pyramid inside the cone, mu / sqrt(2) per axis). The nominal floor's is 1.0; 0.5 keeps the
     planned forces inside the cones of floors down to 0.5 (and, with the pyramid's own margin, close to
     0.35 in the worst direction). Unused by "oracle", which takes the simulator's."""
+    recovery: bool = True
+    """replan within the cycle, from the measured state, when the base is pushed off its plan (see
+    ``recovery_velocity``, ``recovery_position``): the new cycle starts with four-leg support, so a foot
+    in the air is put down below where it is, and its COG path starts with the measured velocity."""
+    recovery_velocity: float = param(0.12, "m/s", lo=0.0, lo_open=True)
+    """m/s, > 0: horizontal base velocity error (measured minus planned) that triggers a replan."""
+    recovery_position: float = param(0.04, "m", lo=0.0, lo_open=True)
+    """m, > 0: horizontal base position error that triggers a replan."""
     share_nominal_world: bool = True
     """with "nominal": when the simulated robot's parameters equal the nominal ones exactly (checked at
     every reset), read the dynamics terms from the simulator's data instead of copying the measured
@@ -123,8 +134,12 @@ class ExpertConfig:
         validate_durations(self.durations)
         if not isinstance(self.gains, Gains):
             raise ValueError(f"ExpertConfig.gains must be a Gains, got {self.gains!r}")
+        if not isinstance(self.recovery, bool):
+            raise ValueError(f"ExpertConfig.recovery must be True or False, got {self.recovery!r}")
         if not isinstance(self.share_nominal_world, bool):
-            raise ValueError(f"ExpertConfig.share_nominal_world must be True or False, got {self.share_nominal_world!r}")
+            raise ValueError(
+                f"ExpertConfig.share_nominal_world must be True or False, got {self.share_nominal_world!r}"
+            )
 
 
 _BLAS: list[ThreadpoolController] = []
@@ -205,6 +220,8 @@ class ExpertPolicy:
         self._terrain: Any = None
         self._zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
         self._tau_ok = np.zeros(C.N_JOINTS)
+        self._steps = 0
+        self._calm_after = 0.0  # s (controller time): no disturbance replan before
         self._log_dropped = 0
         self._last_controller_error = ""
 
@@ -230,6 +247,9 @@ class ExpertPolicy:
         self._log_dropped = 0
         self._last_controller_error = ""
         self._tau_ok[:] = 0.0
+        self._steps = 0
+        self._calm_after = 0.0
+        self.recoveries = 0
         nominal = self.nominal
         if nominal is None:  # oracle: the simulator's model, and the friction of its foot-terrain contacts
             self.shares_simulator_data = True
@@ -250,12 +270,17 @@ class ExpertPolicy:
         Never raises: a failing step (logged in :attr:`failure_log`) returns the last good torques.
         """
         try:
+            own = data if self.shares_simulator_data else self.nominal.measure(data.qpos, data.qvel, data.time)  # type: ignore[union-attr]
+            self._steps += 1
+            if self.config.recovery and self._steps % DISTURBANCE_CHECK_EVERY == 0:
+                self._check_disturbance(own)
             if self.shares_simulator_data:
                 tau = self.controller(model, data, action)
             else:
-                own = self.nominal.measure(data.qpos, data.qvel, data.time)  # type: ignore[union-attr]
                 ctrl = self.controller
-                contacts = IK.foot_contact_mask(data.contact.geom, ctrl.foot_of_geom, ctrl.terrain_geom) if data.ncon else 0
+                contacts = (
+                    IK.foot_contact_mask(data.contact.geom, ctrl.foot_of_geom, ctrl.terrain_geom) if data.ncon else 0
+                )
                 tau = ctrl(self._model, own, action, contacts)
             if np.isfinite(tau).all():
                 self._tau_ok[:] = tau
@@ -267,6 +292,30 @@ class ExpertPolicy:
             self._log(f"t={float(data.time):.3f} s: controller failed ({err}); keeping the last good torques")
         self._last_controller_error = err
         return self._tau_ok.copy()
+
+    def _check_disturbance(self, d: mujoco.MjData) -> None:
+        """Replan now from the measured state if the base is off its plan (``ExpertConfig.recovery_*``)."""
+        t = float(d.time) - self.controller.t0
+        if t < self._calm_after or self._row_of is None or t >= self._t_end:
+            return
+        packed = self._row_of(t - self._t_start)
+        if packed is None:
+            return
+        row, cfgx = packed[0], self.config
+        q, v = d.qpos, d.qvel
+        dv = (v[0] - row[7]) ** 2 + (v[1] - row[8]) ** 2
+        dp = (q[0] - row[0]) ** 2 + (q[1] - row[1]) ** 2
+        if dv <= cfgx.recovery_velocity**2 and dp <= cfgx.recovery_position**2:
+            return
+        self.recoveries += 1
+        self._log(
+            f"t={t:.2f} s: base {np.sqrt(dp):.3f} m and {np.sqrt(dv):.2f} m/s off its plan: replanning from the "
+            "measured state"
+        )
+        cog = physics.cog(d, self.env.idx).copy()
+        vel = np.array([v[0], v[1], 0.0])
+        self._start_cycle(t, cog_start={"pos": cog, "vel": vel, "acc": np.zeros(3)}, measured=True)
+        self._calm_after = t + cfgx.durations[0]
 
     def _log(self, message: str) -> None:
         """Append to :attr:`failure_log` (at most ``MAX_FAILURE_LOG`` entries; the rest are counted)."""
@@ -331,12 +380,18 @@ class ExpertPolicy:
         ground = self._terrain.heightfield.height(sites[:, 0], sites[:, 1])
         return np.column_stack([sites[:, :2], ground])
 
-    def _start_cycle(self, t0: float, cog_start: dict | None) -> None:
+    def _start_cycle(self, t0: float, cog_start: dict | None, measured: bool = False) -> None:
+        """Plan the cycle starting at ``t0`` (s) from ``cog_start`` (the previous plan's end; None: the
+        measured COG at rest); ``measured``: ``cog_start`` is the measured COG state (pitch measured too)."""
         d, cfgx = self._data, self.config
         feet = self._measured_footholds()
         previous = getattr(self._current, "pitch", None)
-        pitch_start = previous.end if previous is not None else pitch_of_quaternion(physics.base_quat(d))
-        if cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, self.env.idx)) > 0.05:
+        pitch_start = (
+            previous.end if previous is not None and not measured else pitch_of_quaternion(physics.base_quat(d))
+        )
+        if not measured and (
+            cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, self.env.idx)) > 0.05
+        ):
             # First cycle, after a hold, or drifted: start from the measured COG (and pitch) at rest.
             cog_start = {"pos": physics.cog(d, self.env.idx).copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
             pitch_start = pitch_of_quaternion(physics.base_quat(d))

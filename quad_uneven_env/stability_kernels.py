@@ -7,7 +7,6 @@ import math
 import numba as nb
 import numpy as np
 
-
 MIN_EDGE = 1e-9
 """m: a support polygon edge shorter than this joins coincident feet and is not an edge (see
 :func:`quad_uneven_env.stability.stability_index`)."""

@@ -43,9 +43,8 @@ class NominalModel:
     """
 
     def __init__(self, robot: RobotConfig, terrain: Any, timestep: float) -> None:
-        xml = scene_mjcf(
-            robot, terrain.hfield_asset_xml(), terrain.hfield_geom_xml(robot.friction), PhysicsOptions(timestep=timestep)
-        )
+        hfield = (terrain.hfield_asset_xml(), terrain.hfield_geom_xml(robot.friction))
+        xml = scene_mjcf(robot, *hfield, PhysicsOptions(timestep=timestep))
         self.model = mujoco.MjModel.from_xml_string(xml)
         """the nominal MjModel (contacts disabled)."""
         self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
@@ -74,7 +73,7 @@ class NominalModel:
         return d
 
     def matches(self, model: mujoco.MjModel) -> bool:
-        """True if ``model``'s robot parameters (:data:`ROBOT_PARAMETER_FIELDS`, gravity) equal the nominal ones exactly."""
+        """True if ``model``'s robot parameters (:data:`ROBOT_PARAMETER_FIELDS`, gravity) are the nominal ones."""
         nominal = self.model
         if not np.array_equal(model.opt.gravity, nominal.opt.gravity):
             return False

@@ -85,9 +85,7 @@ def _sb3(path: str, env: gym.Env, algo: str) -> Policy:
         raise PolicyError(str(err)) from None
 
 
-def make_policy(
-    name: str, env: gym.Env, algo: str = "ppo", expert_config: Mapping[str, Any] | None = None
-) -> Policy:
+def make_policy(name: str, env: gym.Env, algo: str = "ppo", expert_config: Mapping[str, Any] | None = None) -> Policy:
     """A policy with SB3's ``predict`` for ``env`` (built with :func:`policy_env_kwargs` of ``name``).
 
     :param name: ``"zero"`` (the zero action), ``"expert"`` (``agents.expert.ExpertPolicy(env)``, which installs
