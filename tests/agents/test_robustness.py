@@ -57,4 +57,3 @@ def test_every_factor_fixes_one_randomization_value():
             load_randomization(f.randomization(v))  # valid for the env
     with pytest.raises(ValueError, match="factor must be one of"):
         robustness_sweep("gravity", "unused")
-
