@@ -20,6 +20,7 @@ from agents.evaluation.metrics import cost_of_transport, stability_metrics, timi
 from agents.evaluation.policies import expert_model_of, make_policy, policy_env_kwargs
 from agents.evaluation.suites import EpisodeTask
 from quad_uneven_env.constants import LEG_NAMES
+from quad_uneven_env.randomization import factor_values
 
 VIDEO_FPS = 25
 """Frames per second of the MP4s (one frame every 1 / VIDEO_FPS s of simulated time: real-time playback)."""
@@ -65,8 +66,13 @@ class EpisodeResult:
 
 
 def make_env(task: EpisodeTask, cfg: EvalConfig, render: bool = False) -> gym.Env:
-    """The QuadUneven-v0 env of ``task`` with the policy's arguments and a time limit of ``cfg.time_limit``."""
+    """The QuadUneven-v0 env of ``task`` with the policy's arguments and a time limit of ``cfg.time_limit``.
+
+    The entry's ``randomization`` (if any) overrides one given in ``cfg.env_kwargs``.
+    """
     kwargs = {**policy_env_kwargs(cfg.policy), **cfg.env_kwargs}
+    if task.randomization is not None:
+        kwargs["randomization"] = task.randomization
     try:
         dt = float(kwargs.get("timestep", 0.002)) * int(kwargs.get("frame_skip", 10))
         steps = max(1, round(cfg.time_limit / dt))
@@ -75,6 +81,17 @@ def make_env(task: EpisodeTask, cfg: EvalConfig, render: bool = False) -> gym.En
     if render:
         kwargs.update(render_mode="rgb_array", width=VIDEO_SIZE[0], height=VIDEO_SIZE[1])
     return gym.make("QuadUneven-v0", terrain={"kind": task.kind, **task.params}, max_episode_steps=steps, **kwargs)
+
+
+def _factors(drawn: dict[str, float] | None, pushes: list[dict[str, Any]]) -> dict[str, float] | None:
+    """One value per randomization factor (the report's grouping), pushes as their count and largest impulse."""
+    if drawn is None:
+        return None
+    return {
+        **factor_values(drawn),
+        "push_count": float(len(pushes)),
+        "push_impulse_max": max((float(p["impulse"]) for p in pushes), default=0.0),
+    }
 
 
 def _end_reason(info: dict[str, Any]) -> str:
@@ -104,7 +121,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     u = env.unwrapped
     policy = make_policy(cfg.policy, env, cfg.algo, cfg.expert_config)
     dt = u.dt
-    mass, g = float(u.idx.total_mass), float(-u.model.opt.gravity[2])
+    g = float(-u.model.opt.gravity[2])
     writer, video_path, frame_every = None, None, max(1, round(1.0 / (VIDEO_FPS * dt)))
     if video:
         import imageio.v2 as iio2
@@ -116,6 +133,8 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
         )
 
     obs, info = env.reset(seed=task.seed)
+    mass = u.total_mass  # kg, this episode's (randomized masses included)
+    drawn = dict(info["randomization"]) if u.randomization is not None else None
     terrain = None
     if task.first_of_entry:
         hf = u.terrain.heightfield
@@ -163,6 +182,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     distance = float(info["distance"])
     sim_time = float(u.data.time)
     failure_log = getattr(policy, "failure_log", None)
+    pushes = [dataclasses.asdict(p) for p in u.pushes]
     record: dict[str, Any] = {
         "index": task.index,
         "entry": task.entry,
@@ -186,6 +206,9 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
         "failure_count": len(failure_log) if failure_log is not None else None,
         "expert_model": expert_model_of(policy),
         "error": error,
+        "randomization": drawn,
+        "factors": _factors(drawn, pushes),
+        "pushes": pushes if drawn is not None else None,
         "video": video_path.name if video_path is not None else None,
         "wall_time": time.perf_counter() - wall0,
     }

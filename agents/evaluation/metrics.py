@@ -147,3 +147,33 @@ def summarize(episodes: Sequence[Mapping[str, Any]], entry_labels: Sequence[str]
         "by_entry": by_entry,
         "overall": group_summary(episodes),
     }
+
+
+FACTOR_BINS = 3
+"""Randomized episodes are split into this many groups of equal size (by value) per factor."""
+
+
+def factor_summary(episodes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Per randomization factor that varies over the randomized episodes: its value range split into
+    :data:`FACTOR_BINS` equal-count groups, each with :func:`group_summary` and its ``low``/``high`` values.
+
+    Uses each episode's ``factors`` (see :func:`quad_uneven_env.randomization.factor_values`); episodes
+    without them (nominal world) are left out; a factor with one value only is skipped.
+    """
+    randomized = [e for e in episodes if e.get("factors")]
+    rows: list[dict[str, Any]] = []
+    for factor in dict.fromkeys(k for e in randomized for k in e["factors"]):
+        values = np.array([float(e["factors"][factor]) for e in randomized])
+        if values.min() == values.max():
+            continue
+        order = np.argsort(values, kind="stable")
+        for group in np.array_split(order, min(FACTOR_BINS, len(order))):
+            rows.append(
+                {
+                    "factor": factor,
+                    "low": float(values[group].min()),
+                    "high": float(values[group].max()),
+                    **group_summary([randomized[i] for i in group]),
+                }
+            )
+    return rows

@@ -59,6 +59,35 @@ def _tables(summary: Mapping[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def _factor_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """By randomization factor: each factor's range in equal-count thirds, with success and index."""
+    if not rows:
+        return []
+    head = "| factor | range | episodes | success rate | mean index (N m) | min index (N m) | end reasons |"
+    lines = [
+        "## By randomization factor",
+        "",
+        "Randomized episodes sorted by each factor's drawn value (motor strength: the weakest joint; damping "
+        "and frictionloss: the mean over the joints; pushes: their count and the largest impulse, N s) and "
+        "split into thirds.",
+        "",
+        head,
+        "|" + "---|" * (head.count("|") - 1),
+    ]
+    for r in rows:
+        cells = [
+            r["factor"],
+            f"{r['low']:.3g} – {r['high']:.3g}",
+            str(r["episodes"]),
+            f"{r['success_rate']:.0%} ({r['successes']})" if r["success_rate"] is not None else "–",
+            _f(r["mean_stability_index"]),
+            _f(r["min_stability_index"]),
+            _reasons(r["end_reasons"]),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
+
 def _episode_table(records: Sequence[Mapping[str, Any]]) -> list[str]:
     head = (
         "| # | entry | seed | success | distance (m) | sim time (s) | speed (m/s) | min index (N m) "
@@ -175,6 +204,7 @@ def write_report(
         "",
         *_targets(results.get("targets", [])),
         *_tables(results["summary"]),
+        *_factor_table(results["summary"].get("by_factor", [])),
         *_failures(records, labels),
         *_episode_table(records),
         "## Plots",

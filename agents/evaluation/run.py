@@ -21,7 +21,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from agents.evaluation.episode import EpisodeResult, EvalConfig, make_env, run_task
-from agents.evaluation.metrics import json_safe, summarize
+from agents.evaluation.metrics import factor_summary, json_safe, summarize
 from agents.evaluation.policies import SB3_ALGOS, PolicyError, make_policy, policy_kind
 from agents.evaluation.report import write_report
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite
@@ -55,13 +55,17 @@ def _run_all(tasks: list[EpisodeTask], cfg: EvalConfig, workers: int, progress: 
     return results  # type: ignore[return-value]
 
 
-def _preflight(task: EpisodeTask, cfg: EvalConfig) -> None:
-    """Build the first episode's env and policy here, so bad env kwargs or policies fail before any worker starts."""
-    env = make_env(task, cfg)
+def _preflight(tasks: list[EpisodeTask], cfg: EvalConfig) -> None:
+    """Build the first episode's env and policy, and every entry's env, here: bad env kwargs, randomization
+    (e.g. a latency beyond the control period) or policies fail before any worker starts."""
+    env = make_env(tasks[0], cfg)
     try:
         make_policy(cfg.policy, env, cfg.algo, cfg.expert_config)
     finally:
         env.close()
+    for t in tasks[1:]:
+        if t.first_of_entry and t.randomization is not None:
+            make_env(t, cfg).close()
 
 
 def _save_traces(episodes: list[EpisodeResult], out: Path) -> None:
@@ -117,11 +121,11 @@ def evaluate(
         video_dir=str(out / "videos") if video else None,
         expert_config=dict(expert_config or {}),
     )
-    _preflight(tasks[0], cfg)
+    _preflight(tasks, cfg)
     runs = _run_all(tasks, cfg, min(workers, len(tasks)), progress)
     records = [json_safe(r.record) for r in runs]
     labels = [e.label for e in suite.terrains]
-    summary = json_safe(summarize(records, labels))
+    summary = json_safe({**summarize(records, labels), "by_factor": factor_summary(records)})
     results = {
         "suite": suite.name,
         "policy": str(policy),
@@ -141,6 +145,7 @@ def evaluate(
                 "expert_config": dict(expert_config or {}),
                 "expert_model": sorted({str(r["expert_model"]) for r in records if r.get("expert_model")}) or None,
                 "entries": labels,
+                "randomization": [e.randomization for e in suite.terrains],
             }
         ),
     }

@@ -1,6 +1,6 @@
 """Terrain suites: named lists of terrains x seeds with a goal distance and a time limit (configs/suites/).
 
-File format (every field required except ``params``; no other fields)::
+File format (every field required except ``params`` and ``randomization``; no other fields)::
 
     name: rough-mild
     goal_distance: 5.0      # m along +x from the spawn point
@@ -8,6 +8,7 @@ File format (every field required except ``params``; no other fields)::
     terrains:
       - kind: rough         # any terrain kind of the environment (docs/terrain.md)
         params: {amplitude: 0.04, wavelength: 0.6}
+        randomization: mild # optional: a preset name or a mapping (docs/randomization.md); default nominal
         seeds: [0, 1, 2, 3, 4]
 
 Terrain parameters are validated by :func:`quad_uneven_env.terrain.parse_terrain_spec`. Errors are
@@ -26,6 +27,7 @@ from typing import Any
 
 from quad_uneven_env.config import CONFIG_DIR, read_yaml, resolve_config_path
 from quad_uneven_env.fields import REQUIRED, Param
+from quad_uneven_env.randomization import load_randomization
 from quad_uneven_env.terrain import TERRAIN_KINDS, parse_terrain_spec
 from quad_uneven_env.terrain.kinds import KINDS
 
@@ -35,8 +37,8 @@ SUITE_DIR = CONFIG_DIR / "suites"
 SUITE_FIELDS = ("name", "goal_distance", "time_limit", "terrains")
 """Top-level fields of a suite file (all required)."""
 
-ENTRY_FIELDS = ("kind", "params", "seeds")
-"""Fields of one ``terrains`` entry (``params`` optional, default ``{}``)."""
+ENTRY_FIELDS = ("kind", "params", "seeds", "randomization")
+"""Fields of one ``terrains`` entry (``params`` optional, default ``{}``; ``randomization`` optional, default None)."""
 
 EXIT_MARGIN = 0.3
 """m: the environment ends an episode whose base comes this close to the grid's edge ("left the terrain")."""
@@ -56,6 +58,8 @@ class TerrainEntry:
     """parameters as written in the file (defaults not filled; JSON-friendly)."""
     seeds: tuple[int, ...]
     """episode seeds (>= 0, distinct): each seeds the env's reset and hence the terrain."""
+    randomization: str | dict[str, Any] | None = None
+    """the env's ``randomization=`` argument as written (a preset name or a mapping; None: the nominal world)."""
 
     @property
     def spec(self) -> dict[str, Any]:
@@ -64,9 +68,12 @@ class TerrainEntry:
 
     @property
     def label(self) -> str:
-        """Short human-readable name, e.g. ``stairs(direction=up)``."""
+        """Short human-readable name, e.g. ``stairs(direction=up)`` or ``rough(amplitude=0.05) + mild``."""
         inner = ", ".join(f"{k}={v}" for k, v in self.params.items())
-        return f"{self.kind}({inner})" if inner else self.kind
+        label = f"{self.kind}({inner})" if inner else self.kind
+        if self.randomization is None:
+            return label
+        return f"{label} + {self.randomization if isinstance(self.randomization, str) else 'randomization'}"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,6 +108,8 @@ class EpisodeTask:
     """env reset seed (the entry's seed plus the seed offset)."""
     first_of_entry: bool
     """True for the entry's first episode (plotted, and filmed with --video)."""
+    randomization: str | dict[str, Any] | None = None
+    """the entry's ``randomization`` (None: the nominal world)."""
 
 
 def suite_names() -> list[str]:
@@ -178,6 +187,15 @@ def _entry(raw: Any, i: int, goal_distance: float) -> TerrainEntry:
     except ValueError as e:
         raise SuiteError(_rename_terrain_error(str(e), i)) from None
     seeds = _seeds(raw["seeds"], f"{where}.seeds")
+    randomization = raw.get("randomization")
+    if randomization is not None:
+        if not isinstance(randomization, str | Mapping):
+            raise SuiteError(f"{where}.randomization must be a preset name or a mapping, got {randomization!r}")
+        try:
+            load_randomization(randomization, f"{where}.randomization")
+        except ValueError as e:
+            raise SuiteError(str(e)) from None
+        randomization = randomization if isinstance(randomization, str) else dict(randomization)
     grid = KINDS[kind].grid(spec.params)
     x_exit = grid.origin[0] + grid.size[0] - EXIT_MARGIN
     if goal_distance >= x_exit:
@@ -186,7 +204,7 @@ def _entry(raw: Any, i: int, goal_distance: float) -> TerrainEntry:
             f"{grid.origin[0] + grid.size[0]:.2f} m and an episode ends once the base passes x = {x_exit:.2f} m "
             f"(lengthen {where}.params.length or shorten goal_distance)"
         )
-    return TerrainEntry(kind, dict(params), seeds)
+    return TerrainEntry(kind, dict(params), seeds, randomization)
 
 
 def suite_from_dict(raw: Mapping[str, Any], source: str = "") -> Suite:
@@ -227,7 +245,7 @@ def episode_tasks(suite: Suite, episodes: int | None = None, seed_offset: int = 
             seed = s + seed_offset
             if seed < 0:
                 raise ValueError(f"seed: offset {seed_offset} makes terrains[{e}] seed {s} negative")
-            tasks.append(EpisodeTask(len(tasks), e, entry.kind, dict(entry.params), seed, k == 0))
+            tasks.append(EpisodeTask(len(tasks), e, entry.kind, dict(entry.params), seed, k == 0, entry.randomization))
     return tasks
 
 

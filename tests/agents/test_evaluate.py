@@ -344,6 +344,8 @@ def test_targets_apply_to_matching_entries_only():
     assert slow[0]["passed"] is False and "mean speed" in slow[0]["why_not"]
     short = check_targets(entries[:1], by_entry[:1], goal_distance=1.0)
     assert short[0]["passed"] is False and "goal" in short[0]["why_not"]
+    randomized = [TerrainEntry("rough", {"amplitude": 0.04}, tuple(range(10)), "mild")]
+    assert check_targets(randomized, by_entry[:1], goal_distance=5.0) == []  # the targets are nominal-world ones
 
 
 class InstrumentedPolicy:
@@ -380,3 +382,44 @@ def test_bad_env_kwargs_fail_before_any_episode(tmp_path, capsys):
     assert "frame_skip" in capsys.readouterr().err
     assert main([*argv, "--env-kwargs", "[1]"]) == 2
     assert "JSON object" in capsys.readouterr().err
+
+
+def test_randomized_entries_record_their_draws_and_the_report_groups_by_factor(tmp_path):
+    spec = {"friction": [0.4, 1.0], "payload_mass": [0.0, 10.0], "latency": [0.0, 0.004]}
+    spec |= {"push_impulse": [5.0, 5.0], "push_interval": [0.5, 0.5], "push_duration": [0.1, 0.1]}
+    suite = write_suite(
+        tmp_path / "r.yaml",
+        terrains=[
+            {"kind": "flat", "seeds": [0]},
+            {"kind": "flat", "randomization": spec, "seeds": [0, 1, 2, 3, 4, 5]},
+        ],
+    )
+    res = evaluate(suite, "zero", tmp_path / "o", progress=False)
+    nominal, *randomized = res["episodes"]
+    assert nominal["randomization"] is None and nominal["factors"] is None and nominal["pushes"] is None
+    frictions = [e["randomization"]["friction"] for e in randomized]
+    assert all(0.4 <= f <= 1.0 for f in frictions) and len(set(frictions)) == 6
+    for e in randomized:
+        assert e["factors"]["total_mass"] == pytest.approx(50.0 + e["randomization"]["payload_mass"])
+        assert e["factors"]["push_count"] == 3.0 and e["pushes"][0]["impulse"] == pytest.approx(5.0)  # 0.5, 1, 1.5 s
+    rows = res["summary"]["by_factor"]
+    assert {r["factor"] for r in rows} == {"friction", "payload_mass", "total_mass", "latency"}
+    friction = [r for r in rows if r["factor"] == "friction"]
+    assert [r["episodes"] for r in friction] == [2, 2, 2] and friction[0]["high"] <= friction[1]["low"]
+    assert res["meta"]["randomization"] == [None, spec]
+    report = (tmp_path / "o" / "report.md").read_text()
+    assert "## By randomization factor" in report and "| friction |" in report
+    assert "+ randomization" in report  # the entry label
+
+
+def test_bad_randomization_of_a_later_entry_fails_before_any_episode(tmp_path, capsys):
+    suite = write_suite(
+        tmp_path / "s.yaml",
+        terrains=[
+            {"kind": "flat", "seeds": [0]},
+            {"kind": "flat", "randomization": {"latency": [0, 0.05]}, "seeds": [0]},
+        ],
+    )
+    argv = ["evaluate", "--policy", "zero", "--suite", str(suite), "--out", str(tmp_path / "o"), "--no-progress"]
+    assert main(argv) == 2
+    assert "randomization.latency" in capsys.readouterr().err

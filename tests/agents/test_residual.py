@@ -127,6 +127,21 @@ def test_sb3_env_checker():
     check_env(gym.make(RESIDUAL_ENV_ID, terrain="rough"), warn=True)
 
 
+@pytest.mark.filterwarnings("ignore:.*different from the unwrapped")
+def test_residual_env_accepts_randomization_and_passes_the_checkers():
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make(RESIDUAL_ENV_ID, terrain="rough", randomization="mild")
+    assert env.unwrapped.randomization.motor_strength == (0.8, 1.2)
+    _, info = env.reset(seed=2)
+    _, _, _, _, step_info = env.step(np.zeros(12, dtype=np.float32))
+    assert list(step_info["randomization"]) == list(info["randomization"])
+    assert step_info["randomization"]["latency_steps"] in (0.0, 1.0, 2.0)
+    check_env(env.unwrapped, skip_render_check=True)
+    with pytest.raises(ValueError, match=r"randomization\.friction"):
+        gym.make(RESIDUAL_ENV_ID, terrain="flat", randomization={"friction": [0.0, 1.0]})
+
+
 def test_registered_id_and_defaults():
     env = gym.make("agents.rl:QuadUnevenResidual-v0", terrain="flat")
     assert env.spec.max_episode_steps == 1000

@@ -53,6 +53,15 @@ def test_target_suites_match_the_issue_targets():
     assert len({e.kind for e in load_suite("mixed").terrains}) >= 4
 
 
+@pytest.mark.parametrize(("name", "preset"), [("robust", "mild"), ("robust_hard", "hard")])
+def test_robust_suites_randomize_rough_and_stairs_with_ten_seeds(name, preset):
+    s = load_suite(name)
+    assert all(e.randomization == preset and len(e.seeds) >= 10 for e in s.terrains)
+    params = [(e.kind, parse_terrain_spec(e.spec).params) for e in s.terrains]
+    assert any(k == "rough" and p["amplitude"] == 0.05 for k, p in params)
+    assert {p["direction"] for k, p in params if k == "stairs" and p["riser"] == 0.08} == {"up", "down"}
+
+
 def test_smoke_suite_is_short():
     s = load_suite("smoke")
     assert s.goal_distance <= 1.0 and all(len(e.seeds) == 1 for e in s.terrains)
@@ -105,6 +114,10 @@ def _mutate(path, value):
         (("terrains", 0, "seeds"), [True], "terrains[0].seeds[0] must be an integer in [0, "),
         (("terrains", 0, "seeds"), [3, 3], "terrains[0].seeds must not repeat a seed"),
         (("terrains", 0, "seeds"), 3, "terrains[0].seeds must be a non-empty list"),
+        (("terrains", 0, "randomization"), "wild", "terrains[0].randomization: unknown randomization config 'wild'"),
+        (("terrains", 0, "randomization"), {"friction": [1, 0]}, "terrains[0].randomization.friction must be"),
+        (("terrains", 0, "randomization"), {"gravity": 1}, "terrains[0].randomization: unknown field(s) ['gravity']"),
+        (("terrains", 0, "randomization"), 3, "terrains[0].randomization must be a preset name or a mapping"),
     ],
 )
 def test_invalid_suites_name_the_field(path, value, expected):
