@@ -270,7 +270,7 @@ def add_robustness_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentP
         help="sweep one factor of the simulated world (others nominal): success rate and stability index curves",
         description="Run the expert (or a policy) on rough terrain for every value of one factor, the rest of the "
         "world nominal; write DIR/robustness_FACTOR.json, DIR/robustness_FACTOR.png and each value's evaluation "
-        "under DIR/FACTOR/VALUE/. Exit code 2 on invalid input.",
+        "under DIR/FACTOR/ (one suite entry per value). Exit code 2 on invalid input.",
     )
     p.add_argument("--factor", required=True, choices=list(FACTORS), help="the factor to sweep")
     p.add_argument("--out", type=Path, required=True, help="output directory DIR")

@@ -1,16 +1,17 @@
 """Robustness curves (``quad-uneven robustness``): sweep one factor of the simulated world, the rest nominal.
 
 For each value of the factor, every seed runs one episode of the policy on one terrain through the
-evaluation machinery (:func:`agents.evaluation.run.evaluate`, with ``randomization`` set to that single
-value: a range ``[v, v]``); the curve is the success rate and the mean stability index against the value.
+evaluation machinery (:func:`agents.evaluation.run.evaluate`: one suite entry per value, its
+``randomization`` fixing the factor at that value, a range ``[v, v]``); the curve is the success rate
+and the mean stability index against the value.
 
 Typical use::
 
     quad-uneven robustness --factor friction --out out/robust --workers 2 --seeds 5
 
 writes ``DIR/robustness_friction.json`` (the numbers), ``DIR/robustness_friction.png`` (the curves) and
-each value's evaluation under ``DIR/friction/<value>/`` (results.json, report.md). Factors, values and
-units: :data:`FACTORS`; docs/robustness.md shows the expert's curves.
+the evaluation itself under ``DIR/friction/`` (results.json, report.md: one suite entry per value).
+Factors, values and units: :data:`FACTORS`; docs/robustness.md shows the expert's curves.
 """
 
 from __future__ import annotations
@@ -114,43 +115,35 @@ def robustness_sweep(
         raise ValueError(f"seeds must be an integer >= 1, got {seeds!r}")
     terrain = dict(terrain or DEFAULT_TERRAIN)
     out = Path(out)
+    randomizations = [f.randomization(v) for v in values]
+    entry = {"kind": terrain["kind"], "params": dict(terrain.get("params", {})), "seeds": list(range(seeds))}
+    suite = suite_from_dict(
+        {
+            "name": f"robustness-{factor}",
+            "goal_distance": goal_distance,
+            "time_limit": time_limit,
+            "terrains": [{**entry, "randomization": r} for r in randomizations],
+        },
+        source=f"robustness {factor}",
+    )
+    # One evaluation, one entry per value: the workers start (and compile the controller) once.
+    results = evaluate(suite, policy, out / factor, workers=workers, expert_config=expert_config, progress=progress)
     points = []
-    for v in values:
-        suite = suite_from_dict(
-            {
-                "name": f"robustness-{factor}-{v:g}",
-                "goal_distance": goal_distance,
-                "time_limit": time_limit,
-                "terrains": [
-                    {"kind": terrain["kind"], "params": dict(terrain.get("params", {})), "seeds": list(range(seeds))}
-                ],
-            },
-            source=f"robustness {factor}={v:g}",
-        )
-        randomization = f.randomization(v)
-        results = evaluate(
-            suite,
-            policy,
-            out / factor / f"{v:g}",
-            workers=workers,
-            env_kwargs={"randomization": randomization},
-            expert_config=expert_config,
-            progress=progress,
-        )
-        overall = results["summary"]["overall"]
-        episodes = results["episodes"]
+    for i, (v, randomization) in enumerate(zip(values, randomizations, strict=True)):
+        group = results["summary"]["by_entry"][i]
+        episodes = [e for e in results["episodes"] if e["entry"] == i]
         points.append(
             {
                 "value": v,
                 "randomization": randomization,
-                "episodes": overall["episodes"],
-                "successes": overall["successes"],
-                "success_rate": overall["success_rate"],
-                "mean_stability_index": overall["mean_stability_index"],
-                "mean_distance": overall["mean_distance"],
+                "episodes": group["episodes"],
+                "successes": group["successes"],
+                "success_rate": group["success_rate"],
+                "mean_stability_index": group["mean_stability_index"],
+                "mean_distance": group["mean_distance"],
                 "errors": sum(1 for e in episodes if e["error"]),
                 "diverged": sum(1 for e in episodes if e["end_reason"] == "diverged"),
-                "end_reasons": overall["end_reasons"],
+                "end_reasons": group["end_reasons"],
             }
         )
     summary = json_safe(

@@ -20,10 +20,11 @@ def test_robustness_command_on_a_tiny_sweep(tmp_path, capsys):
     for p in summary["points"]:
         assert p["episodes"] == 1 and p["errors"] == 0 and 0.0 <= p["success_rate"] <= 1.0
         assert p["randomization"] == {"friction": [p["value"], p["value"]]}
-        # each value is a full evaluation, recorded with the world it ran in and the expert's model
-        results = json.loads((tmp_path / "friction" / f"{p['value']:g}" / "results.json").read_text())
-        assert results["meta"]["env_kwargs"] == {"randomization": p["randomization"]}
-        assert results["episodes"][0]["expert_model"] == "nominal"
+    # one evaluation with an entry per value, each episode recorded with its world and the expert's model
+    results = json.loads((tmp_path / "friction" / "results.json").read_text())
+    assert results["meta"]["randomization"] == [{"friction": [1.0, 1.0]}, {"friction": [0.5, 0.5]}]
+    assert [e["randomization"]["friction"] for e in results["episodes"]] == [1.0, 0.5]
+    assert {e["expert_model"] for e in results["episodes"]} == {"nominal"}
     assert summary["expert_model"] == ["nominal"]
     assert (tmp_path / "robustness_friction.png").stat().st_size > 1000
     assert "friction      0.5: success" in capsys.readouterr().out
