@@ -81,7 +81,17 @@ MAX_FAILURE_LOG = 1000
 
 @dataclasses.dataclass(frozen=True)
 class ExpertConfig:
-    """Gait and control settings of the expert (SI units)."""
+    """Gait and control settings of the expert (SI units), and the nominal assumptions it plans and controls with.
+
+    Nominal assumptions (``model="nominal"``): the robot's masses, inertias and centres of mass are those of
+    the robot configuration the env was built from (``env.unwrapped.robot_cfg``; the paper's robot: 50 kg
+    in all, link COMs as in Table 1), never the simulator's; a payload, scaled links or a
+    shifted COM are disturbances to it. Its friction cones assume ``friction`` (0.5, half the nominal
+    floor's 1.0; the inscribed pyramid's ``friction / sqrt(2)`` = 0.35 per tangent axis is the margin that
+    covers floors down to about 0.35-0.5 depending on the force's direction). Motor strength, joint
+    damping and friction, latency and pushes are not modelled: the feedback and the replanning
+    (``recovery``) absorb them.
+    """
 
     durations: tuple[float, ...] = (0.5, 0.5, 0.5, 0.1, 0.5, 0.5, 0.5)
     """s: the 7 phases of the walk cycle (paper order; the paper uses 1, 1, 1, 0.1, 1, 1, 1)."""

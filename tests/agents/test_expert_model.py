@@ -141,7 +141,7 @@ def test_a_failing_controller_step_keeps_the_last_torques_and_is_logged():
     def broken(*args, **kwargs):
         raise ZeroDivisionError("division by zero")
 
-    policy.controller = type("Broken", (), {"__call__": broken, "foot_of_geom": None, "terrain_geom": 0})()
+    policy.controller = type("Broken", (), {"__call__": broken, "t0": 0.0, "foot_of_geom": None, "terrain_geom": 0})()
     obs, _, _, _, info = env.step(policy.predict(obs)[0])
     assert not info["diverged"]
     np.testing.assert_array_equal(env.unwrapped.data.ctrl, last)
