@@ -113,8 +113,9 @@ class QuadUnevenEnv(gym.Env):
     ``randomization`` (None: the nominal world; a preset name of ``configs/randomization/``, a YAML path or
     a mapping, see :class:`quad_uneven_env.randomization.RandomizationConfig` and docs/randomization.md).
 
-    **Randomization** (``randomization`` not None): drawn at every reset from ``np_random`` after the
-    terrain and the reset noise (so a seed gives the nominal env's terrain and start), written into
+    **Randomization** (``randomization`` not None): drawn at every reset from a child of ``np_random``
+    (``np_random.spawn``: a seed gives the same world on every terrain, and the nominal env's terrain and
+    start), written into
     ``model`` and restored exactly before the next draw. Ground friction, payload and link masses
     (``total_mass`` follows: stability index normalisation, COG acceleration), motor strength and joint
     damping/friction are model parameters; actuation latency delays the applied command (``ctrl``) by k
@@ -433,7 +434,7 @@ class QuadUnevenEnv(gym.Env):
         """This control step's push runs (see :meth:`PushSchedule.segments`) and its mean push force, or None."""
         if not self._push_schedule.on:
             return None
-        segments = self._push_schedule.segments(self.np_random, self._physics_step, self.frame_skip)
+        segments = self._push_schedule.segments(self._world_rng, self._physics_step, self.frame_skip)
         mean = self._push_force
         mean[:] = 0.0
         for length, force in segments:
@@ -467,6 +468,7 @@ class QuadUnevenEnv(gym.Env):
         self._ctrl_ring = np.zeros((1, C.N_JOINTS))
         self._physics_step = 0
         self._latency = 0
+        self._world_rng: np.random.Generator | None = None
         noise = cfg.observation_noise if cfg is not None else None
         self._noise_scale = None
         self._obs_low64 = self.observation_space.low.astype(np.float64)
@@ -484,11 +486,17 @@ class QuadUnevenEnv(gym.Env):
         return dataclasses.replace(nominal, total_mass=self._mass)
 
     def _draw_world(self) -> None:
-        """Draw this episode's world from ``np_random`` (after the terrain and the reset noise) and apply it."""
+        """Draw this episode's world and apply it.
+
+        The draws (the world now, pushes and observation noise during the episode) come from a child of
+        ``np_random`` (``np_random.spawn``): the same seed gives the same world whatever the terrain
+        generator consumed, and the terrain and reset noise are those of the nominal env.
+        """
         cfg, r = self.randomization, self.model_randomizer
         if cfg is not None:
+            self._world_rng = self.np_random.spawn(1)[0]
             draw = draw_episode(
-                cfg, self.np_random, r.nominal_friction, r.nominal_damping, r.nominal_frictionloss, self.physics_dt
+                cfg, self._world_rng, r.nominal_friction, r.nominal_damping, r.nominal_frictionloss, self.physics_dt
             )
             self._draw = r.apply(cfg, draw)
             self._draw_info = self._draw.as_info()
@@ -499,13 +507,13 @@ class QuadUnevenEnv(gym.Env):
         self._ctrl_prev[:] = self.data.ctrl
         self._physics_step = 0
         self._push_force[:] = 0.0
-        self._push_schedule.reset(self.np_random)
+        self._push_schedule.reset(self._world_rng)
 
     def _observe(self, obs: np.ndarray) -> np.ndarray:
         """The float32 observation of the measured ``obs``, with this config's noise, clipped to the Box."""
         if self._noise_scale is None:
             return obs.astype(np.float32)
-        noisy = obs + self._noise_scale * self.np_random.uniform(-1.0, 1.0, obs.shape[0])
+        noisy = obs + self._noise_scale * self._world_rng.uniform(-1.0, 1.0, obs.shape[0])
         np.clip(noisy, self._obs_low64, self._obs_high64, out=noisy)
         return noisy.astype(np.float32)
 

@@ -181,6 +181,9 @@ class RandomizationConfig:
             object.__setattr__(
                 self, "observation_noise", from_mapping(ObservationNoise, noise, "randomization.observation_noise")
             )
+        for axis in "xyz":
+            if getattr(self, f"payload_com_{axis}") is not None and self.payload_mass is None:
+                raise ValueError(f"randomization.payload_com_{axis} needs payload_mass (the payload it places)")
         push = (self.push_impulse, self.push_interval, self.push_duration)
         if any(v is not None for v in push) and any(v is None for v in push):
             missing = [
@@ -201,8 +204,9 @@ class RandomizationConfig:
         return self.push_impulse is not None
 
 
-def load_randomization(spec: str | os.PathLike[str] | Mapping[str, Any] | RandomizationConfig | None,
-                       where: str = "randomization") -> RandomizationConfig | None:  # fmt: skip
+def load_randomization(
+    spec: str | os.PathLike[str] | Mapping[str, Any] | RandomizationConfig | None, where: str = "randomization"
+) -> RandomizationConfig | None:
     """The config of ``spec``: None (nominal world), a preset name (``configs/randomization/NAME.yaml``), a YAML
     path, a mapping of fields, or a config.
 
@@ -258,7 +262,7 @@ class EpisodeDraw:
     physics_dt: float
     """s, the physics timestep (latency = latency_steps x physics_dt)."""
     total_mass: float = math.nan
-    """kg, simulated whole-robot mass after the draw (set by :meth:`ModelRandomizer.draw`)."""
+    """kg, simulated whole-robot mass after the draw (set by :meth:`ModelRandomizer.apply`)."""
 
     def as_info(self) -> dict[str, float]:
         """Flat dict of floats, the same keys for every config (``info["randomization"]``)."""
@@ -282,8 +286,8 @@ class EpisodeDraw:
 def factor_values(info: Mapping[str, float]) -> dict[str, float]:
     """One number per factor from an ``info["randomization"]`` dict (the report's grouping keys).
 
-    ``link_mass`` is the total mass, ``motor_strength`` the weakest joint's gain, damping and friction
-    the means over the joints.
+    ``total_mass`` stands for payload and link masses together, ``motor_strength_min`` is the weakest
+    joint's gain, ``joint_damping_mean`` and ``joint_frictionloss_mean`` the means over the joints.
     """
 
     def joints(prefix: str) -> np.ndarray:
@@ -509,8 +513,8 @@ class PushSchedule:
         self._next = self._start = self._end = 0
         self._force = np.zeros(3)
 
-    def reset(self, rng: np.random.Generator) -> None:
-        """Forget the pushes; draw the first start time."""
+    def reset(self, rng: np.random.Generator | None) -> None:
+        """Forget the pushes; draw the first start time (``rng`` unused, may be None, when pushes are off)."""
         self.pushes = []
         self._start = self._end = 0
         self._next = self._steps(_uniform(rng, self.cfg.push_interval)) if self.on else 1 << 62

@@ -154,20 +154,26 @@ FACTOR_BINS = 3
 
 
 def factor_summary(episodes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Per randomization factor that varies over the randomized episodes: its value range split into
-    :data:`FACTOR_BINS` equal-count groups, each with :func:`group_summary` and its ``low``/``high`` values.
+    """Per randomization factor that varies over the randomized episodes: the episodes in groups by its value,
+    each with :func:`group_summary` and its ``low``/``high`` values.
 
-    Uses each episode's ``factors`` (see :func:`quad_uneven_env.randomization.factor_values`); episodes
-    without them (nominal world) are left out; a factor with one value only is skipped.
+    A factor with at most :data:`FACTOR_BINS` distinct values (latency steps, push counts) gets one group
+    per value; others :data:`FACTOR_BINS` groups of (nearly) equal size in value order. Uses each
+    episode's ``factors`` (see :func:`quad_uneven_env.randomization.factor_values`); episodes without
+    them (nominal world) are left out; a factor with one value only is skipped.
     """
     randomized = [e for e in episodes if e.get("factors")]
     rows: list[dict[str, Any]] = []
     for factor in dict.fromkeys(k for e in randomized for k in e["factors"]):
         values = np.array([float(e["factors"][factor]) for e in randomized])
-        if values.min() == values.max():
+        distinct = np.unique(values)
+        if distinct.size == 1:
             continue
-        order = np.argsort(values, kind="stable")
-        for group in np.array_split(order, min(FACTOR_BINS, len(order))):
+        if distinct.size <= FACTOR_BINS:
+            groups = [np.flatnonzero(values == v) for v in distinct]
+        else:
+            groups = np.array_split(np.argsort(values, kind="stable"), FACTOR_BINS)
+        for group in groups:
             rows.append(
                 {
                     "factor": factor,

@@ -60,31 +60,35 @@ def _tables(summary: Mapping[str, Any]) -> list[str]:
 
 
 def _factor_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
-    """By randomization factor: each factor's range in equal-count thirds, with success and index."""
+    """By randomization factor: one line per factor, its episodes in thirds by drawn value (success, mean index)."""
     if not rows:
         return []
-    head = "| factor | range | episodes | success rate | mean index (N m) | min index (N m) | end reasons |"
+    by_factor: dict[str, list[Mapping[str, Any]]] = {}
+    for r in rows:
+        by_factor.setdefault(r["factor"], []).append(r)
+    n_cols = max(len(v) for v in by_factor.values())
+    names = [f"group {k + 1}" for k in range(n_cols)]
+    names[0], names[-1] = f"{names[0]} (lowest values)", f"{names[-1]} (highest values)"
+    head = "| factor | " + " | ".join(names) + " |"
     lines = [
         "## By randomization factor",
         "",
         "Randomized episodes sorted by each factor's drawn value (motor strength: the weakest joint; damping "
         "and frictionloss: the mean over the joints; pushes: their count and the largest impulse, N s) and "
-        "split into thirds.",
+        "split into thirds (one group per value for factors with at most three values); each cell: value range, "
+        "success rate (successes / episodes), mean index (N m).",
         "",
         head,
         "|" + "---|" * (head.count("|") - 1),
     ]
-    for r in rows:
+    for factor, groups in by_factor.items():
         cells = [
-            r["factor"],
-            f"{r['low']:.3g} – {r['high']:.3g}",
-            str(r["episodes"]),
-            f"{r['success_rate']:.0%} ({r['successes']})" if r["success_rate"] is not None else "–",
-            _f(r["mean_stability_index"]),
-            _f(r["min_stability_index"]),
-            _reasons(r["end_reasons"]),
+            f"{g['low']:.3g}–{g['high']:.3g}: {g['success_rate']:.0%} ({g['successes']}/{g['episodes']}), "
+            f"{_f(g['mean_stability_index'])}"
+            for g in groups
         ]
-        lines.append("| " + " | ".join(cells) + " |")
+        cells += ["–"] * (n_cols - len(cells))
+        lines.append(f"| {factor} | " + " | ".join(cells) + " |")
     return [*lines, ""]
 
 

@@ -425,3 +425,24 @@ def test_bad_randomization_of_a_later_entry_fails_before_any_episode(tmp_path, c
     argv = ["evaluate", "--policy", "zero", "--suite", str(suite), "--out", str(tmp_path / "o"), "--no-progress"]
     assert main(argv) == 2
     assert "randomization.latency" in capsys.readouterr().err
+
+
+def test_factor_summary_groups_by_value_hand_case():
+    from agents.evaluation.metrics import factor_summary
+
+    def record(friction, latency, success):
+        base = {"success": success, "fall_reason": None if success else "fall: tilt 70 deg > 60 deg"}
+        base |= {k: 1.0 for k in ("distance", "mean_speed", "sim_time", "min_stability_index")}
+        base |= {k: 1.0 for k in ("mean_stability_index", "time_index_negative", "cost_of_transport")}
+        base |= {"fraction_index_nonnegative": 1.0, "planner_ms_median": None, "planner_ms_p95": None}
+        return base | {"factors": {"friction": friction, "latency": latency, "payload_mass": 0.0}}
+
+    frictions = [0.9, 0.3, 0.5, 0.4, 0.8, 0.6]
+    records = [record(f, 0.002 * (k % 2), f >= 0.5) for k, f in enumerate(frictions)]
+    records.append({**record(1.0, 0.0, True), "factors": None})  # a nominal episode: left out
+    rows = factor_summary(records)
+    assert {r["factor"] for r in rows} == {"friction", "latency"}  # payload_mass does not vary
+    friction = [(r["low"], r["high"], r["success_rate"]) for r in rows if r["factor"] == "friction"]
+    assert friction == [(0.3, 0.4, 0.0), (0.5, 0.6, 1.0), (0.8, 0.9, 1.0)]
+    latency = [(r["low"], r["episodes"]) for r in rows if r["factor"] == "latency"]
+    assert latency == [(0.0, 3), (0.002, 3)]  # two distinct values: one group each

@@ -58,6 +58,7 @@ def assert_bit_identical(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> 
         ({"joint_damping": [-0.1, 0.0]}, r"randomization\.joint_damping must be"),
         ({"latency": [0.0, 0.03]}, r"randomization\.latency .*control period 0\.02 s"),
         ({"push_impulse": [0.0, 10.0]}, r"randomization\.push_interval is required"),
+        ({"payload_com_y": [0.0, 0.1]}, r"randomization\.payload_com_y needs payload_mass"),
         (
             {"push_impulse": [0.0, 10.0], "push_interval": [0.1, 1.0], "push_duration": [0.1, 0.2]},
             r"randomization\.push_duration .*push_interval low",
@@ -114,6 +115,17 @@ def test_same_seed_same_draw_different_seed_different_draw():
     other = make(randomization="mild")
     _, d = other.reset(seed=5)
     assert d["randomization"] == a["randomization"]
+
+
+def test_a_seed_draws_the_same_world_on_every_terrain():
+    worlds = []
+    for terrain in ("flat", "rough", {"kind": "stairs", "direction": "up"}):
+        _, info = make(terrain=terrain, randomization="mild").reset(seed=21)
+        worlds.append(info["randomization"])
+    assert worlds[0]["friction"] == worlds[1]["friction"] == worlds[2]["friction"]
+    assert {k: v for k, v in worlds[0].items() if k != "total_mass"} == {
+        k: v for k, v in worlds[1].items() if k != "total_mass"
+    }
 
 
 def test_randomized_env_keeps_the_nominal_terrain_and_start_of_its_seed():
