@@ -1,6 +1,7 @@
 """The ``quad-uneven`` command line: every argparse parser of the project, and the thin handlers behind them.
 
-Subcommands: ``demo``, ``evaluate``, ``train``, ``export``, ``paper``, ``plan-paper`` (see ``--help`` of each). The
+Subcommands: ``demo``, ``evaluate``, ``train``, ``export``, ``paper``, ``plan-paper``, ``robustness`` (see
+``--help`` of each). The
 library modules expose typed functions only; this module turns arguments into their calls and their
 errors into one line on stderr with exit code 2: every validation error of the project is a ``ValueError``
 (``SuiteError``, ``PolicyError``, ``EnvArgumentError``, ``TrainConfigError``, ``OutputError``, ...) whose
@@ -379,6 +380,63 @@ def run_plan_paper_command(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------------------------- robustness
+def add_robustness_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``robustness`` subcommand on ``sub``."""
+    from agents.evaluation.robustness import FACTORS
+
+    p = sub.add_parser(
+        "robustness",
+        help="sweep one factor of the simulated world (others nominal): success rate and stability index curves",
+        description="Run the expert (or a policy) on rough terrain for every value of one factor, the rest of the "
+        "world nominal; write DIR/robustness_FACTOR.json, DIR/robustness_FACTOR.png and each value's evaluation "
+        "under DIR/FACTOR/ (one suite entry per value). Exit code 2 on invalid input.",
+    )
+    p.add_argument("--factor", required=True, choices=list(FACTORS), help="the factor to sweep")
+    p.add_argument("--out", type=Path, required=True, help="output directory DIR")
+    p.add_argument("--workers", type=int, default=1, help="parallel episode processes (default 1)")
+    p.add_argument("--seeds", type=int, default=5, help="episodes (seeds 0..N-1) per value (default 5)")
+    p.add_argument("--values", default=None, help="comma-separated values in the factor's unit (default: its sweep)")
+    p.add_argument("--goal", type=float, default=3.0, help="goal distance along +x (m, default 3)")
+    p.add_argument("--policy", default="expert", help="'expert' (default), 'zero' or an SB3 model .zip")
+    p.add_argument("--model", choices=("nominal", "oracle"), default=None, help="the expert's model (default nominal)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_robustness_command)
+    return p
+
+
+def run_robustness_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven robustness``: 0 on success, 2 on invalid input."""
+    from agents.evaluation.robustness import robustness_sweep
+
+    try:
+        values = None if args.values is None else [float(v) for v in args.values.split(",") if v.strip()]
+        if args.workers < 1:
+            raise ValueError(f"--workers must be >= 1, got {args.workers}")
+        summary = robustness_sweep(
+            args.factor,
+            args.out,
+            values=values,
+            seeds=args.seeds,
+            workers=args.workers,
+            policy=args.policy,
+            goal_distance=args.goal,
+            expert_config=None if args.model is None else {"model": args.model},
+            progress=not args.no_progress,
+        )
+    except ValueError as e:  # PolicyError, SuiteError, ... are ValueErrors
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    for pt in summary["points"]:
+        index = pt["mean_stability_index"]
+        print(
+            f"{args.factor} {pt['value']:8g}: success {pt['successes']}/{pt['episodes']}  mean index "
+            f"{index if index is None else round(index, 1)} N m"
+        )
+    print(f"curves: {(Path(args.out) / f'robustness_{args.factor}.png').resolve()}")
+    return 0
+
+
 # ---------------------------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
     """The ``quad-uneven`` parser with every subcommand."""
@@ -386,7 +444,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     for add in (
         add_demo_parser, add_evaluate_parser, add_train_parser, add_export_parser, add_paper_parser,
-        add_plan_paper_parser,
+        add_plan_paper_parser, add_robustness_parser,
     ):  # fmt: skip
         add(sub)
     return parser

@@ -4,9 +4,32 @@
 footholds, COG path, swing paths) heading +x, with the body pitched along the slope of the
 footholds (``ExpertConfig.body_pitch``; the paper keeps it level), and runs the computed-torque
 controller (:class:`agents.control.controller.ComputedTorqueController`) at physics rate through the env's
-control hook. It has **privileged access**: the terrain's height field
-(``env.unwrapped.terrain``) and the full MuJoCo state (COG, foot positions), as a scripted
-expert in simulation may.
+control hook.
+
+*Its own model* (``ExpertConfig.model="nominal"``, the default). The expert plans and controls with
+a nominal model of the robot (:class:`agents.control.nominal.NominalModel`, compiled from the
+robot configuration the env was built from, before any randomization) and nominal assumptions
+(``ExpertConfig``: the configuration's masses and centres of mass, and a friction coefficient
+``friction`` for its cones, with margin below the nominal 1.0). What it reads from the simulator
+is what a robot measures, and nothing else:
+
+- joint angles and velocities (encoders): ``qpos[7:]``, ``qvel[6:]``;
+- base pose and twist (state estimator): ``qpos[:7]`` (position, world; quaternion w, x, y, z)
+  and ``qvel[:6]`` (linear velocity, world; angular velocity, base frame);
+- foot contacts (contact switches), one boolean per foot: whether the foot geom touches the
+  terrain in MuJoCo's contact list of the current step, and the feet's contact sensors' found
+  flags (the same booleans after the previous step's constraint solve) for late touch-downs;
+- the height field as its map (``env.unwrapped.terrain``), and the clock ``data.time``.
+
+Every copy goes into the nominal model's data (:meth:`NominalModel.measure`), whose position and
+velocity stages give the mass matrix, bias forces, foot Jacobians and COG the controller and the
+planner use. The simulator's masses, inertias, friction, motor strength, contact forces and COG
+are never read. When the simulated robot is exactly nominal (checked at every reset by
+:meth:`NominalModel.matches`) and ``share_nominal_world`` is on, the controller reads the same
+terms straight from the simulator's data: they equal the nominal model's bit for bit (tested), and
+the copy would only cost time. ``model="oracle"`` is the expert before it had a model of its own:
+it reads the simulator's live model and data, and its cones use the simulated friction
+(for comparison; never the default).
 
 It follows SB3's ``predict`` protocol so the evaluation code runs it like a learned agent;
 ``predict`` returns the zero action because the work is done in the physics-rate hook (the
@@ -15,7 +38,9 @@ residual RL agent adds its action on top of it).
 When a plan fails (:class:`planners.PlanningError`) the expert degrades: it retries with half
 the stride, then steps in place, then stands still for one cycle (holding the measured pose)
 and replans; every failure is recorded in :attr:`ExpertPolicy.failure_log`. It never raises
-out of a rollout.
+out of a rollout: any other failure of the planner is handled like a failed plan, and a failure
+of the controller at a physics step (logged with its reason) keeps the last good torques for that
+step.
 """
 
 from __future__ import annotations
@@ -29,22 +54,44 @@ import mujoco
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
+from agents.control import inverse_dynamics_kernels as IK
 from agents.control.controller import ComputedTorqueController, Gains
 from agents.control.inverse_dynamics import DISTRIBUTIONS
+from agents.control.nominal import NominalModel
 from planners import PlanningError, Scenario, plan_gait_cycle
 from planners.gait import validate_durations
 from planners.pitch import pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
 from planners.scenario import BODY_PITCH_MODES
 from planners.types import ReferenceSample
+from quad_uneven_env import constants as C
 from quad_uneven_env import physics
 from quad_uneven_env.fields import check_fields, param
 from quad_uneven_env.robot.dynamics import BACKENDS
 
+EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
+"""Allowed values of ``ExpertConfig.model``."""
+
+DISTURBANCE_CHECK_EVERY = 5
+"""physics steps between two checks of the base against its plan (``ExpertConfig.recovery``)."""
+
+MAX_FAILURE_LOG = 1000
+"""At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
+
 
 @dataclasses.dataclass(frozen=True)
 class ExpertConfig:
-    """Gait and control settings of the expert (SI units)."""
+    """Gait and control settings of the expert (SI units), and the nominal assumptions it plans and controls with.
+
+    Nominal assumptions (``model="nominal"``): the robot's masses, inertias and centres of mass are those of
+    the robot configuration the env was built from (``env.unwrapped.robot_cfg``; the paper's robot: 50 kg
+    in all, link COMs as in Table 1), never the simulator's; a payload, scaled links or a
+    shifted COM are disturbances to it. Its friction cones assume ``friction`` (0.5, half the nominal
+    floor's 1.0; the inscribed pyramid's ``friction / sqrt(2)`` = 0.35 per tangent axis is the margin that
+    covers floors down to about 0.35-0.5 depending on the force's direction). Motor strength, joint
+    damping and friction, latency and pushes are not modelled: the feedback and the replanning
+    (``recovery``) absorb them.
+    """
 
     durations: tuple[float, ...] = (0.5, 0.5, 0.5, 0.1, 0.5, 0.5, 0.5)
     """s: the 7 phases of the walk cycle (paper order; the paper uses 1, 1, 1, 0.1, 1, 1, 1)."""
@@ -70,12 +117,39 @@ class ExpertConfig:
     """dynamics backend of the controller."""
     gains: Gains = dataclasses.field(default_factory=Gains)
     """computed-torque gains."""
+    model: str = param("nominal", kind="choice", choices=EXPERT_MODELS)
+    """what the expert plans and controls with: "nominal" (its own model of the nominal robot: the robot
+    configuration's masses, inertias and centres of mass, fed with the measured state only, see the
+    module docstring) or "oracle" (the simulator's live model and state, and its friction in the cones)."""
+    friction: float = param(0.5, "-", lo=0.0, hi=2.0, lo_open=True)
+    """-, in (0, 2]: friction coefficient the nominal model assumes in its "qp" friction cones (the
+    4-sided pyramid inside the cone, mu / sqrt(2) per axis). The nominal floor's is 1.0; 0.5 keeps the
+    planned forces inside the cones of floors down to 0.5 (and, with the pyramid's own margin, close to
+    0.35 in the worst direction). Unused by "oracle", which takes the simulator's."""
+    recovery: bool = True
+    """replan within the cycle, from the measured state, when the base is pushed off its plan (see
+    ``recovery_velocity``, ``recovery_position``): the new cycle starts with four-leg support, so a foot
+    in the air is put down below where it is, and its COG path starts with the measured velocity."""
+    recovery_velocity: float = param(0.12, "m/s", lo=0.0, lo_open=True)
+    """m/s, > 0: horizontal base velocity error (measured minus planned) that triggers a replan."""
+    recovery_position: float = param(0.04, "m", lo=0.0, lo_open=True)
+    """m, > 0: horizontal base position error that triggers a replan."""
+    share_nominal_world: bool = True
+    """with "nominal": when the simulated robot's parameters equal the nominal ones exactly (checked at
+    every reset), read the dynamics terms from the simulator's data instead of copying the measured
+    state into the nominal model: the same numbers bit for bit (tested), about 10 µs a step cheaper."""
 
     def __post_init__(self) -> None:
         check_fields(self)
         validate_durations(self.durations)
         if not isinstance(self.gains, Gains):
             raise ValueError(f"ExpertConfig.gains must be a Gains, got {self.gains!r}")
+        if not isinstance(self.recovery, bool):
+            raise ValueError(f"ExpertConfig.recovery must be True or False, got {self.recovery!r}")
+        if not isinstance(self.share_nominal_world, bool):
+            raise ValueError(
+                f"ExpertConfig.share_nominal_world must be True or False, got {self.share_nominal_world!r}"
+            )
 
 
 _BLAS: list[ThreadpoolController] = []
@@ -125,13 +199,21 @@ class ExpertPolicy:
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
         self._foot_sensor_adr = np.array([int(a) for a in self.env.idx.foot_sensor_adr])
+        self.nominal: NominalModel | None = None
+        """the expert's own model (None with ``model="oracle"``)."""
+        if self.config.model == "nominal":
+            self.nominal = NominalModel(self.cfg, self.env.terrain, self.env.physics_dt)
         self.controller = ComputedTorqueController(
             reference=self._reference,
             reference_row=self._reference_row,
             backend=self.config.backend,
             distribution=self.config.distribution,
             gains=self.config.gains,
+            mu=self.config.friction if self.nominal is not None else None,
         )
+        self.shares_simulator_data = False
+        """this episode's dynamics terms are read from the simulator's data ("oracle", or "nominal" in an
+        exactly nominal world with ``share_nominal_world``); False: from the nominal model's copy."""
         self.planner_times_ms: list[float] = []
         """wall time of every gait-cycle plan (ms)."""
         self.failure_log: list[str] = []
@@ -142,9 +224,16 @@ class ExpertPolicy:
         self._row_of: Any = None
         self._t_start = 0.0
         self._t_end = 0.0
-        self._data: mujoco.MjData | None = None
+        self._data: mujoco.MjData | None = None  # the data the expert plans and controls with
+        self._model: mujoco.MjModel | None = None
+        self._sim: mujoco.MjData | None = None  # the simulator's: measured state and contact flags only
         self._terrain: Any = None
         self._zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+        self._tau_ok = np.zeros(C.N_JOINTS)
+        self._steps = 0
+        self._calm_after = 0.0  # s (controller time): no disturbance replan before
+        self._log_dropped = 0
+        self._last_controller_error = ""
 
     # -------------------------------------------------------------- SB3 protocol
     def predict(
@@ -160,17 +249,90 @@ class ExpertPolicy:
     # -------------------------------------------------------------- env hook
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any) -> None:
         """Called by the env at every reset: plan the first cycle from the measured stand."""
-        self._data = data
+        self._sim = data
         self._terrain = terrain
         self.planner_times_ms.clear()
         self.failure_log.clear()
         self.plans.clear()
-        self.controller.reset(model, data, terrain)
+        self._log_dropped = 0
+        self._last_controller_error = ""
+        self._tau_ok[:] = 0.0
+        self._steps = 0
+        self._calm_after = 0.0
+        self.recoveries = 0
+        nominal = self.nominal
+        if nominal is None:  # oracle: the simulator's model, and the friction of its foot-terrain contacts
+            self.shares_simulator_data = True
+            self.controller.mu = _contact_friction(model)
+            self._model, self._data = model, data
+        else:
+            self.shares_simulator_data = self.config.share_nominal_world and nominal.matches(model)
+            if self.shares_simulator_data:
+                self._model, self._data = model, data
+            else:
+                self._model, self._data = nominal.model, nominal.measure(data.qpos, data.qvel, data.time)
+        self.controller.reset(self._model, self._data, terrain)
         self._start_cycle(0.0, cog_start=None)
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
-        """Joint torques (N m) of the computed-torque controller at the current state."""
-        return self.controller(model, data, action)
+        """Joint torques (N m) of the computed-torque controller at the measured state.
+
+        Never raises: a failing step (logged in :attr:`failure_log`) returns the last good torques.
+        """
+        try:
+            own = data if self.shares_simulator_data else self.nominal.measure(data.qpos, data.qvel, data.time)  # type: ignore[union-attr]
+            self._steps += 1
+            if self.config.recovery and self._steps % DISTURBANCE_CHECK_EVERY == 0:
+                self._check_disturbance(own)
+            if self.shares_simulator_data:
+                tau = self.controller(model, data, action)
+            else:
+                ctrl = self.controller
+                contacts = (
+                    IK.foot_contact_mask(data.contact.geom, ctrl.foot_of_geom, ctrl.terrain_geom) if data.ncon else 0
+                )
+                tau = ctrl(self._model, own, action, contacts)
+            if np.isfinite(tau).all():
+                self._tau_ok[:] = tau
+                return tau
+            err = "non-finite torques"
+        except Exception as exc:  # degrade, never crash a rollout
+            err = f"{type(exc).__name__}: {exc}"
+        if err != self._last_controller_error:  # one entry per run of equal failures
+            self._log(f"t={float(data.time):.3f} s: controller failed ({err}); keeping the last good torques")
+        self._last_controller_error = err
+        return self._tau_ok.copy()
+
+    def _check_disturbance(self, d: mujoco.MjData) -> None:
+        """Replan now from the measured state if the base is off its plan (``ExpertConfig.recovery_*``)."""
+        t = float(d.time) - self.controller.t0
+        if t < self._calm_after or self._row_of is None or t >= self._t_end:
+            return
+        packed = self._row_of(t - self._t_start)
+        if packed is None:
+            return
+        row, cfgx = packed[0], self.config
+        q, v = d.qpos, d.qvel
+        dv = (v[0] - row[7]) ** 2 + (v[1] - row[8]) ** 2
+        dp = (q[0] - row[0]) ** 2 + (q[1] - row[1]) ** 2
+        if dv <= cfgx.recovery_velocity**2 and dp <= cfgx.recovery_position**2:
+            return
+        self.recoveries += 1
+        self._log(
+            f"t={t:.2f} s: base {np.sqrt(dp):.3f} m and {np.sqrt(dv):.2f} m/s off its plan: replanning from the "
+            "measured state"
+        )
+        cog = physics.cog(d, self.env.idx).copy()
+        vel = np.array([v[0], v[1], 0.0])
+        self._start_cycle(t, cog_start={"pos": cog, "vel": vel, "acc": np.zeros(3)}, measured=True)
+        self._calm_after = t + cfgx.durations[0]
+
+    def _log(self, message: str) -> None:
+        """Append to :attr:`failure_log` (at most ``MAX_FAILURE_LOG`` entries; the rest are counted)."""
+        if len(self.failure_log) < MAX_FAILURE_LOG:
+            self.failure_log.append(message)
+        else:
+            self._log_dropped += 1
 
     # -------------------------------------------------------------- planning
     def _reference(self, t: float) -> ReferenceSample:
@@ -188,7 +350,7 @@ class ExpertPolicy:
         if packed is None:
             return None
         planned = packed[1]
-        touch = self._data.sensordata[self._foot_sensor_adr].tolist()
+        touch = self._sim.sensordata[self._foot_sensor_adr].tolist()
         for i in range(4):
             if planned >> i & 1 and touch[i] <= 0:
                 return None
@@ -216,7 +378,7 @@ class ExpertPolicy:
         """
         if not hasattr(self._current, "footholds"):
             return ref
-        sd, stance = self._data.sensordata, ref.stance
+        sd, stance = self._sim.sensordata, ref.stance
         late = [stance[i] and sd[a] <= 0 for i, a in enumerate(self._foot_sensor_adr)]
         if not (late[0] or late[1] or late[2] or late[3]):
             return ref
@@ -228,12 +390,18 @@ class ExpertPolicy:
         ground = self._terrain.heightfield.height(sites[:, 0], sites[:, 1])
         return np.column_stack([sites[:, :2], ground])
 
-    def _start_cycle(self, t0: float, cog_start: dict | None) -> None:
+    def _start_cycle(self, t0: float, cog_start: dict | None, measured: bool = False) -> None:
+        """Plan the cycle starting at ``t0`` (s) from ``cog_start`` (the previous plan's end; None: the
+        measured COG at rest); ``measured``: ``cog_start`` is the measured COG state (pitch measured too)."""
         d, cfgx = self._data, self.config
         feet = self._measured_footholds()
         previous = getattr(self._current, "pitch", None)
-        pitch_start = previous.end if previous is not None else pitch_of_quaternion(physics.base_quat(d))
-        if cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, self.env.idx)) > 0.05:
+        pitch_start = (
+            previous.end if previous is not None and not measured else pitch_of_quaternion(physics.base_quat(d))
+        )
+        if not measured and (
+            cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, self.env.idx)) > 0.05
+        ):
             # First cycle, after a hold, or drifted: start from the measured COG (and pitch) at rest.
             cog_start = {"pos": physics.cog(d, self.env.idx).copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
             pitch_start = pitch_of_quaternion(physics.base_quat(d))
@@ -259,7 +427,10 @@ class ExpertPolicy:
                 with _blas_controller().limit(limits=1, user_api="blas"):
                     plan = plan_gait_cycle(scenario)
             except PlanningError as err:
-                self.failure_log.append(f"t={t0:.2f} s, stride {stride:.3f} m: {err}")
+                self._log(f"t={t0:.2f} s, stride {stride:.3f} m: {err}")
+                continue
+            except Exception as err:  # a planner bug or numerical trouble: handled as a failed plan
+                self._log(f"t={t0:.2f} s, stride {stride:.3f} m: planner failed ({type(err).__name__}: {err})")
                 continue
             finally:
                 self.planner_times_ms.append(1e3 * (time.perf_counter() - tic))
@@ -267,7 +438,7 @@ class ExpertPolicy:
         if plan is None:
             qpos = d.qpos.copy()
             hold = _HoldReference(qpos, float(sum(cfgx.durations)))
-            self.failure_log.append(f"t={t0:.2f} s: no feasible plan, standing still for {hold.duration:.2f} s")
+            self._log(f"t={t0:.2f} s: no feasible plan, standing still for {hold.duration:.2f} s")
             self._current, self._current_ref = hold, hold
             duration = hold.duration
         else:
@@ -278,7 +449,13 @@ class ExpertPolicy:
         self._t_start, self._t_end = t0, t0 + duration
 
 
-__all__ = ["ExpertConfig", "ExpertPolicy"]
+def _contact_friction(model: mujoco.MjModel) -> float:
+    """Sliding friction of a foot-terrain contact in ``model`` (MuJoCo's default mix: the larger of the two geoms')."""
+    foot = float(model.geom_friction[model.geom(C.FOOT_GEOMS[0]).id, 0])
+    return max(foot, float(model.geom_friction[model.geom(C.TERRAIN_GEOM).id, 0]))
+
+
+__all__ = ["EXPERT_MODELS", "ExpertConfig", "ExpertPolicy", "attach_expert"]
 
 
 def attach_expert(env: gym.Env, config: ExpertConfig | None = None) -> ExpertPolicy:

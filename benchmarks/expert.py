@@ -6,7 +6,9 @@ computed-torque controller at every 2 ms physics step, through QuadUneven-v0's h
 (restarted every 2 s so it keeps simulating contacts rather than a pile on the ground).
 Targets: expert >= 0.5 x the zero-torque rate and >= 10 x real time.
 
-Usage: ``python benchmarks/expert.py [--seconds 30] [--terrain rough]``.
+Usage: ``python benchmarks/expert.py [--seconds 30] [--terrain rough] [--model nominal|oracle] [--copy]``
+(``--copy``: the nominal expert copies the measured state into its own model every physics step even in
+the nominal world, as it does whenever the simulated robot differs from the nominal one).
 """
 
 from __future__ import annotations
@@ -28,12 +30,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seconds", type=float, default=30.0, help="simulated seconds of walking")
     parser.add_argument("--terrain", default="rough")
     parser.add_argument("--distribution", default="qp", choices=["qp", "pinv"])
+    parser.add_argument("--model", default="nominal", choices=["nominal", "oracle"])
+    parser.add_argument("--copy", action="store_true", help="never share the simulator's data (nominal model)")
     args = parser.parse_args(argv)
 
     from agents.expert import ExpertConfig
 
     env = gym.make("QuadUneven-v0", terrain=args.terrain, max_episode_steps=10**7)
-    policy = attach_expert(env, ExpertConfig(distribution=args.distribution))
+    config = ExpertConfig(distribution=args.distribution, model=args.model, share_nominal_world=not args.copy)
+    policy = attach_expert(env, config)
     # Warm-up: numba kernels compile on first use; keep that out of the timing.
     obs, _ = env.reset(seed=1)
     for _ in range(5):
@@ -70,7 +75,10 @@ def main(argv: list[str] | None = None) -> None:
         done += k
     rate_expert = sim_expert / wall_expert
     rate_zero = sim_expert / wall_zero
-    print(f"terrain {args.terrain}, distribution {args.distribution}, {sim_expert:.1f} s simulated")
+    print(
+        f"terrain {args.terrain}, distribution {args.distribution}, model {args.model} "
+        f"({'simulator data shared' if policy.shares_simulator_data else 'own copy'}), {sim_expert:.1f} s simulated"
+    )
     print(f"expert walked {info['cog'][0] - x0:.2f} m, ended: {info['termination_reason'] or 'no fall'}")
     print(f"{'':34s} {'sim s / wall s':>15s}")
     print(f"{'expert in the loop':34s} {rate_expert:15.1f}")

@@ -8,6 +8,7 @@ equal to it.
 from agents.control.controller import STANCE_MODES, ComputedTorqueController, Gains
 from agents.control.elimination import ProjectedDynamics, eliminate_constraints
 from agents.control.inverse_dynamics import DISTRIBUTIONS, IDResult, InverseDynamics, friction_pyramid
+from agents.control.nominal import NominalModel
 from agents.control.verify import IDCheck, verify_inverse_dynamics
 
 __all__ = [
@@ -18,6 +19,7 @@ __all__ = [
     "IDCheck",
     "IDResult",
     "InverseDynamics",
+    "NominalModel",
     "ProjectedDynamics",
     "eliminate_constraints",
     "friction_pyramid",

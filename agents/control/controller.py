@@ -122,6 +122,7 @@ class ComputedTorqueController:
         ``planned`` its stance bitmask, or None where only ``reference`` applies. With the
         "mujoco" backend the controller then runs one compiled call per step
         (:class:`agents.control.fast_path.FastControlStep`) and gives the same torques.
+    :param mu: friction coefficient of the "qp" cones (-); None: the model's foot friction.
     """
 
     def __init__(
@@ -133,6 +134,7 @@ class ComputedTorqueController:
         stance_mode: str = "both",
         min_normal_force: float = 5.0,
         reference_row: Callable[[float], tuple[np.ndarray, int] | None] | None = None,
+        mu: float | None = None,
     ) -> None:
         if distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {distribution!r}")
@@ -145,6 +147,9 @@ class ComputedTorqueController:
         self.gains = gains or Gains()
         self.stance_mode = stance_mode
         self.min_normal_force = float(min_normal_force)
+        if mu is not None and not mu > 0:
+            raise ValueError(f"mu must be > 0 (friction coefficient of the cones), got {mu!r}")
+        self.mu = mu
         self.t0 = 0.0
         self.terrain: Any = None
         self._model: mujoco.MjModel | None = None
@@ -186,7 +191,7 @@ class ComputedTorqueController:
     def _bind(self, model: mujoco.MjModel) -> None:
         self._model = model
         self.dynamics = make_dynamics(self.backend, model)
-        self.id = InverseDynamics(self.dynamics, self.distribution, min_normal_force=self.min_normal_force)
+        self.id = InverseDynamics(self.dynamics, self.distribution, mu=self.mu, min_normal_force=self.min_normal_force)
         act = [model.actuator(a).id for a in C.ACTUATOR_NAMES]
         if [int(model.actuator_trnid[a, 0]) for a in act] != [model.joint(j).id for j in C.JOINT_NAMES]:
             raise ValueError("actuators must drive the joints in JOINT_NAMES order")
@@ -218,21 +223,36 @@ class ComputedTorqueController:
         self._last = None
 
     # ------------------------------------------------------------------ control law
-    def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray | None = None) -> np.ndarray:
-        """Joint torques (12, N m, clipped to the motor limits) at ``data``'s state (after mj_step1)."""
+    def __call__(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        action: np.ndarray | None = None,
+        contacts: int | None = None,
+    ) -> np.ndarray:
+        """Joint torques (12, N m, clipped to the motor limits) at ``data``'s state (after mj_step1).
+
+        :param contacts: bitmask of the feet measured in contact (bit i: leg i); None: from ``data.contact``.
+        """
         if model is not self._model:
             self._bind(model)
         t = float(data.time) - self.t0
         if self.reference_row is not None and self._fast is not None:
             packed = self.reference_row(t)
             if packed is not None:
-                fast = self._fast.step(data, self.terrain, self._gains, STANCE_MODES.index(self.stance_mode), *packed)
+                fast = self._fast.step(
+                    data, self.terrain, self._gains, STANCE_MODES.index(self.stance_mode), *packed,
+                    -1 if contacts is None else contacts,
+                )  # fmt: skip
                 if fast is not None:
                     tau, self._last = fast
                     self._last_reference = PackedReference(t, *packed)
                     return tau
         ref = self.reference(t)
-        meas = K.foot_contact_mask(data.contact.geom, self.foot_of_geom, self.terrain_geom) if data.ncon else 0
+        if contacts is not None:
+            meas = contacts
+        else:
+            meas = K.foot_contact_mask(data.contact.geom, self.foot_of_geom, self.terrain_geom) if data.ncon else 0
         try:
             stance = self._stance_memo[(ref.stance, meas, self.stance_mode)]
         except (KeyError, TypeError):

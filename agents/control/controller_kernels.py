@@ -46,7 +46,7 @@ def select_stance_mask(planned, measured, mode):  # pragma: no cover - compiled
 
 @nb.njit(cache=False, nogil=True)
 def control_step(
-    row, planned, stance_mode, contact_geom, foot_of_geom, terrain_geom,
+    row, planned, stance_mode, contact_geom, foot_of_geom, terrain_geom, measured,
     qpos, qvel, gains, bdd,
     M_csr, rowadr, rownnz, colind, xpos, xmat, xanchor, xaxis, site_xpos, subtree_com, idx, par,
     M, J, Jdd, G, h, inv_sigma, damping, tau, F, qacc, r, Jinv, S,
@@ -56,7 +56,8 @@ def control_step(
     """Stance, PD command, dynamics terms, pinv inverse dynamics and foot normals at one physics step.
 
     Inputs as the kernels it calls: ``row`` a packed reference (55,), ``planned`` its stance
-    bitmask, ``stance_mode`` a ``STANCE_*`` code; MuJoCo arrays after ``mj_step1``; ``tau, F,
+    bitmask, ``stance_mode`` a ``STANCE_*`` code; ``measured`` the bitmask of feet in contact, or -1
+    to read it from the contact list ``contact_geom``; MuJoCo arrays after ``mj_step1``; ``tau, F,
     qacc, r, Jinv, S`` the inverse-dynamics outputs; ``normals`` (4, 3) is written when
     ``hf_flat`` is not empty. With normals and ``mu > 0`` the pinv forces are also checked
     against the stance legs' friction pyramids (written into ``cones``, (4, 5, 3)) with the
@@ -66,7 +67,7 @@ def control_step(
     :func:`agents.control.inverse_dynamics_kernels.id_pinv`; a negative value when an input has the wrong size
     (the caller then takes the general path, which names it).
     """
-    meas = K.foot_contact_mask(contact_geom, foot_of_geom, terrain_geom)
+    meas = K.foot_contact_mask(contact_geom, foot_of_geom, terrain_geom) if measured < 0 else measured
     mask = select_stance_mask(planned, meas, stance_mode)
     n_beta = K.beta_command(
         qpos, qvel, row[0:3], row[3:7], row[7:10], row[10:13], row[13:16], row[16:19],

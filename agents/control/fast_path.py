@@ -82,19 +82,27 @@ class FastControlStep:
         self._cache: tuple | None = None
 
     def step(
-        self, data: mujoco.MjData, terrain: Any, gains: np.ndarray, stance_mode: int, row: np.ndarray, planned: int
+        self,
+        data: mujoco.MjData,
+        terrain: Any,
+        gains: np.ndarray,
+        stance_mode: int,
+        row: np.ndarray,
+        planned: int,
+        measured: int = -1,
     ) -> tuple[np.ndarray, IDResult | WorkspaceResult] | None:
         """Torques (12, N m, clipped) and the solution at ``data`` (after ``mj_step1``), or None (readable path).
 
         :param gains: (6,) kp/kd of position, rotation and joints (``ComputedTorqueController``'s array).
         :param stance_mode: index into ``STANCE_MODES`` (``controller_kernels.STANCE_*``).
         :param row: (55,) packed reference; ``planned`` its stance bitmask.
+        :param measured: bitmask of the feet in contact (bit i: leg i), or -1: from ``data.contact``.
         """
         tail, normals = self._arguments(data, terrain, gains)
         self.id.workspace_version += 1  # control_step rewrites the inverse-dynamics buffers
         try:
             code = FK.control_step(
-                row, planned, stance_mode, data.contact.geom, self.foot_of_geom, self.terrain_geom, *tail
+                row, planned, stance_mode, data.contact.geom, self.foot_of_geom, self.terrain_geom, measured, *tail
             )
         except TypeError:  # arrays the kernel does not take (numba dispatch): the readable path
             return None

@@ -17,7 +17,7 @@ import numpy as np
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.evaluation.metrics import cost_of_transport, stability_metrics, timing_metrics
-from agents.evaluation.policies import make_policy, policy_env_kwargs
+from agents.evaluation.policies import expert_model_of, make_policy, policy_env_kwargs
 from agents.evaluation.suites import EpisodeTask
 from quad_uneven_env.constants import LEG_NAMES
 from quad_uneven_env.randomization import factor_values
@@ -90,6 +90,8 @@ class EvalConfig:
     """s of wall-clock time per episode (env and policy construction included); the episode then ends."""
     allow_pickle: bool = False
     """load pickled files of a model folder (they can run code: trusted files only)."""
+    expert_config: dict[str, Any] = dataclasses.field(default_factory=dict)
+    """fields of :class:`agents.expert.ExpertConfig` for the ``"expert"`` policy (e.g. ``{"model": "oracle"}``)."""
 
 
 @dataclasses.dataclass
@@ -160,7 +162,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     video = cfg.video_dir is not None and task.first_of_entry
     env = make_env(task, cfg, render=video)
     u = env.unwrapped
-    policy = make_policy(cfg.policy, env, cfg.algo, cfg.allow_pickle)
+    policy = make_policy(cfg.policy, env, cfg.algo, cfg.allow_pickle, cfg.expert_config)
     dt = u.dt
     g = float(-u.model.opt.gravity[2])
     writer, video_path, frame_every = None, None, max(1, round(1.0 / (VIDEO_FPS * dt)))
@@ -248,6 +250,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
         **timing_metrics(getattr(policy, "planner_times_ms", None)),
         "failure_log": [str(s) for s in failure_log[:MAX_FAILURE_LOG]] if failure_log is not None else None,
         "failure_count": len(failure_log) if failure_log is not None else None,
+        "expert_model": expert_model_of(policy),
         "error": error,
         "randomization": drawn,
         "factors": _factors(drawn, pushes),

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 
 from agents.policy import Policy, ZeroActionPolicy
+from quad_uneven_env.fields import from_mapping
 
 POLICY_ENV_KWARGS: dict[str, dict[str, Any]] = {
     # The zero action in joint_pd mode holds the standing pose.
@@ -57,10 +59,17 @@ def policy_env_kwargs(name: str) -> dict[str, Any]:
     return kwargs
 
 
-def _expert(env: gym.Env) -> Policy:
-    from agents.expert import attach_expert  # deferred: compiling the controller's kernels takes seconds
+def _expert(env: gym.Env, expert_config: Mapping[str, Any] | None) -> Policy:
+    from agents.expert import ExpertConfig, attach_expert  # deferred: compiling the kernels takes seconds
 
-    return attach_expert(env)
+    config = from_mapping(ExpertConfig, expert_config, "expert_config") if expert_config else None
+    return attach_expert(env, config)
+
+
+def expert_model_of(policy: Any) -> str | None:
+    """``"nominal"`` or ``"oracle"``: the model the expert in ``policy`` plans and controls with (None: no expert)."""
+    expert = getattr(policy, "expert", policy)
+    return getattr(getattr(expert, "config", None), "model", None)
 
 
 def _sb3(path: str, env: gym.Env, algo: str, allow_pickle: bool) -> Policy:
@@ -76,7 +85,13 @@ def _sb3(path: str, env: gym.Env, algo: str, allow_pickle: bool) -> Policy:
         raise PolicyError(str(err)) from None
 
 
-def make_policy(name: str, env: gym.Env, algo: str = "ppo", allow_pickle: bool = False) -> Policy:
+def make_policy(
+    name: str,
+    env: gym.Env,
+    algo: str = "ppo",
+    allow_pickle: bool = False,
+    expert_config: Mapping[str, Any] | None = None,
+) -> Policy:
     """A policy with SB3's ``predict`` for ``env`` (built with :func:`policy_env_kwargs` of ``name``).
 
     :param name: ``"zero"`` (the zero action), ``"expert"`` (``agents.expert.ExpertPolicy(env)``, which installs
@@ -84,11 +99,13 @@ def make_policy(name: str, env: gym.Env, algo: str = "ppo", allow_pickle: bool =
         model, per its ``rl_meta.json``, installs the expert plus residual: :mod:`agents.rl.model_io`).
     :param algo: ``"ppo"`` or ``"sac"``: the class an SB3 model file is loaded with.
     :param allow_pickle: unpickle files of the model folder (trusted files only; default: refused).
+    :param expert_config: fields of :class:`agents.expert.ExpertConfig` for ``"expert"`` (e.g.
+        ``{"model": "oracle"}``); None: the defaults.
     :raises PolicyError: on an unknown name, a missing model file or expert module, or an unknown algo.
     """
     kind = policy_kind(name)
     if kind == "zero":
         return ZeroActionPolicy(env.action_space)
     if kind == "expert":
-        return _expert(env)
+        return _expert(env, expert_config)
     return _sb3(name, env, algo, allow_pickle)

@@ -105,7 +105,7 @@ def _preflight(tasks: list[EpisodeTask], cfg: EvalConfig) -> None:
 
     env = build(tasks[0])
     try:
-        make_policy(cfg.policy, env, cfg.algo, cfg.allow_pickle)
+        make_policy(cfg.policy, env, cfg.algo, cfg.allow_pickle, cfg.expert_config)
     finally:
         env.close()
     for t in tasks[1:]:
@@ -141,6 +141,7 @@ def evaluate(
     overwrite: bool = False,
     wall_time_limit: float = DEFAULT_WALL_TIME_LIMIT,
     allow_pickle: bool = False,
+    expert_config: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Run ``policy`` on every (terrain entry, seed) of ``suite``; write ``out/results.json``, ``report.md``, PNGs.
 
@@ -159,6 +160,8 @@ def evaluate(
     :param overwrite: delete an earlier run's outputs in ``out`` first (other files are kept).
     :param wall_time_limit: s of wall-clock time per episode before it is ended (``wall_time_limit``).
     :param allow_pickle: unpickle files of an SB3 model folder (trusted files only).
+    :param expert_config: fields of :class:`agents.expert.ExpertConfig` for ``policy="expert"``, e.g.
+        ``{"model": "oracle"}`` (None: the defaults; a residual model keeps the expert of its training).
     :return: the results.json content.
     :raises SuiteError: on an invalid suite; ``PolicyError`` on an unusable policy; ``EnvArgumentError`` on env
         arguments the environment rejects; ``OutputError`` on an unusable ``out`` (a file, an earlier run's
@@ -188,6 +191,7 @@ def evaluate(
         video_dir=str(out / "videos") if video else None,
         wall_time_limit=float(wall_time_limit),
         allow_pickle=allow_pickle,
+        expert_config=dict(expert_config or {}),
     )
     _preflight(tasks, cfg)
     if not resuming:
@@ -220,6 +224,8 @@ def evaluate(
         "env_kwargs": env_kwargs,
         "entries": [e.label for e in suite.terrains],
         "randomization": [e.randomization for e in suite.terrains],
+        "expert_config": dict(expert_config or {}),
+        "expert_model": sorted({str(r["expert_model"]) for r in records if r.get("expert_model")}) or None,
         "wall_time_limit": float(wall_time_limit),
         "resumed_episodes": len(tasks) - len(todo),
     }

@@ -211,7 +211,7 @@ class LeanForward:
 
 
 def test_goal_ends_the_episode_as_a_success(monkeypatch):
-    monkeypatch.setattr(evaluate_episode, "make_policy", lambda name, env, algo, allow_pickle=False: LeanForward())
+    monkeypatch.setattr(evaluate_episode, "make_policy", lambda *args, **kwargs: LeanForward())
     task = EpisodeTask(0, 0, "flat", {}, 0, True)
     res = run_task(task, EvalConfig("zero", goal_distance=0.05, time_limit=2.0))
     r = res.record
@@ -239,7 +239,7 @@ def test_policy_exception_does_not_crash_the_evaluation(monkeypatch):
         def predict(self, observation, state=None, episode_start=None, deterministic=True):
             raise RuntimeError("boom")
 
-    monkeypatch.setattr(evaluate_episode, "make_policy", lambda name, env, algo, allow_pickle=False: Broken())
+    monkeypatch.setattr(evaluate_episode, "make_policy", lambda *args, **kwargs: Broken())
     r = run_task(EpisodeTask(0, 0, "flat", {}, 0, False), EvalConfig("zero", 1.0, 1.0)).record
     assert r["end_reason"] == "error" and "boom" in r["fall_reason"] and r["success"] is False
 
@@ -363,7 +363,9 @@ class InstrumentedPolicy:
 
 def test_policy_timings_failure_log_and_phase_are_recorded(monkeypatch):
     monkeypatch.setattr(
-        evaluate_episode, "make_policy", lambda name, env, algo, allow_pickle=False: InstrumentedPolicy(env)
+        evaluate_episode,
+        "make_policy",
+        lambda name, env, *args, **kwargs: InstrumentedPolicy(env),
     )
     r = run_task(EpisodeTask(0, 0, "flat", {}, 0, False), EvalConfig("zero", 1.0, 0.1)).record
     assert r["planner_ms_median"] == pytest.approx(2.5)

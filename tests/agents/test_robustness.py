@@ -1,0 +1,60 @@
+"""The robustness command: a sweep of one factor through the evaluation machinery, its JSON and curves."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from agents.cli import main
+from agents.evaluation.robustness import FACTORS, robustness_sweep
+
+
+@pytest.mark.slow  # ~40 s: two evaluations of the expert (most of it compiling the controller's kernels)
+def test_robustness_command_on_a_tiny_sweep(tmp_path, capsys):
+    code = main(["robustness", "--factor", "friction", "--values", "1.0,0.5", "--seeds", "1", "--goal", "0.2",
+                 "--out", str(tmp_path), "--no-progress"])  # fmt: skip
+    assert code == 0
+    summary = json.loads((tmp_path / "robustness_friction.json").read_text())
+    assert [p["value"] for p in summary["points"]] == [1.0, 0.5]
+    for p in summary["points"]:
+        assert p["episodes"] == 1 and p["errors"] == 0 and 0.0 <= p["success_rate"] <= 1.0
+        assert p["randomization"] == {"friction": [p["value"], p["value"]]}
+    # one evaluation with an entry per value, each episode recorded with its world and the expert's model
+    results = json.loads((tmp_path / "friction" / "results.json").read_text())
+    assert results["meta"]["randomization"] == [{"friction": [1.0, 1.0]}, {"friction": [0.5, 0.5]}]
+    assert [e["randomization"]["friction"] for e in results["episodes"]] == [1.0, 0.5]
+    assert {e["expert_model"] for e in results["episodes"]} == {"nominal"}
+    assert summary["expert_model"] == ["nominal"]
+    assert (tmp_path / "robustness_friction.png").stat().st_size > 1000
+    assert "friction      0.5: success" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--factor", "push", "--values", "a,b"], "could not convert"),
+        (["--factor", "push", "--seeds", "0"], "seeds must be an integer >= 1"),
+        (["--factor", "latency", "--workers", "0"], "--workers must be >= 1"),
+    ],
+)
+def test_robustness_command_rejects_bad_input(tmp_path, capsys, argv, message):
+    assert main(["robustness", *argv, "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_robustness_command_rejects_an_unknown_factor(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["robustness", "--factor", "gravity", "--out", str(tmp_path)])
+    assert exc.value.code == 2 and "invalid choice" in capsys.readouterr().err
+
+
+def test_every_factor_fixes_one_randomization_value():
+    from quad_uneven_env.randomization import load_randomization
+
+    for f in FACTORS.values():
+        for v in f.values:
+            load_randomization(f.randomization(v))  # valid for the env
+    with pytest.raises(ValueError, match="factor must be one of"):
+        robustness_sweep("gravity", "unused")
