@@ -141,7 +141,7 @@ def measure_ppo(env_id: str, steps: int, seed: int = RANDOM_SEED, **kwargs) -> d
     from stable_baselines3.common.env_util import make_vec_env
 
     if env_id.startswith("QuadUnevenResidual"):
-        import agents.residual  # noqa: F401  (registers QuadUnevenResidual-v0)
+        import agents.rl  # noqa: F401  (registers QuadUnevenResidual-v0)
     torch.set_num_threads(1)
     venv = make_vec_env(env_id, n_envs=2, seed=seed, env_kwargs=kwargs)
     # configs/rl/ppo_residual.yaml's hyperparameters, n_steps shortened so a short run holds 2 updates.
