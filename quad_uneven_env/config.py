@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from quad_uneven_env.fields import Param, check_fields, from_mapping, param
+from quad_uneven_env.fields import Param, check_fields, param
 
 CONFIG_DIR = Path(os.environ.get("QUAD_UNEVEN_CONFIGS", Path(__file__).resolve().parents[1] / "configs"))
 """Directory of the shipped YAML configs (override with ``$QUAD_UNEVEN_CONFIGS``)."""
@@ -300,8 +300,3 @@ class HeightScanConfig:
     def shape(self) -> tuple[int, int]:
         """(nx, ny) points of the grid."""
         return (round(self.size_x / self.resolution) + 1, round(self.size_y / self.resolution) + 1)
-
-
-def dataclass_from_mapping(cls: type, raw: Mapping[str, Any] | None, where: str) -> Any:
-    """Alias of :func:`quad_uneven_env.fields.from_mapping` (the env's ``reward_weights=``, ``termination=``, ...)."""
-    return from_mapping(cls, raw, where)

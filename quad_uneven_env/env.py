@@ -21,10 +21,9 @@ from quad_uneven_env.config import (
     RewardWeights,
     RobotConfig,
     TerminationLimits,
-    dataclass_from_mapping,
     load_robot_config,
 )
-from quad_uneven_env.fields import Param
+from quad_uneven_env.fields import Param, from_mapping
 from quad_uneven_env.measurement import StepMeasurement
 from quad_uneven_env.measurement_kernels import clip_finite_into
 from quad_uneven_env.observations import (
@@ -274,9 +273,9 @@ class QuadUnevenEnv(gym.Env):
         self.randomization: RandomizationConfig | None = load_randomization(randomization)
         self.robot_cfg: RobotConfig = load_robot_config(robot)
         self.terrain = Terrain(parse_terrain_spec(terrain))
-        self.reward_weights: RewardWeights = dataclass_from_mapping(RewardWeights, reward_weights, "reward_weights")
-        self.termination: TerminationLimits = dataclass_from_mapping(TerminationLimits, termination, "termination")
-        self.height_scan: HeightScanConfig = dataclass_from_mapping(HeightScanConfig, height_scan, "height_scan")
+        self.reward_weights: RewardWeights = from_mapping(RewardWeights, reward_weights, "reward_weights")
+        self.termination: TerminationLimits = from_mapping(TerminationLimits, termination, "termination")
+        self.height_scan: HeightScanConfig = from_mapping(HeightScanConfig, height_scan, "height_scan")
         self.frame_skip = int(frame_skip)
         self.gait_period = args["gait_period"]
         self.reset_noise_scale = args["reset_noise_scale"]
