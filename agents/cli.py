@@ -12,6 +12,7 @@ after the command has kept what it finished.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -23,7 +24,7 @@ from agents.evaluation.suites import SuiteError, load_suite, suite_from_dict, su
 from agents.interrupts import sigterm_as_keyboard_interrupt
 from agents.outputs import prepare_output_dir
 from agents.paper.simulation import DISTRIBUTIONS as PAPER_DISTRIBUTIONS
-from agents.rl.config import ALGOS, load_train_config
+from agents.rl.config import ALGOS, load_train_config, validate
 
 EXIT_USAGE = 2
 """Exit code of an invalid argument, file or output directory (argparse's own code for bad options)."""
@@ -228,7 +229,18 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         "stops training and saves the model (exit code 130). Exit code 2 on an invalid option, config or DIR.",
     )
     p.add_argument("--algo", choices=ALGOS, default=None, help="SB3 algorithm (default: the config's, else ppo)")
-    p.add_argument("--terrain", default=None, help="terrain kind, preset or YAML path (default: the config's)")
+    p.add_argument(
+        "--terrain",
+        nargs="+",
+        default=None,
+        help="terrain kind, preset or YAML path; several: a mix, each episode on one (default: the config's)",
+    )
+    p.add_argument(
+        "--randomization",
+        default=None,
+        help="randomization of the training world: a preset (mild, hard), a YAML path, or 'none' (default: the "
+        "config's)",
+    )
     p.add_argument("--timesteps", type=int, default=None, help="total env steps over all envs")
     p.add_argument("--out", type=Path, required=True, help="output directory DIR")
     p.add_argument("--seed", type=int, default=None, help="seed of the model and envs (default: the config's)")
@@ -254,9 +266,10 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
 
 def run_train_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven train``: 0 on success, 2 on an invalid option or config."""
+    terrain = args.terrain if args.terrain is None or len(args.terrain) > 1 else args.terrain[0]
     overrides = {
         "algo": args.algo,
-        "terrain": args.terrain,
+        "terrain": terrain,
         "timesteps": args.timesteps,
         "seed": args.seed,
         "n_envs": args.n_envs,
@@ -264,6 +277,9 @@ def run_train_command(args: argparse.Namespace) -> int:
         "time_limit_min": args.time_limit_min,
     }
     cfg = load_train_config(args.config, overrides)
+    if args.randomization is not None:
+        randomization = None if args.randomization.lower() == "none" else args.randomization
+        cfg = validate(dataclasses.replace(cfg, randomization=randomization))
     from agents.rl.training import train  # deferred: SB3, torch and the expert's kernels
 
     summary = train(

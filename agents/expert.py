@@ -221,6 +221,7 @@ class ExpertPolicy:
         self.plans: list[Any] = []
         """(t_start, plan or hold reference) of every cycle of the current episode."""
         self._current: Any = None
+        self._current_ref: Any = None
         self._row_of: Any = None
         self._t_start = 0.0
         self._t_end = 0.0
@@ -333,6 +334,23 @@ class ExpertPolicy:
             self.failure_log.append(message)
         else:
             self._log_dropped += 1
+
+    @property
+    def last_torques(self) -> np.ndarray:
+        """(12,) N m: the torques of the last successful physics step (a read-only view)."""
+        view = self._tau_ok.view()
+        view.setflags(write=False)
+        return view
+
+    def planned_now(self, sim_time: float) -> tuple[ReferenceSample, float]:
+        """The current plan at simulator time ``sim_time`` (s), without planning anything new.
+
+        :return: the planned whole-robot motion (held at the plan's end once past it) and the phase of the
+            current cycle in [0, 1].
+        """
+        duration = max(self._t_end - self._t_start, 1e-9)
+        tc = min(max(sim_time - self.controller.t0 - self._t_start, 0.0), duration)
+        return self._current_ref.sample(tc), tc / duration
 
     # -------------------------------------------------------------- planning
     def _reference(self, t: float) -> ReferenceSample:

@@ -15,6 +15,7 @@ from typing import Any
 
 from quad_uneven_env.config import CONFIG_DIR, read_yaml
 from quad_uneven_env.fields import check_fields, param
+from quad_uneven_env.randomization import load_randomization
 from quad_uneven_env.terrain import parse_terrain_spec
 
 RL_CONFIG_DIR = CONFIG_DIR / "rl"
@@ -26,7 +27,7 @@ ALGOS = ("ppo", "sac")
 VEC_ENVS = ("auto", "dummy", "subproc")
 """VecEnv classes: ``auto`` is SubprocVecEnv for n_envs > 1, else DummyVecEnv."""
 
-FORBIDDEN_ENV_KWARGS = ("terrain", "controller", "action_mode", "render_mode")
+FORBIDDEN_ENV_KWARGS = ("terrain", "randomization", "controller", "action_mode", "render_mode")
 """QuadUneven-v0 arguments that ``env_kwargs`` may not set (the trainer or the residual env owns them)."""
 
 
@@ -40,8 +41,16 @@ class TrainConfig:
 
     algo: str = param("ppo", kind="choice", choices=ALGOS)
     """``ppo`` or ``sac``."""
-    terrain: str = "rough"
-    """terrain kind, preset (``configs/terrain/``) or YAML path; a new surface is drawn at every reset."""
+    terrain: Any = "rough"
+    """terrain kind, preset (``configs/terrain/``), YAML path or ``{kind: ..., params}`` mapping, or a list of
+    them (a terrain mix: each episode on one drawn uniformly, :class:`agents.rl.terrain_mix.TerrainMixEnv`);
+    a new surface is drawn at every reset."""
+    randomization: Any = None
+    """domain randomization of the training world: None (nominal), a preset of ``configs/randomization/``
+    (``mild``, ``hard``), a YAML path or a mapping; drawn at every reset. Not applied by ``evaluate``,
+    whose suites say their own world."""
+    expert_features: bool = param(True, kind="bool")
+    """append the expert features (its plan now, the tracking error, its torques) to the observation."""
     timesteps: int = param(100_000, "steps", kind="int", lo=1)
     """total environment steps over all parallel envs."""
     time_limit_min: float = param(0.0, "min", lo=0.0, hi=1e6, hi_open=True)
@@ -95,10 +104,19 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         check_fields(cfg, where="")
     except ValueError as err:
         raise TrainConfigError(str(err)) from None
+    terrains = terrain_list(cfg.terrain)
+    if not terrains:
+        raise TrainConfigError("terrain: the terrain mix needs at least one terrain")
+    for i, spec in enumerate(terrains):
+        try:
+            parse_terrain_spec(spec)
+        except ValueError as err:
+            where = "terrain" if isinstance(cfg.terrain, str | Mapping) else f"terrain[{i}]"
+            raise TrainConfigError(f"{where}: {err}") from None
     try:
-        parse_terrain_spec(cfg.terrain)
+        load_randomization(cfg.randomization)
     except ValueError as err:
-        raise TrainConfigError(f"terrain: {err}") from None
+        raise TrainConfigError(str(err)) from None
     env_kwargs = _mapping("env_kwargs", cfg.env_kwargs)
     bad = sorted(set(env_kwargs) & set(FORBIDDEN_ENV_KWARGS))
     if bad:
@@ -109,6 +127,13 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         if key in cfg.hyperparams:
             raise TrainConfigError(f"hyperparams may not set {key!r} (use the config field or option of that name)")
     return cfg
+
+
+def terrain_list(terrain: Any) -> list[Any]:
+    """The terrain specs of ``TrainConfig.terrain``: one spec, or the entries of a list (a mix)."""
+    if isinstance(terrain, list | tuple):
+        return list(terrain)
+    return [terrain]
 
 
 def default_config_path(algo: str) -> Path:
@@ -147,4 +172,12 @@ def load_train_config(
     return validate(TrainConfig(**{**raw, **overrides}))
 
 
-__all__ = ["ALGOS", "RL_CONFIG_DIR", "TrainConfig", "TrainConfigError", "default_config_path", "load_train_config"]
+__all__ = [
+    "ALGOS",
+    "RL_CONFIG_DIR",
+    "TrainConfig",
+    "TrainConfigError",
+    "default_config_path",
+    "load_train_config",
+    "terrain_list",
+]

@@ -18,7 +18,14 @@ from typing import Any
 
 import numpy as np
 
-from agents.rl.model_io import ModelError, load_obs_normalization, load_sb3_model, metadata_env_kwargs, read_metadata
+from agents.rl.model_io import (
+    ModelError,
+    ModelSpaces,
+    load_obs_normalization,
+    load_sb3_model,
+    metadata_env_kwargs,
+    read_metadata,
+)
 
 
 def _policy_module(model: Any, norm: Any, low: np.ndarray, high: np.ndarray) -> Any:
@@ -81,12 +88,13 @@ def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None
     algo = algo or meta.get("algo") or "ppo"
     env = gym.make("QuadUneven-v0", **metadata_env_kwargs(model_path))
     try:
-        model = load_sb3_model(model_path, algo, env, allow_pickle)
+        spaces = ModelSpaces(env, meta or None)
+        model = load_sb3_model(model_path, algo, spaces, allow_pickle)  # type: ignore[arg-type]
         norm = load_obs_normalization(model_path, meta or None, allow_pickle)
         space = env.action_space
         module = _policy_module(model, norm, np.asarray(space.low, float), np.asarray(space.high, float))
-        n_obs = env.observation_space.shape[0]
-        layout = {k: [s.start, s.stop] for k, s in env.unwrapped.observation_structure.items()}
+        n_obs = spaces.observation_space.shape[0]
+        layout = {k: [s.start, s.stop] for k, s in spaces.observation_structure.items()}
         torque_limit = env.unwrapped.idx.torque_limit.tolist()
     finally:
         env.close()

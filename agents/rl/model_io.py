@@ -104,12 +104,15 @@ class SB3Policy:
     :param model: the loaded SB3 algorithm.
     :param obs_normalizer: the :class:`ObsNormalization` applied before ``model.predict``, or None.
     :param expert: the :class:`agents.expert.ExpertPolicy` in the loop of a residual model, or None.
+    :param features_of: the env (unwrapped) whose simulator state the expert features are read from, for a
+        model trained with them (:mod:`agents.rl.expert_features`); None: the observation is used as given.
     """
 
-    def __init__(self, model: Any, obs_normalizer: Any = None, expert: Any = None) -> None:
+    def __init__(self, model: Any, obs_normalizer: Any = None, expert: Any = None, features_of: Any = None) -> None:
         self.model = model
         self.obs_normalizer = obs_normalizer
         self.expert = expert
+        self.features_of = features_of
 
     @property
     def planner_times_ms(self) -> list[float] | None:
@@ -128,7 +131,14 @@ class SB3Policy:
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
-        """SB3's predict on the (normalised) observation; :return: action in [-1, 1]^12 and the state."""
+        """SB3's predict on the (normalised) observation; :return: action in [-1, 1]^12 and the state.
+
+        For a model trained with the expert features, they are appended to ``observation`` (one env's) first.
+        """
+        if self.features_of is not None:
+            from agents.rl.expert_features import expert_features
+
+            observation = np.concatenate([observation, expert_features(self.expert, self.features_of.data)])
         obs = observation if self.obs_normalizer is None else self.obs_normalizer.normalize(observation)
         return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
 
@@ -284,12 +294,35 @@ def check_spaces(model: Any, env: gym.Env, path: Path) -> None:
             )
 
 
+class ModelSpaces:
+    """The observation and action spaces of a model trained on ``env`` (with ``meta``), and its layout.
+
+    ``observation_space`` is ``env``'s, with the expert features appended when ``meta`` says
+    ``residual`` and ``expert_features``; ``observation_structure`` names the slices of both parts.
+    """
+
+    def __init__(self, env: gym.Env, meta: dict[str, Any] | None) -> None:
+        self.expert_features = bool(meta and meta.get("residual") and meta.get("expert_features", False))
+        self.action_space = env.action_space
+        self.observation_space = env.observation_space
+        self.observation_structure: dict[str, slice] = dict(env.unwrapped.observation_structure)
+        if self.expert_features:
+            from agents.rl.expert_features import EXPERT_FEATURE_FIELDS, augmented_space
+
+            offset = int(env.observation_space.shape[0])
+            self.observation_space = augmented_space(env.observation_space)
+            for f in EXPERT_FEATURE_FIELDS:
+                self.observation_structure[f.name] = slice(offset, offset + f.size)
+                offset += f.size
+
+
 def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: bool = False) -> SB3Policy:
     """Load the SB3 model ``path`` as a policy for ``env`` (a ``QuadUneven-v0`` env, before ``reset``).
 
     With ``rl_meta.json`` saying ``residual``, installs the expert plus the residual
-    (:func:`agents.rl.residual_env.install_residual_controller`) on ``env.unwrapped``. Nothing in the
-    model folder is unpickled unless ``allow_pickle`` (see :func:`load_sb3_model`).
+    (:func:`agents.rl.residual_env.install_residual_controller`) on ``env.unwrapped``, and with
+    ``expert_features`` the policy appends the expert features to every observation, as the training env
+    did. Nothing in the model folder is unpickled unless ``allow_pickle`` (see :func:`load_sb3_model`).
 
     :param algo: ``"ppo"`` or ``"sac"``; must match the metadata's ``algo`` if there is one.
     :raises ModelError: on an algo mismatch, bad metadata, missing or unreadable normalisation statistics, a
@@ -299,21 +332,23 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
     meta = read_metadata(path)
     if meta is not None and meta.get("algo") not in (None, algo):
         raise ModelError(f"algo: {path} was trained with {meta['algo']!r}; pass --algo {meta['algo']}, got {algo!r}")
+    spaces_of = ModelSpaces(env, meta)
     normalizer = load_obs_normalization(path, meta, allow_pickle)
-    model = load_sb3_model(path, algo, env, allow_pickle)
-    check_spaces(model, env, path)
+    model = load_sb3_model(path, algo, spaces_of, allow_pickle)  # type: ignore[arg-type]
+    check_spaces(model, spaces_of, path)  # type: ignore[arg-type]
     expert = None
     if meta is not None and meta.get("residual"):
         from agents.rl.residual_env import install_residual_controller
 
         expert, _ = install_residual_controller(env, float(meta["residual_scale"]))
-    return SB3Policy(model, normalizer, expert)
+    return SB3Policy(model, normalizer, expert, env.unwrapped if spaces_of.expert_features else None)
 
 
 __all__ = [
     "META_FILE",
     "META_FORMAT",
     "ModelError",
+    "ModelSpaces",
     "SB3Policy",
     "check_spaces",
     "load_obs_normalization",

@@ -6,9 +6,10 @@ physics rate through the env's controller hook; the RL action is added on top of
     tau = clip(tau_expert + residual_scale * action * torque_limit, -torque_limit, torque_limit)   (N m)
 
 at every 2 ms physics step, with ``action`` in [-1, 1]^12 (joint order LF RF LH RH x HAA HFE KFE)
-held over the control step. With ``action = 0`` the env reproduces the expert exactly. The
-observation, reward, termination and info are those of ``QuadUneven-v0`` (the gait clock and the
-stability index are in the observation).
+held over the control step. With ``action = 0`` the env reproduces the expert exactly. Reward,
+termination and info are those of ``QuadUneven-v0``; the observation is ``QuadUneven-v0``'s followed
+by the expert features (:mod:`agents.rl.expert_features`: the expert's plan now, the tracking error
+and its torques), or the env's alone with ``expert_features=False``.
 
 ``residual_scale`` (default 0.1: up to 12 N m on top of the expert, with 120 N m motors) bounds how
 far the learned agent can move away from the expert.
@@ -32,6 +33,7 @@ import numpy as np
 from gymnasium.envs.registration import register, registry
 
 from agents.expert import ExpertConfig, ExpertPolicy
+from agents.rl.expert_features import augmented_space, expert_features
 from quad_uneven_env.env import QuadUnevenEnv
 
 RESIDUAL_ENV_ID = "QuadUnevenResidual-v0"
@@ -119,28 +121,44 @@ def install_residual_controller(
 class ResidualExpertEnv(gym.Wrapper):
     """``QuadUneven-v0`` with the expert in the loop; the action is a residual on the expert's torques.
 
-    Spaces, reward, termination and info are the wrapped env's, plus ``info["residual_scale"]`` and
+    Action space, reward, termination and info are the wrapped env's, plus ``info["residual_scale"]`` and
     ``info["residual_torque"]`` (N m: mean over the 12 joints of |residual torque| commanded this step,
-    before the motor limit).
+    before the motor limit). The observation is the wrapped env's followed by the expert features
+    (:data:`agents.rl.expert_features.EXPERT_FEATURE_FIELDS`) unless ``expert_features`` is False.
 
     :param env: a ``QuadUneven-v0`` env in torque mode, without a controller of its own.
     :param residual_scale: residual torque per unit action as a fraction of the torque limit, in (0, 1].
     :param expert_config: the expert's settings (default :class:`ExpertConfig`).
+    :param expert_features: append the expert features to the observation.
     """
 
     def __init__(
-        self, env: gym.Env, residual_scale: float = DEFAULT_RESIDUAL_SCALE, expert_config: ExpertConfig | None = None
+        self,
+        env: gym.Env,
+        residual_scale: float = DEFAULT_RESIDUAL_SCALE,
+        expert_config: ExpertConfig | None = None,
+        expert_features: bool = True,
     ) -> None:
         super().__init__(env)
+        if not isinstance(expert_features, bool):
+            raise ValueError(f"expert_features must be true or false, got {expert_features!r}")
         self.expert, self.controller = install_residual_controller(env, residual_scale, expert_config)
         self.residual_scale = self.controller.residual_scale
+        self.expert_features = expert_features
+        if expert_features:
+            self.observation_space = augmented_space(env.observation_space)
+
+    def _observation(self, obs: np.ndarray) -> np.ndarray:
+        if not self.expert_features:
+            return obs
+        return np.concatenate([obs, expert_features(self.expert, self.env.unwrapped.data)])
 
     def reset(self, **kwargs: Any):
         """Reset the env (the expert plans its first cycle); the info has the step's keys (residual zero)."""
         obs, info = self.env.reset(**kwargs)
         info["residual_scale"] = self.residual_scale
         info["residual_torque"] = 0.0
-        return obs, info
+        return self._observation(obs), info
 
     def step(self, action: np.ndarray):
         """One control step of expert + residual ``action``; see :meth:`QuadUnevenEnv.step`."""
@@ -148,24 +166,28 @@ class ResidualExpertEnv(gym.Wrapper):
         info["residual_scale"] = self.residual_scale
         a = np.asarray(action, dtype=float)
         info["residual_torque"] = float(np.mean(np.abs(np.clip(a, -1.0, 1.0) * self.controller.gain)))
-        return obs, reward, terminated, truncated, info
+        return self._observation(obs), reward, terminated, truncated, info
 
 
 def make_residual_env(
-    residual_scale: float = DEFAULT_RESIDUAL_SCALE, expert_config: ExpertConfig | None = None, **env_kwargs: Any
+    residual_scale: float = DEFAULT_RESIDUAL_SCALE,
+    expert_config: ExpertConfig | None = None,
+    expert_features: bool = True,
+    **env_kwargs: Any,
 ) -> ResidualExpertEnv:
     """The residual env (entry point of ``QuadUnevenResidual-v0``).
 
     :param residual_scale: residual torque per unit action as a fraction of the torque limit, in (0, 1]
         (default 0.1 = 12 N m per joint).
     :param expert_config: the expert's settings.
+    :param expert_features: append the expert features (:mod:`agents.rl.expert_features`) to the observation.
     :param env_kwargs: ``QuadUnevenEnv`` arguments (``terrain``, ``reward_weights``, ...); ``action_mode`` must be
         ``"torque"`` and ``controller`` is not accepted.
     :raises ValueError: on a bad argument (named).
     """
     if "controller" in env_kwargs:
         raise ValueError("controller is not accepted by the residual env: expert plus residual is its controller")
-    return ResidualExpertEnv(QuadUnevenEnv(**env_kwargs), residual_scale, expert_config)
+    return ResidualExpertEnv(QuadUnevenEnv(**env_kwargs), residual_scale, expert_config, expert_features)
 
 
 if RESIDUAL_ENV_ID not in registry:

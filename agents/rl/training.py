@@ -182,12 +182,19 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
         "residual_scale": float(cfg.residual_scale),
         "env_id": RESIDUAL_ENV_ID,
         "env_kwargs": dict(cfg.env_kwargs),
+        "expert_features": bool(cfg.expert_features),
         "terrain": cfg.terrain,
+        "randomization": cfg.randomization if not isinstance(cfg.randomization, dict) else dict(cfg.randomization),
         "max_episode_steps": cfg.max_episode_steps,
         "normalize_obs": cfg.normalize_obs,
         "seed": cfg.seed,
         "stable_baselines3": stable_baselines3.__version__,
     }
+
+
+def _terrain_label(terrain: Any) -> str:
+    specs = terrain if isinstance(terrain, list | tuple) else [terrain]
+    return " + ".join(s if isinstance(s, str) else str(dict(s).get("kind")) for s in specs)
 
 
 def _make_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) -> Any:
@@ -321,7 +328,8 @@ def train(
         out / "monitor",
         out / "eval" / "evaluations.npz",
         out / "learning_curve.png",
-        title=f"residual {cfg.algo.upper()} on {cfg.terrain} (scale {cfg.residual_scale})",
+        title=f"residual {cfg.algo.upper()} on {_terrain_label(cfg.terrain)}"
+        f"{'' if cfg.randomization is None else f', randomization {cfg.randomization}'} (scale {cfg.residual_scale})",
     )
     summary = {
         "timesteps": int(model.num_timesteps),

@@ -16,6 +16,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv,
 
 from agents.rl.config import TrainConfig
 from agents.rl.residual_env import RESIDUAL_ENV_ID
+from agents.rl.terrain_mix import TerrainMixEnv
 
 EPISODE_KEYS = ("ep_stability_mean", "ep_stability_min", "ep_distance", "ep_diverged", "ep_fell", "ep_residual_torque")
 """Keys :class:`EpisodeStats` puts in the last info of an episode (and Monitor writes to its CSV)."""
@@ -67,22 +68,40 @@ class EpisodeStats(gym.Wrapper):
 
 
 def make_train_env(
-    terrain: str, residual_scale: float, max_episode_steps: int, env_kwargs: dict[str, Any] | None = None
+    terrain: Any,
+    residual_scale: float,
+    max_episode_steps: int,
+    env_kwargs: dict[str, Any] | None = None,
+    randomization: Any = None,
+    expert_features: bool = True,
 ) -> gym.Env:
     """One residual env (expert in the loop) with a time limit and :class:`EpisodeStats`.
 
-    :param terrain: terrain kind, preset or YAML path.
+    :param terrain: terrain kind, preset, YAML path or mapping, or a list of them (a
+        :class:`~agents.rl.terrain_mix.TerrainMixEnv`: each episode on one of them).
     :param residual_scale: residual torque per unit action as a fraction of the torque limit.
     :param max_episode_steps: control steps before truncation.
     :param env_kwargs: extra QuadUneven-v0 arguments.
+    :param randomization: the training world's randomization (None: nominal).
+    :param expert_features: append the expert features to the observation.
     """
-    env = gym.make(
-        RESIDUAL_ENV_ID,
-        terrain=terrain,
-        residual_scale=residual_scale,
-        max_episode_steps=max_episode_steps,
-        **(env_kwargs or {}),
-    )
+
+    def one(spec: Any) -> gym.Env:
+        return gym.make(
+            RESIDUAL_ENV_ID,
+            terrain=spec,
+            residual_scale=residual_scale,
+            max_episode_steps=max_episode_steps,
+            randomization=randomization,
+            expert_features=expert_features,
+            **(env_kwargs or {}),
+        )
+
+    if isinstance(terrain, list | tuple):
+        names = [spec if isinstance(spec, str) else str(dict(spec).get("kind")) for spec in terrain]
+        env: gym.Env = TerrainMixEnv([functools.partial(one, spec) for spec in terrain], names=names)
+    else:
+        env = one(terrain)
     return EpisodeStats(env)
 
 
@@ -110,7 +129,13 @@ def build_vec_env(
     if kind == "auto":
         kind = "subproc" if n_envs > 1 else "dummy"
     env_fn = functools.partial(
-        make_train_env, cfg.terrain, float(cfg.residual_scale), cfg.max_episode_steps, dict(cfg.env_kwargs)
+        make_train_env,
+        cfg.terrain,
+        float(cfg.residual_scale),
+        cfg.max_episode_steps,
+        dict(cfg.env_kwargs),
+        cfg.randomization,
+        cfg.expert_features,
     )
     if kind == "subproc":
         env_fn = functools.partial(_ignoring_interrupts, env_fn)

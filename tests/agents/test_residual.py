@@ -8,6 +8,7 @@ import pytest
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.expert import ExpertConfig, ExpertPolicy, attach_expert
+from agents.rl.expert_features import EXPERT_FEATURE_SIZE
 from agents.rl.residual_env import (
     RESIDUAL_ENV_ID,
     ResidualController,
@@ -38,7 +39,7 @@ def _rollout(env: gym.Env, actions: np.ndarray, seed: int) -> dict[str, np.ndarr
 @pytest.mark.parametrize("distribution", ["pinv", "qp"])
 def test_zero_residual_reproduces_the_expert(distribution):
     """Zero action: the residual env's trajectory equals the plain expert's, bit for bit (both force
-    distributions: the QP's solver, DAQP, is deterministic)."""
+    distributions: the QP's solver, DAQP, is deterministic); its observation starts with the plain env's."""
     cfg = ExpertConfig(distribution=distribution)
     plain = gym.make("QuadUneven-v0", terrain="rough", max_episode_steps=STEPS + 1)
     attach_expert(plain, cfg)
@@ -46,6 +47,9 @@ def test_zero_residual_reproduces_the_expert(distribution):
     zeros = np.zeros((STEPS, 12), dtype=np.float32)
     a, b = _rollout(plain, zeros, seed=0), _rollout(residual, zeros, seed=0)
     assert len(a["reward"]) == STEPS and a["qpos"][-1, 0] - a["qpos"][0, 0] > 0.15  # the expert walked
+    n_env = a["obs"].shape[1]
+    assert b["obs"].shape[1] == n_env + EXPERT_FEATURE_SIZE
+    b["obs"] = b["obs"][:, :n_env]
     for key in a:
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
 
