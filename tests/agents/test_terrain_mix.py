@@ -86,7 +86,7 @@ def test_config_terrain_list_and_randomization_are_validated():
         validate(TrainConfig(terrain=["rough", "lava"]))
     with pytest.raises(TrainConfigError, match="at least one terrain"):
         validate(TrainConfig(terrain=[]))
-    with pytest.raises(TrainConfigError, match="^randomization"):
+    with pytest.raises(TrainConfigError, match=r"^randomization"):
         validate(TrainConfig(randomization="stormy"))
     with pytest.raises(TrainConfigError, match="env_kwargs may not set"):
         validate(TrainConfig(env_kwargs={"randomization": "hard"}))
