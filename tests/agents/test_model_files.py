@@ -138,3 +138,49 @@ def test_statistics_round_trip_and_match_vecnormalize(tmp_path):
     (tmp_path / "bad.npz").write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="unreadable"):
         ObsNormalization.load(tmp_path / "bad.npz")
+
+
+def test_onnx_export_of_a_residual_model_with_expert_features(tmp_path):
+    """The exported graph takes env observation + expert features, and equals the evaluation's predict."""
+    import onnx
+    import onnxruntime as ort
+    import stable_baselines3
+    import torch
+
+    from agents.evaluation.policies import make_policy, policy_env_kwargs
+    from agents.rl.expert_features import EXPERT_FEATURE_SIZE
+    from agents.rl.export import export_onnx
+    from agents.rl.residual_env import RESIDUAL_ENV_ID
+
+    train_env = gym.make(RESIDUAL_ENV_ID, terrain="flat")
+    model = stable_baselines3.PPO("MlpPolicy", train_env, n_steps=64, batch_size=32, device="cpu", seed=0,
+                                  policy_kwargs={"net_arch": [32, 32]})  # fmt: skip
+    with torch.no_grad():
+        for p in model.policy.parameters():
+            p.add_(0.3 * torch.randn_like(p))
+    model.save(tmp_path / "model.zip")
+    write_metadata(tmp_path, {"algo": "ppo", "residual": True, "residual_scale": 0.1, "expert_features": True,
+                              "normalize_obs": False, "env_kwargs": {"terrain": "flat"}})  # fmt: skip
+    path = tmp_path / "model.zip"
+    export_onnx(path, tmp_path / "p.onnx")
+    props = {p.key: p.value for p in onnx.load(str(tmp_path / "p.onnx")).metadata_props}
+    layout = json.loads(props["observation_layout"])
+    n_env = gym.make("QuadUneven-v0", terrain="flat").observation_space.shape[0]
+    assert layout["expert_base_pos_error"][0] == n_env and layout["expert_torque"][1] == n_env + EXPERT_FEATURE_SIZE
+
+    env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(str(path)), "terrain": "flat"})
+    policy = make_policy(str(path), env)
+    obs, _ = env.reset(seed=0)
+    session = ort.InferenceSession(str(tmp_path / "p.onnx"), providers=["CPUExecutionProvider"])
+    for _ in range(20):
+        action, _ = policy.predict(obs)
+        full = np.concatenate([obs, _policy_features(policy)])[None].astype(np.float32)
+        np.testing.assert_allclose(session.run(None, {"obs": full})[0][0], action, atol=1e-5)
+        obs, *_ = env.step(action)
+    assert np.abs(action).max() > 0.05
+
+
+def _policy_features(policy) -> np.ndarray:
+    from agents.rl.expert_features import expert_features
+
+    return expert_features(policy.expert, policy.features_of.data)
