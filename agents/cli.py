@@ -453,6 +453,41 @@ def run_robustness_command(args: argparse.Namespace) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------------------------- compare
+def add_compare_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``compare`` subcommand on ``sub``."""
+    p = sub.add_parser(
+        "compare",
+        help="two evaluations of the same episodes side by side (e.g. the expert vs expert + residual)",
+        description="Pair the episodes of two `quad-uneven evaluate` folders by (entry, seed) and write "
+        "DIR/comparison.md, DIR/comparison.json and DIR/comparison.png: success, falls, divergences, stalls, "
+        "stability index and residual torque, overall, per entry and per randomization factor, and the episodes "
+        "whose outcome differs. Exit code 2 if the folders do not hold the same episodes.",
+    )
+    p.add_argument("--baseline", type=Path, required=True, help="evaluation folder of the baseline (e.g. the expert)")
+    p.add_argument("--candidate", type=Path, required=True, help="evaluation folder of the candidate")
+    p.add_argument("--out", type=Path, required=True, help="output directory DIR (created; its files are replaced)")
+    p.set_defaults(func=run_compare_command)
+    return p
+
+
+def run_compare_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven compare``: 0 on success, 2 on folders that cannot be compared."""
+    from agents.evaluation.compare import compare_runs, write_comparison
+
+    comp = compare_runs(args.baseline, args.candidate)
+    paths = write_comparison(comp, args.out)
+    for who in ("baseline", "candidate"):
+        g = comp["overall"][who]
+        print(
+            f"{who:9s} {comp[who]['policy']}: success {g['successes']}/{g['episodes']}, falls {g['falls']}, "
+            f"divergences {g['divergences']}, stalls {g['stalls']}, "
+            f"time index < 0 {g['mean_time_index_negative']:.3f} s"
+        )
+    print(f"comparison: {paths['md'].resolve()}")
+    return 0
+
+
 # ---------------------------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
     """The ``quad-uneven`` parser with every subcommand."""
@@ -460,7 +495,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     for add in (
         add_demo_parser, add_evaluate_parser, add_train_parser, add_export_parser, add_paper_parser,
-        add_plan_paper_parser, add_robustness_parser,
+        add_plan_paper_parser, add_robustness_parser, add_compare_parser,
     ):  # fmt: skip
         add(sub)
     return parser

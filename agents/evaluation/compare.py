@@ -1,0 +1,285 @@
+"""Two evaluations of the same episodes side by side: a baseline (e.g. the expert) and a candidate (e.g. a residual).
+
+:func:`compare_runs` pairs the episodes of two ``quad-uneven evaluate`` output folders by (entry, seed),
+refuses runs that do not hold the same episodes, and computes per policy: success and failure rates,
+falls, divergences and stalls, the stability index figures and the mean residual torque, overall, per
+terrain entry and per randomization factor (thirds of the drawn values, as in the report), plus the
+episodes whose outcome differs. :func:`write_comparison` writes ``comparison.md``, ``comparison.json``
+and ``comparison.png``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.evaluation.metrics import json_safe
+
+FAILURE_KINDS = ("fall", "diverged", "stall", "error")
+"""How an episode that missed the goal ended: a fall (or leaving the terrain), a divergence, a stall (time or
+wall-time limit short of the goal), or an error of the policy."""
+
+
+class ComparisonError(ValueError):
+    """Two evaluation folders that cannot be compared; the message names the folder or the field."""
+
+
+def failure_kind(record: Mapping[str, Any]) -> str | None:
+    """None for a success, else one of :data:`FAILURE_KINDS`."""
+    if record["success"]:
+        return None
+    reason = record.get("end_reason")
+    if reason in ("fall", "left_terrain"):
+        return "fall"
+    if reason == "diverged":
+        return "diverged"
+    if reason == "error":
+        return "error"
+    return "stall"
+
+
+def _mean(values: Sequence[float | None]) -> float | None:
+    xs = [float(v) for v in values if v is not None and math.isfinite(float(v))]
+    return float(np.mean(xs)) if xs else None
+
+
+def group_figures(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Figures of a group of episodes: counts and rates (0-1), index figures (N m, s), residual torque (N m)."""
+    n = len(records)
+    kinds = [failure_kind(r) for r in records]
+    successes = [r for r in records if r["success"]]
+    return {
+        "episodes": n,
+        "successes": len(successes),
+        "success_rate": len(successes) / n if n else None,
+        "failure_rate": (n - len(successes)) / n if n else None,
+        **{f"{k}s" if k != "diverged" else "divergences": kinds.count(k) for k in FAILURE_KINDS},
+        "mean_stability_index": _mean([r.get("mean_stability_index") for r in records]),
+        "min_stability_index": min(
+            (float(r["min_stability_index"]) for r in records if r.get("min_stability_index") is not None),
+            default=None,
+        ),
+        "mean_time_index_negative": _mean([r.get("time_index_negative") for r in records]),
+        "mean_fraction_index_nonnegative": _mean([r.get("fraction_index_nonnegative") for r in records]),
+        "successes_index_ok": sum(1 for r in successes if (r.get("fraction_index_nonnegative") or 0.0) >= 0.99),
+        "mean_speed": _mean([r.get("mean_speed") for r in records]),
+        "mean_residual_torque": _mean([r.get("mean_residual_torque") for r in records]),
+    }
+
+
+def _load(folder: Path) -> dict[str, Any]:
+    path = folder / "results.json"
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ComparisonError(f"{folder}: no results.json (run quad-uneven evaluate --out {folder} first)") from None
+    except (OSError, json.JSONDecodeError) as err:
+        raise ComparisonError(f"{path}: unreadable ({err})") from None
+
+
+def _paired(base: Mapping[str, Any], cand: Mapping[str, Any], names: tuple[str, str]) -> list[tuple[dict, dict]]:
+    def by_key(run: Mapping[str, Any]) -> dict[tuple[int, int], dict]:
+        return {(int(e["entry"]), int(e["seed"])): e for e in run["episodes"]}
+
+    a, b = by_key(base), by_key(cand)
+    if set(a) != set(b):
+        only = sorted(set(a) ^ set(b))[:3]
+        raise ComparisonError(
+            f"episodes: {names[0]} and {names[1]} do not hold the same (entry, seed) episodes (e.g. {only}); "
+            "evaluate both on the same suite with the same --seed and --episodes"
+        )
+    if base["meta"].get("entries") != cand["meta"].get("entries"):
+        raise ComparisonError(f"suite: {names[0]} and {names[1]} were run on different suite entries")
+    return [(a[k], b[k]) for k in sorted(a)]
+
+
+def _factor_groups(pairs: Sequence[tuple[dict, dict]]) -> list[dict[str, Any]]:
+    """Per factor, the paired episodes split into thirds of the drawn value (one group per value if <= 3)."""
+    names = sorted({k for a, _ in pairs for k in (a.get("factors") or {})})
+    rows = []
+    for name in names:
+        items = [(a["factors"][name], a, b) for a, b in pairs if (a.get("factors") or {}).get(name) is not None]
+        items.sort(key=lambda x: x[0])
+        values = sorted({v for v, _, _ in items})
+        if len(values) <= 3:
+            groups = [[x for x in items if x[0] == v] for v in values]
+        else:
+            groups = [list(g) for g in np.array_split(np.array(items, dtype=object), 3) if len(g)]
+        for g in groups:
+            rows.append(
+                {
+                    "factor": name,
+                    "low": float(g[0][0]),
+                    "high": float(g[-1][0]),
+                    "baseline": group_figures([a for _, a, _ in g]),
+                    "candidate": group_figures([b for _, _, b in g]),
+                }
+            )
+    return rows
+
+
+def compare_runs(baseline: str | Path, candidate: str | Path) -> dict[str, Any]:
+    """The comparison of two evaluation folders holding the same episodes.
+
+    :return: ``{"baseline": {"dir", "policy"}, "candidate": {...}, "overall": {"baseline": figures, "candidate":
+        figures}, "by_entry": [...], "by_factor": [...], "changed": [episodes whose outcome differs]}``
+        (figures: :func:`group_figures`).
+    :raises ComparisonError: on a missing or unreadable results.json, or runs of different episodes.
+    """
+    base_dir, cand_dir = Path(baseline), Path(candidate)
+    base, cand = _load(base_dir), _load(cand_dir)
+    pairs = _paired(base, cand, (str(base_dir), str(cand_dir)))
+    labels = base["meta"].get("entries") or []
+    by_entry = []
+    for entry in sorted({a["entry"] for a, _ in pairs}):
+        sel = [(a, b) for a, b in pairs if a["entry"] == entry]
+        by_entry.append(
+            {
+                "entry": entry,
+                "label": labels[entry] if entry < len(labels) else str(entry),
+                "baseline": group_figures([a for a, _ in sel]),
+                "candidate": group_figures([b for _, b in sel]),
+            }
+        )
+    changed = [
+        {
+            "entry": a["entry"],
+            "seed": a["seed"],
+            "baseline": failure_kind(a) or "success",
+            "candidate": failure_kind(b) or "success",
+            "factors": a.get("factors"),
+        }
+        for a, b in pairs
+        if bool(a["success"]) != bool(b["success"]) or failure_kind(a) != failure_kind(b)
+    ]
+    return {
+        "baseline": {"dir": str(base_dir), "policy": base.get("policy"), "suite": base.get("suite")},
+        "candidate": {"dir": str(cand_dir), "policy": cand.get("policy"), "suite": cand.get("suite")},
+        "seed_offset": base["meta"].get("seed_offset"),
+        "overall": {
+            "baseline": group_figures([a for a, _ in pairs]),
+            "candidate": group_figures([b for _, b in pairs]),
+        },
+        "by_entry": by_entry,
+        "by_factor": _factor_groups(pairs),
+        "changed": changed,
+    }
+
+
+def _f(value: Any, fmt: str = ".3g") -> str:
+    if value is None:
+        return "–"
+    return format(value, fmt) if isinstance(value, float) else str(value)
+
+
+_COLUMNS = (
+    ("success", lambda g: f"{_f(100 * g['success_rate'], '.0f')}% ({g['successes']}/{g['episodes']})"),
+    ("falls", lambda g: str(g["falls"])),
+    ("divergences", lambda g: str(g["divergences"])),
+    ("stalls", lambda g: str(g["stalls"])),
+    ("mean index (N m)", lambda g: _f(g["mean_stability_index"])),
+    ("time index < 0 (s)", lambda g: _f(g["mean_time_index_negative"])),
+    ("index >= 0 (fraction)", lambda g: _f(g["mean_fraction_index_nonnegative"], ".4f")),
+    ("successes >= 99 %", lambda g: str(g["successes_index_ok"])),
+    ("residual (N m)", lambda g: _f(g["mean_residual_torque"])),
+)
+
+
+def _rows(label: str, row: Mapping[str, Any]) -> list[str]:
+    out = []
+    for who in ("baseline", "candidate"):
+        cells = [fn(row[who]) for _, fn in _COLUMNS]
+        out.append(f"| {label if who == 'baseline' else ''} | {who} | " + " | ".join(cells) + " |")
+    return out
+
+
+def comparison_markdown(comp: Mapping[str, Any]) -> str:
+    """The comparison as a Markdown page."""
+    head = "| group | policy | " + " | ".join(c for c, _ in _COLUMNS) + " |"
+    sep = "|---" * (len(_COLUMNS) + 2) + "|"
+    b, c = comp["baseline"], comp["candidate"]
+    lines = [
+        f"# Comparison on `{b['suite']}` (seed offset {comp['seed_offset']})",
+        "",
+        f"- baseline: `{b['policy']}` ({b['dir']})",
+        f"- candidate: `{c['policy']}` ({c['dir']})",
+        "",
+        "The same episodes (entry, seed: the same terrain and the same drawn world) for both. Failures: falls "
+        "(and leaving the terrain), divergences, stalls (time limit short of the goal), errors. Index figures are "
+        "the evaluation's (N m; fraction of the episode's time with index >= 0).",
+        "",
+        "## Overall",
+        "",
+        head,
+        sep,
+        *_rows("all", comp["overall"]),
+        "",
+        "## By terrain entry",
+        "",
+        head,
+        sep,
+    ]
+    for row in comp["by_entry"]:
+        lines += _rows(f"[{row['entry']}] {row['label']}", row)
+    if comp["by_factor"]:
+        lines += ["", "## By randomization factor (thirds of the drawn values)", "", head, sep]
+        for row in comp["by_factor"]:
+            lines += _rows(f"{row['factor']} {row['low']:.3g}–{row['high']:.3g}", row)
+    lines += ["", "## Episodes whose outcome differs", ""]
+    if comp["changed"]:
+        lines += ["| entry | seed | baseline | candidate |", "|---|---|---|---|"]
+        lines += [f"| {e['entry']} | {e['seed']} | {e['baseline']} | {e['candidate']} |" for e in comp["changed"]]
+    else:
+        lines.append("None: every episode ended the same way for both.")
+    return "\n".join(lines) + "\n"
+
+
+def plot_comparison(comp: Mapping[str, Any], path: Path) -> Path:
+    """Bars per terrain entry: success rate and mean time with index < 0, baseline vs candidate."""
+    from agents.plotting import pyplot, save
+
+    rows = [*comp["by_entry"], {"label": "all", "entry": "all", **comp["overall"]}]
+    x = np.arange(len(rows))
+    fig, axes = pyplot().subplots(1, 2, figsize=(11, 4))
+    for ax, key, ylabel in (
+        (axes[0], "success_rate", "success rate"),
+        (axes[1], "mean_time_index_negative", "mean time with index < 0 (s)"),
+    ):
+        for k, who in enumerate(("baseline", "candidate")):
+            vals = [r[who][key] if r[who][key] is not None else np.nan for r in rows]
+            ax.bar(x + (k - 0.5) * 0.38, vals, width=0.38, label=f"{who}: {comp[who]['policy']}")
+        ax.set_xticks(x, [f"[{r['entry']}]" for r in rows])
+        ax.set_ylabel(ylabel)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].set_ylim(0, 1.05)
+    axes[0].legend(fontsize=7, loc="lower left")
+    fig.suptitle(f"{comp['baseline']['suite']}: baseline vs candidate, same episodes")
+    return save(fig, path)
+
+
+def write_comparison(comp: Mapping[str, Any], out: str | Path) -> dict[str, Path]:
+    """Write ``comparison.md``, ``comparison.json`` and ``comparison.png`` into ``out`` (created)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"md": out / "comparison.md", "json": out / "comparison.json", "png": out / "comparison.png"}
+    paths["md"].write_text(comparison_markdown(comp))
+    paths["json"].write_text(json.dumps(json_safe(comp), indent=2, allow_nan=False))
+    plot_comparison(comp, paths["png"])
+    return paths
+
+
+__all__ = [
+    "FAILURE_KINDS",
+    "ComparisonError",
+    "compare_runs",
+    "comparison_markdown",
+    "failure_kind",
+    "group_figures",
+    "plot_comparison",
+    "write_comparison",
+]
