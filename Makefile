@@ -39,6 +39,7 @@ bench: venv
 	$(PY) benchmarks/dynamics.py
 	$(PY) benchmarks/planning.py
 	$(PY) benchmarks/expert.py
+	$(PY) benchmarks/residual_exploration.py
 
 # The shipped residual baseline (docs/rl.md, models/ppo_residual_hard): PPO on the randomized world of the
 # robust_hard suite (hard randomization, its three terrains mixed), 90 min of training on 2 cores, seeded;
