@@ -93,3 +93,12 @@ def test_frames_on_a_turned_and_shoved_robot():
     # a world-frame shove of (0.3, -0.2) in the robot's yaw frame: rotated by -120 deg
     shove_Y = yaw.inv().apply([0.3, -0.2, 0.05])
     np.testing.assert_allclose(features[SLICES["expert_base_vel_error"]], -shove_Y, atol=0.02)
+
+
+def test_the_documented_layout_is_the_code():
+    from pathlib import Path
+
+    from quad_uneven_env.observations import observation_table
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "rl.md").read_text()
+    assert observation_table(EXPERT_FEATURE_FIELDS) in doc
