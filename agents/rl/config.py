@@ -49,6 +49,8 @@ class TrainConfig:
     """domain randomization of the training world: None (nominal), a preset of ``configs/randomization/``
     (``mild``, ``hard``), a YAML path or a mapping; drawn at every reset. Not applied by ``evaluate``,
     whose suites say their own world."""
+    residual_penalty: float = param(0.0, "per mean(action^2)", lo=0.0, hi=1e6)
+    """reward penalty on the residual: minus this x the mean over the 12 joints of action^2, every step."""
     expert_features: bool = param(True, kind="bool")
     """append the expert features (its plan now, the tracking error, its torques) to the observation."""
     timesteps: int = param(100_000, "steps", kind="int", lo=1)

@@ -130,6 +130,8 @@ class ResidualExpertEnv(gym.Wrapper):
     :param residual_scale: residual torque per unit action as a fraction of the torque limit, in (0, 1].
     :param expert_config: the expert's settings (default :class:`ExpertConfig`).
     :param expert_features: append the expert features to the observation.
+    :param residual_penalty: >= 0: subtracted from the reward per unit of mean(action^2) over the 12 joints
+        (``info["reward_terms"]["residual"]``); 0 keeps the env's reward.
     """
 
     def __init__(
@@ -138,10 +140,18 @@ class ResidualExpertEnv(gym.Wrapper):
         residual_scale: float = DEFAULT_RESIDUAL_SCALE,
         expert_config: ExpertConfig | None = None,
         expert_features: bool = True,
+        residual_penalty: float = 0.0,
     ) -> None:
         super().__init__(env)
         if not isinstance(expert_features, bool):
             raise ValueError(f"expert_features must be true or false, got {expert_features!r}")
+        try:
+            penalty = float("nan") if isinstance(residual_penalty, bool) else float(residual_penalty)
+        except (TypeError, ValueError):
+            penalty = float("nan")
+        if not (0.0 <= penalty < float("inf")):
+            raise ValueError(f"residual_penalty must be a finite number >= 0, got {residual_penalty!r}")
+        self.residual_penalty = penalty
         self.expert, self.controller = install_residual_controller(env, residual_scale, expert_config)
         self.residual_scale = self.controller.residual_scale
         self.expert_features = expert_features
@@ -158,14 +168,20 @@ class ResidualExpertEnv(gym.Wrapper):
         obs, info = self.env.reset(**kwargs)
         info["residual_scale"] = self.residual_scale
         info["residual_torque"] = 0.0
+        if self.residual_penalty > 0:
+            info["reward_terms"]["residual"] = 0.0
         return self._observation(obs), info
 
     def step(self, action: np.ndarray):
         """One control step of expert + residual ``action``; see :meth:`QuadUnevenEnv.step`."""
         obs, reward, terminated, truncated, info = self.env.step(action)
         info["residual_scale"] = self.residual_scale
-        a = np.asarray(action, dtype=float)
-        info["residual_torque"] = float(np.mean(np.abs(np.clip(a, -1.0, 1.0) * self.controller.gain)))
+        a = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
+        info["residual_torque"] = float(np.mean(np.abs(a * self.controller.gain)))
+        if self.residual_penalty > 0:
+            term = -self.residual_penalty * float(np.mean(a * a))
+            info["reward_terms"]["residual"] = term
+            reward = float(reward) + term
         return self._observation(obs), reward, terminated, truncated, info
 
 
@@ -173,6 +189,7 @@ def make_residual_env(
     residual_scale: float = DEFAULT_RESIDUAL_SCALE,
     expert_config: ExpertConfig | None = None,
     expert_features: bool = True,
+    residual_penalty: float = 0.0,
     **env_kwargs: Any,
 ) -> ResidualExpertEnv:
     """The residual env (entry point of ``QuadUnevenResidual-v0``).
@@ -181,13 +198,16 @@ def make_residual_env(
         (default 0.1 = 12 N m per joint).
     :param expert_config: the expert's settings.
     :param expert_features: append the expert features (:mod:`agents.rl.expert_features`) to the observation.
+    :param residual_penalty: reward penalty per unit of mean(action^2) (see :class:`ResidualExpertEnv`).
     :param env_kwargs: ``QuadUnevenEnv`` arguments (``terrain``, ``reward_weights``, ...); ``action_mode`` must be
         ``"torque"`` and ``controller`` is not accepted.
     :raises ValueError: on a bad argument (named).
     """
     if "controller" in env_kwargs:
         raise ValueError("controller is not accepted by the residual env: expert plus residual is its controller")
-    return ResidualExpertEnv(QuadUnevenEnv(**env_kwargs), residual_scale, expert_config, expert_features)
+    return ResidualExpertEnv(
+        QuadUnevenEnv(**env_kwargs), residual_scale, expert_config, expert_features, residual_penalty
+    )
 
 
 if RESIDUAL_ENV_ID not in registry:

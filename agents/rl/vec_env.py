@@ -74,6 +74,7 @@ def make_train_env(
     env_kwargs: dict[str, Any] | None = None,
     randomization: Any = None,
     expert_features: bool = True,
+    residual_penalty: float = 0.0,
 ) -> gym.Env:
     """One residual env (expert in the loop) with a time limit and :class:`EpisodeStats`.
 
@@ -84,6 +85,7 @@ def make_train_env(
     :param env_kwargs: extra QuadUneven-v0 arguments.
     :param randomization: the training world's randomization (None: nominal).
     :param expert_features: append the expert features to the observation.
+    :param residual_penalty: reward penalty per unit of mean(action^2).
     """
 
     def one(spec: Any) -> gym.Env:
@@ -94,6 +96,7 @@ def make_train_env(
             max_episode_steps=max_episode_steps,
             randomization=randomization,
             expert_features=expert_features,
+            residual_penalty=residual_penalty,
             **(env_kwargs or {}),
         )
 
@@ -136,6 +139,7 @@ def build_vec_env(
         dict(cfg.env_kwargs),
         cfg.randomization,
         cfg.expert_features,
+        float(cfg.residual_penalty),
     )
     if kind == "subproc":
         env_fn = functools.partial(_ignoring_interrupts, env_fn)
