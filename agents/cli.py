@@ -19,6 +19,7 @@ from pathlib import Path
 
 from agents.evaluation.episode import DEFAULT_WALL_TIME_LIMIT
 from agents.evaluation.policies import SB3_ALGOS
+from agents.evaluation.ray_backend import BACKENDS, DEFAULT_LOCAL_CPUS
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import SuiteError, load_suite, suite_from_dict, suite_names
 from agents.interrupts import sigterm_as_keyboard_interrupt
@@ -116,7 +117,26 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
     p.add_argument("--out", type=Path, required=True, help="output directory DIR")
     p.add_argument("--episodes", type=int, default=None, help="at most N seeds per terrain entry (default: all)")
     p.add_argument("--seed", type=int, default=0, help="offset added to every seed of the suite (default 0)")
-    p.add_argument("--workers", type=int, default=1, help="parallel episode processes (default 1)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help=f"parallel episode processes (default 1); with --backend ray and no --address: the CPUs of the local "
+        f"Ray (default {DEFAULT_LOCAL_CPUS})",
+    )
+    p.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="pool",
+        help="where the episodes run: 'pool' (processes on this machine, default) or 'ray' (one Ray task per "
+        "episode; needs the 'distributed' extra; docs/distributed.md)",
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        help="with --backend ray: the Ray cluster to join ('auto', HOST:6379 or ray://HOST:10001); default: a "
+        "local Ray",
+    )
     p.add_argument(
         "--video",
         action="store_true",
@@ -179,8 +199,11 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
     env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
     if args.episodes is not None and args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
-    if args.workers < 1:
+    if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    if args.address is not None and args.backend != "ray":
+        raise ValueError("--address needs --backend ray")
+    workers = args.workers if args.workers is not None else DEFAULT_LOCAL_CPUS if args.backend == "ray" else 1
     if not args.episode_wall_limit > 0:  # also refuses nan
         raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
     try:
@@ -194,7 +217,7 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
             args.out,
             episodes=args.episodes,
             seed=args.seed,
-            workers=args.workers,
+            workers=workers,
             video=args.video,
             algo=args.algo,
             env_kwargs=env_kwargs,
@@ -203,6 +226,8 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
             overwrite=args.overwrite,
             wall_time_limit=args.episode_wall_limit,
             allow_pickle=args.allow_pickle,
+            backend=args.backend,
+            address=args.address,
         )
     for kind, g in results["summary"]["by_kind"].items():
         speed = g["mean_speed"]
