@@ -138,6 +138,12 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         "local Ray",
     )
     p.add_argument(
+        "--ship-code",
+        action="store_true",
+        help="with --backend ray: upload this source tree (packages and configs) to the Ray workers instead of "
+        "using the package installed on each node",
+    )
+    p.add_argument(
         "--video",
         action="store_true",
         help="write an MP4 (DIR/videos/) for the first episode of each terrain entry only (MuJoCo offscreen)",
@@ -201,8 +207,8 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
-    if args.address is not None and args.backend != "ray":
-        raise ValueError("--address needs --backend ray")
+    if (args.address is not None or args.ship_code) and args.backend != "ray":
+        raise ValueError("--address and --ship-code need --backend ray")
     workers = args.workers if args.workers is not None else DEFAULT_LOCAL_CPUS if args.backend == "ray" else 1
     if not args.episode_wall_limit > 0:  # also refuses nan
         raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
@@ -228,6 +234,7 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
             allow_pickle=args.allow_pickle,
             backend=args.backend,
             address=args.address,
+            ship_code=args.ship_code,
         )
     for kind, g in results["summary"]["by_kind"].items():
         speed = g["mean_speed"]
@@ -497,6 +504,12 @@ def add_sweep_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         help="the Ray cluster to join ('auto', HOST:6379 or ray://HOST:10001); default: a local Ray",
     )
     p.add_argument(
+        "--ship-code",
+        action="store_true",
+        help="upload this source tree (packages and configs) to the Ray workers instead of using the package "
+        "installed on each node",
+    )
+    p.add_argument(
         "--num-cpus",
         type=int,
         default=None,
@@ -525,7 +538,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     sweep = load_sweep(args.config)
     summary = run_sweep(
         sweep, args.out, address=args.address, num_cpus=args.num_cpus, overwrite=args.overwrite,
-        progress=not args.no_progress,
+        progress=not args.no_progress, ship_code=args.ship_code,
     )  # fmt: skip
     for row in summary["runs"]:
         e = row["evaluation"]

@@ -25,8 +25,10 @@ __all__ = [
     "BACKENDS",
     "DEFAULT_LOCAL_CPUS",
     "EXTRA_HINT",
+    "SHIPPED",
     "RayUnavailable",
     "absolute_paths",
+    "code_runtime_env",
     "import_ray",
     "import_tune",
     "ray_session",
@@ -41,6 +43,25 @@ DEFAULT_LOCAL_CPUS = 2
 
 EXTRA_HINT = 'pip install -e ".[distributed]"'
 """How to install Ray (the ``distributed`` extra of pyproject.toml)."""
+
+
+SHIPPED = ("agents", "planners", "quad_uneven_env", "configs")
+"""Folders of the source tree that ``ship_code`` uploads to the cluster (the Python packages and the configs)."""
+
+
+def code_runtime_env() -> dict[str, Any]:
+    """A Ray ``runtime_env`` that ships this source tree's :data:`SHIPPED` folders to every worker (its
+    ``working_dir``: the workers import these packages and read these configs, whatever is installed there).
+
+    :raises ValueError: if the packages do not run from a source tree holding all of :data:`SHIPPED`.
+    """
+    root = Path(__file__).resolve().parents[2]
+    missing = [name for name in SHIPPED if not (root / name).is_dir()]
+    if missing:
+        raise ValueError(f"ship_code: {root} is not a source tree with {list(SHIPPED)} (missing {missing})")
+    keep = {*SHIPPED}
+    excludes = [f"/{p.name}" for p in root.iterdir() if p.name not in keep]
+    return {"working_dir": str(root), "excludes": [*excludes, "__pycache__", "*.pyc"]}
 
 
 class RayUnavailable(ValueError):
@@ -71,12 +92,16 @@ def import_tune(what: str = "sweep") -> ModuleType:
 
 
 @contextlib.contextmanager
-def ray_session(address: str | None = None, num_cpus: int | None = None, what: str = "--backend ray") -> Iterator[Any]:
+def ray_session(
+    address: str | None = None, num_cpus: int | None = None, what: str = "--backend ray", ship_code: bool = False
+) -> Iterator[Any]:
     """Inside the block, Ray is initialised: the running session if there is one, else a new one (shut down on exit).
 
     :param address: a cluster to join (``"auto"``, ``"HOST:6379"`` or ``"ray://HOST:10001"``); None: a local Ray
         on this machine with ``num_cpus`` CPUs (default :data:`DEFAULT_LOCAL_CPUS`) and no dashboard.
     :param num_cpus: CPUs of a local Ray; ignored when joining a cluster (its nodes say their own).
+    :param ship_code: a new session uploads this source tree to its workers (:func:`code_runtime_env`); without
+        it the workers import the packages installed on their node. A running session keeps its own.
     :raises RayUnavailable: without Ray; ``ValueError`` if ``num_cpus`` < 1 or the cluster cannot be reached.
     """
     ray = import_ray(what)
@@ -86,6 +111,8 @@ def ray_session(address: str | None = None, num_cpus: int | None = None, what: s
         yield ray
         return
     kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": logging.WARNING}
+    if ship_code:
+        kwargs["runtime_env"] = code_runtime_env()
     if address is None:
         kwargs["num_cpus"] = num_cpus or DEFAULT_LOCAL_CPUS
     else:
@@ -116,17 +143,18 @@ def run_on_ray(
     on_result: Callable[[EpisodeResult], None],
     address: str | None = None,
     num_cpus: int | None = None,
+    ship_code: bool = False,
 ) -> None:
     """Run every task as a Ray task (1 CPU each), handing each result to ``on_result`` as it finishes.
 
-    Joins the running Ray session, else starts one (see :func:`ray_session`). An error in ``on_result``
-    or an interrupt cancels the tasks not yet finished; the results already handed on are the caller's.
+    Joins the running Ray session, else starts one (see :func:`ray_session`, also for ``ship_code``). An error
+    in ``on_result`` or an interrupt cancels the tasks not yet finished; the results already handed on are the caller's.
 
     :raises RayUnavailable: without Ray.
     """
     if not tasks:
         return
-    with ray_session(address, num_cpus) as ray:
+    with ray_session(address, num_cpus, ship_code=ship_code) as ray:
         remote = ray.remote(num_cpus=1, max_retries=0)(run_task)
         cfg_ref = ray.put(absolute_paths(cfg))
         pending = [remote.remote(t, cfg_ref) for t in tasks]

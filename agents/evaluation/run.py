@@ -61,6 +61,7 @@ def _run_all(
     on_result: Callable[[EpisodeResult], None],
     backend: str = "pool",
     address: str | None = None,
+    ship_code: bool = False,
 ) -> None:
     """Run every task, in ``workers`` spawned processes if > 1 (``backend="ray"``: as Ray tasks, see
     :func:`agents.evaluation.ray_backend.run_on_ray`), handing each result to ``on_result`` as it ends.
@@ -76,7 +77,7 @@ def _run_all(
                 on_result(result)
                 bar.update(1)
 
-            run_on_ray(tasks, cfg, keep, address=address, num_cpus=workers)
+            run_on_ray(tasks, cfg, keep, address=address, num_cpus=workers, ship_code=ship_code)
             return
         if workers <= 1:
             for t in tasks:
@@ -156,6 +157,7 @@ def evaluate(
     expert_config: Mapping[str, Any] | None = None,
     backend: str = "pool",
     address: str | None = None,
+    ship_code: bool = False,
 ) -> dict[str, Any]:
     """Run ``policy`` on every (terrain entry, seed) of ``suite``; write ``out/results.json``, ``report.md``, PNGs.
 
@@ -179,6 +181,8 @@ def evaluate(
     :param backend: ``"pool"`` (``workers`` processes on this machine) or ``"ray"``: one Ray task per episode on
         the running Ray session, else on the cluster at ``address``, else on a local Ray of ``workers`` CPUs.
     :param address: the Ray cluster to join (``backend="ray"`` only; None: the running session or a local Ray).
+    :param ship_code: a Ray session started here uploads this source tree to the workers
+        (:func:`agents.evaluation.ray_backend.code_runtime_env`); else they import their installed package.
     :return: the results.json content.
     :raises SuiteError: on an invalid suite; ``PolicyError`` on an unusable policy; ``EnvArgumentError`` on env
         arguments the environment rejects; ``OutputError`` on an unusable ``out`` (a file, an earlier run's
@@ -196,8 +200,8 @@ def evaluate(
         raise ValueError(f"wall_time_limit must be a number > 0 (s), got {wall_time_limit!r}")
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
-    if address is not None and backend != "ray":
-        raise ValueError(f"address is for backend 'ray' only, got backend {backend!r}")
+    if (address is not None or ship_code) and backend != "ray":
+        raise ValueError(f"address and ship_code are for backend 'ray' only, got backend {backend!r}")
     if backend == "ray":
         import_ray()  # without the extra, fail before anything is written
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
@@ -232,7 +236,7 @@ def evaluate(
 
     try:
         n = workers if backend == "ray" else min(workers, max(1, len(todo)))
-        _run_all(todo, cfg, n, progress, keep, backend, address)
+        _run_all(todo, cfg, n, progress, keep, backend, address, ship_code)
     except KeyboardInterrupt:
         raise EvaluationInterrupted(out, len(done), len(tasks)) from None
 

@@ -260,6 +260,11 @@ def _trial(config: dict[str, Any]) -> None:
     tune.report({k: v for k, v in summary.items() if isinstance(v, int | float) and not isinstance(v, bool)})
 
 
+def _trial_dirname(trial: Any) -> str:
+    """Tune's folder of a trial (under ``DIR/tune/``): the run's name."""
+    return str(trial.config["run"]["name"])
+
+
 def _cpus(sweep: Sweep, cluster_cpus: float) -> float:
     want = sweep.cpus_per_run or max(r.config.n_envs for r in sweep.runs)
     return float(min(want, max(1.0, cluster_cpus)))
@@ -272,7 +277,9 @@ def _train_all(sweep: Sweep, out: Path, cpus: float, progress: bool) -> dict[str
     tuner = tune.Tuner(
         tune.with_resources(_trial, {"cpu": cpus}),
         param_space={"run": tune.grid_search(specs)},
-        tune_config=tune.TuneConfig(num_samples=1),
+        tune_config=tune.TuneConfig(
+            num_samples=1, trial_dirname_creator=_trial_dirname, trial_name_creator=_trial_dirname
+        ),
         run_config=tune.RunConfig(
             name="tune",
             storage_path=str(out),
@@ -305,12 +312,15 @@ def run_sweep(
     num_cpus: int | None = None,
     overwrite: bool = False,
     progress: bool = True,
+    ship_code: bool = False,
 ) -> dict[str, Any]:
     """Train every run of ``sweep`` as a Ray Tune trial, evaluate every model, write the summary; return it.
 
     :param out: output directory (checked first: a non-empty one is refused unless ``overwrite``). On a
         multi-node cluster it must be on a filesystem every node mounts at the same path (docs/distributed.md).
     :param address: the Ray cluster to join (None: the running Ray session, else a local Ray of ``num_cpus`` CPUs).
+    :param ship_code: a Ray session started here uploads this source tree to the workers
+        (:func:`agents.evaluation.ray_backend.code_runtime_env`); else they import their installed package.
     :param overwrite: delete an earlier sweep's outputs in ``out`` (``SWEEP_OUTPUTS``; other files are kept).
     :return: the ``summary.json`` content: ``sweep``, ``suite``, ``swept`` fields and one row per run with its
         ``params``, ``train`` figures (``train_summary.json``), ``evaluation`` figures (overall success rate,
@@ -327,7 +337,7 @@ def run_sweep(
     )  # fmt: skip
     suite = load_suite(sweep.evaluation.suite)
     rows = []
-    with ray_session(address, num_cpus, what="sweep") as ray:
+    with ray_session(address, num_cpus, what="sweep", ship_code=ship_code) as ray:
         errors = _train_all(sweep, out, _cpus(sweep, ray.cluster_resources().get("CPU", 1.0)), progress)
         for run in sweep.runs:
             results, error = None, errors[run.name]

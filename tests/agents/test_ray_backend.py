@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -10,7 +12,7 @@ import pytest
 import yaml
 
 from agents.cli import main
-from agents.evaluation.ray_backend import RayUnavailable, import_ray, ray_session
+from agents.evaluation.ray_backend import SHIPPED, RayUnavailable, code_runtime_env, import_ray, ray_session
 from agents.evaluation.run import evaluate
 
 ray = pytest.importorskip("ray")
@@ -113,5 +115,39 @@ def test_address_needs_the_ray_backend(tmp_path, capsys):
     rc = main(["evaluate", "--policy", "zero", "--suite", str(suite), "--out", str(tmp_path / "o"),
                "--address", "auto"])  # fmt: skip
     assert rc == 2 and "--backend ray" in capsys.readouterr().err
+    rc = main(["evaluate", "--policy", "zero", "--suite", str(suite), "--out", str(tmp_path / "o"), "--ship-code"])
+    assert rc == 2 and "--backend ray" in capsys.readouterr().err
     with pytest.raises(ValueError, match="backend"):
         evaluate(suite, "zero", tmp_path / "o", backend="dask")
+
+
+SHIPPED_PROBE = """
+import json, ray
+from agents.evaluation.ray_backend import ray_session
+
+@ray.remote
+def probe():
+    import quad_uneven_env
+    from quad_uneven_env.config import CONFIG_DIR
+    return quad_uneven_env.__file__, sorted(p.name for p in CONFIG_DIR.iterdir())
+
+with ray_session(num_cpus=1, ship_code=True):
+    print(json.dumps(ray.get(probe.remote())))
+"""
+"""A new Ray session (runtime envs that upload a folder are per session) asked where its worker's package is."""
+
+
+def test_ship_code_uploads_the_packages_and_configs_only(tmp_path):
+    import quad_uneven_env
+
+    env = code_runtime_env()
+    root = Path(quad_uneven_env.__file__).resolve().parents[1]
+    assert env["working_dir"] == str(root)
+    assert "/tests" in env["excludes"] and not any(f"/{name}" in env["excludes"] for name in SHIPPED)
+    run = subprocess.run([sys.executable, "-c", SHIPPED_PROBE], capture_output=True, text=True, cwd=tmp_path,
+                         env={**os.environ, "PYTHONPATH": str(root)}, timeout=300)  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    where, configs = json.loads(run.stdout.strip().splitlines()[-1])
+    assert not where.startswith(str(root)) and where.endswith("quad_uneven_env/__init__.py")  # the uploaded copy
+    assert configs == sorted(p.name for p in (root / "configs").iterdir())
+    assert not (Path(where).parents[1] / "tests").exists()
