@@ -494,7 +494,8 @@ def add_sweep_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         description="Train every run of a sweep file (a grid or list of training-config fields) as a Ray Tune "
         "trial, exactly as 'quad-uneven train' does, into DIR/runs/NAME/; evaluate every model on the sweep's "
         "suite into DIR/evals/NAME/; write DIR/summary.md, summary.json, summary.csv and summary.png. Needs the "
-        "'distributed' extra. Exit code 2 on an invalid sweep file or DIR (docs/distributed.md).",
+        "'distributed' extra. Exit code 1 if a run failed (its row says why), 2 on an invalid sweep file or DIR "
+        "(docs/distributed.md).",
     )
     p.add_argument("--config", required=True, type=Path, help="the sweep YAML (e.g. configs/sweeps/example.yaml)")
     p.add_argument("--out", type=Path, required=True, help="output directory DIR")

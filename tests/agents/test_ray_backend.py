@@ -15,17 +15,7 @@ from agents.cli import main
 from agents.evaluation.ray_backend import SHIPPED, RayUnavailable, code_runtime_env, import_ray, ray_session
 from agents.evaluation.run import evaluate
 
-ray = pytest.importorskip("ray")
-
 WALL_CLOCK_FIELDS = ("wall_time", "realtime_factor", "planner_ms_median", "planner_ms_p95")
-
-
-@pytest.fixture(scope="module")
-def local_ray():
-    """One local Ray of 2 CPUs for the tests of this module (starting one costs seconds)."""
-    ray.init(num_cpus=2, include_dashboard=False, logging_level="WARNING")
-    yield ray
-    ray.shutdown()
 
 
 def write_suite(path: Path) -> Path:
@@ -49,6 +39,7 @@ def records(out: Path) -> list[dict]:
     return [{k: v for k, v in json.loads(f.read_text()).items() if k not in WALL_CLOCK_FIELDS} for f in files]
 
 
+@pytest.mark.slow  # the pool's 2 spawned processes and the Ray workers each import the simulator: 24-43 s here
 def test_ray_gives_the_records_of_the_process_pool(tmp_path, local_ray):
     suite = write_suite(tmp_path / "s.yaml")
     pool = evaluate(suite, "zero", tmp_path / "pool", workers=2, progress=False)
@@ -58,7 +49,7 @@ def test_ray_gives_the_records_of_the_process_pool(tmp_path, local_ray):
     assert [e["index"] for e in on_ray["episodes"]] == [0, 1, 2]
     # The rough seeds differ, so equal records are not equal by accident.
     assert on_ray["episodes"][1]["mean_stability_index"] != on_ray["episodes"][2]["mean_stability_index"]
-    strip = {"wall_time", "realtime_factor", "planner_ms_median", "planner_ms_p95"}
+    strip = set(WALL_CLOCK_FIELDS)
     for group in ("overall", "by_kind"):
         a, b = pool["summary"][group], on_ray["summary"][group]
         if group == "overall":
@@ -138,6 +129,7 @@ with ray_session(num_cpus=1, ship_code=True):
 
 
 def test_ship_code_uploads_the_packages_and_configs_only(tmp_path):
+    pytest.importorskip("ray")
     import quad_uneven_env
 
     env = code_runtime_env()

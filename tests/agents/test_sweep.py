@@ -145,15 +145,6 @@ def test_summary_table_and_plot_from_a_hand_made_summary(tmp_path):
 
 
 # -------------------------------------------------------------------------- a tiny sweep on Ray
-@pytest.fixture(scope="module")
-def local_ray():
-    """One local Ray of 2 CPUs for the sweeps of this module."""
-    ray = pytest.importorskip("ray")
-    ray.init(num_cpus=2, include_dashboard=False, logging_level="WARNING")
-    yield ray
-    ray.shutdown()
-
-
 def write_tiny_suite(path: Path) -> Path:
     """One 2 s episode on rough ground (goal 0.3 m)."""
     raw = {
