@@ -13,6 +13,8 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
+import signal
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from types import ModuleType
@@ -102,6 +104,9 @@ def ray_session(
     :param num_cpus: CPUs of a local Ray; ignored when joining a cluster (its nodes say their own).
     :param ship_code: a new session uploads this source tree to its workers (:func:`code_runtime_env`); without
         it the workers import the packages installed on their node. A running session keeps its own.
+
+    The SIGTERM handler of this process is kept (``ray.init`` replaces it with one that exits at once), so
+    :func:`agents.interrupts.sigterm_as_keyboard_interrupt` still turns SIGTERM into an interrupt.
     :raises RayUnavailable: without Ray; ``ValueError`` if ``num_cpus`` < 1 or the cluster cannot be reached.
     """
     ray = import_ray(what)
@@ -117,10 +122,15 @@ def ray_session(
         kwargs["num_cpus"] = num_cpus or DEFAULT_LOCAL_CPUS
     else:
         kwargs["address"] = address
+    main_thread = threading.current_thread() is threading.main_thread()
+    sigterm = signal.getsignal(signal.SIGTERM) if main_thread else None
     try:
         ray.init(**kwargs)
     except (ConnectionError, RuntimeError) as err:
         raise ValueError(f"--address {address!r}: cannot join the Ray cluster ({err})") from None
+    finally:
+        if main_thread:  # ray.init installs a SIGTERM -> sys.exit handler: keep ours (SIGTERM as Ctrl-C)
+            signal.signal(signal.SIGTERM, sigterm)
     try:
         yield ray
     finally:

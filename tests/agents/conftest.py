@@ -9,7 +9,8 @@ import pytest
 def local_ray():
     """One local Ray of 2 CPUs and no dashboard for the tests of a module (starting one costs seconds); shut down
     after them. Skips without the ``distributed`` extra."""
-    ray = pytest.importorskip("ray")
-    ray.init(num_cpus=2, include_dashboard=False, logging_level="WARNING")
-    yield ray
-    ray.shutdown()
+    pytest.importorskip("ray")
+    from agents.evaluation.ray_backend import ray_session
+
+    with ray_session(num_cpus=2) as ray:
+        yield ray

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -81,11 +82,12 @@ def test_cli_backend_ray_end_to_end(tmp_path, capsys, local_ray):
     assert "report written" in capsys.readouterr().out
 
 
-def test_ray_session_reuses_the_running_ray(local_ray):
+def test_ray_session_reuses_the_running_ray_and_keeps_our_sigterm_handler(local_ray):
     with ray_session(num_cpus=1) as r:
         assert r.is_initialized()
     assert local_ray.is_initialized()  # not shut down: it was not ours
     assert local_ray.cluster_resources()["CPU"] == 2
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # ray.init's own handler was removed
 
 
 def test_without_ray_the_cli_names_the_extra_and_exits_2(tmp_path, capsys, monkeypatch):
