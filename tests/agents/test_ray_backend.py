@@ -145,3 +145,23 @@ def test_ship_code_uploads_the_packages_and_configs_only(tmp_path):
     assert not where.startswith(str(root)) and where.endswith("quad_uneven_env/__init__.py")  # the uploaded copy
     assert configs == sorted(p.name for p in (root / "configs").iterdir())
     assert not (Path(where).parents[1] / "tests").exists()
+
+
+@pytest.mark.slow  # the interrupt kills the Ray workers (as the pool's terminate): the resume starts new ones
+def test_an_interrupt_keeps_the_finished_episodes_and_resume_ends_the_run(tmp_path, monkeypatch, local_ray):
+    import agents.evaluation.run as run
+
+    suite = write_suite(tmp_path / "s.yaml")
+    written = run.write_episode
+
+    def write_then_interrupt(out, result):
+        written(out, result)
+        raise KeyboardInterrupt  # as Ctrl-C (or SIGTERM) right after the first record
+
+    monkeypatch.setattr(run, "write_episode", write_then_interrupt)
+    with pytest.raises(run.EvaluationInterrupted, match="--resume"):
+        evaluate(suite, "zero", tmp_path / "o", backend="ray", progress=False)
+    assert len(list((tmp_path / "o" / "episodes").glob("ep*.json"))) == 1
+    monkeypatch.setattr(run, "write_episode", written)
+    res = evaluate(suite, "zero", tmp_path / "o", backend="ray", resume=True, progress=False)
+    assert res["meta"]["resumed_episodes"] == 1 and len(records(tmp_path / "o")) == 3
