@@ -1,6 +1,6 @@
 """The ``quad-uneven`` command line: every argparse parser of the project, and the thin handlers behind them.
 
-Subcommands: ``demo``, ``evaluate``, ``train``, ``export``, ``paper``, ``plan-paper``, ``robustness`` (see
+Subcommands: ``demo``, ``evaluate``, ``train``, ``export``, ``paper``, ``plan-paper``, ``robustness``, ``sweep`` (see
 ``--help`` of each). The
 library modules expose typed functions only; this module turns arguments into their calls and their
 errors into one line on stderr with exit code 2: every validation error of the project is a ``ValueError``
@@ -19,6 +19,7 @@ from pathlib import Path
 
 from agents.evaluation.episode import DEFAULT_WALL_TIME_LIMIT
 from agents.evaluation.policies import SB3_ALGOS
+from agents.evaluation.ray_backend import BACKENDS, DEFAULT_LOCAL_CPUS
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import SuiteError, load_suite, suite_from_dict, suite_names
 from agents.interrupts import sigterm_as_keyboard_interrupt
@@ -116,7 +117,32 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
     p.add_argument("--out", type=Path, required=True, help="output directory DIR")
     p.add_argument("--episodes", type=int, default=None, help="at most N seeds per terrain entry (default: all)")
     p.add_argument("--seed", type=int, default=0, help="offset added to every seed of the suite (default 0)")
-    p.add_argument("--workers", type=int, default=1, help="parallel episode processes (default 1)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help=f"parallel episode processes (default 1); with --backend ray and no --address: the CPUs of the local "
+        f"Ray (default {DEFAULT_LOCAL_CPUS})",
+    )
+    p.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="pool",
+        help="where the episodes run: 'pool' (processes on this machine, default) or 'ray' (one Ray task per "
+        "episode; needs the 'distributed' extra; docs/distributed.md)",
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        help="with --backend ray: the Ray cluster to join ('auto', HOST:6379 or ray://HOST:10001); default: a "
+        "local Ray",
+    )
+    p.add_argument(
+        "--ship-code",
+        action="store_true",
+        help="with --backend ray: upload this source tree (packages and configs) to the Ray workers instead of "
+        "using the package installed on each node",
+    )
     p.add_argument(
         "--video",
         action="store_true",
@@ -179,8 +205,11 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
     env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
     if args.episodes is not None and args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
-    if args.workers < 1:
+    if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    if (args.address is not None or args.ship_code) and args.backend != "ray":
+        raise ValueError("--address and --ship-code need --backend ray")
+    workers = args.workers if args.workers is not None else DEFAULT_LOCAL_CPUS if args.backend == "ray" else 1
     if not args.episode_wall_limit > 0:  # also refuses nan
         raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
     try:
@@ -194,7 +223,7 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
             args.out,
             episodes=args.episodes,
             seed=args.seed,
-            workers=args.workers,
+            workers=workers,
             video=args.video,
             algo=args.algo,
             env_kwargs=env_kwargs,
@@ -203,6 +232,9 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
             overwrite=args.overwrite,
             wall_time_limit=args.episode_wall_limit,
             allow_pickle=args.allow_pickle,
+            backend=args.backend,
+            address=args.address,
+            ship_code=args.ship_code,
         )
     for kind, g in results["summary"]["by_kind"].items():
         speed = g["mean_speed"]
@@ -488,6 +520,72 @@ def run_compare_command(args: argparse.Namespace) -> int:
     return 0
 
 
+# --------------------------------------------------------------------------------------------- sweep
+def add_sweep_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``sweep`` subcommand on ``sub``."""
+    p = sub.add_parser(
+        "sweep",
+        help="a grid of training runs on Ray Tune, each model evaluated on a suite; summary table and plot",
+        description="Train every run of a sweep file (a grid or list of training-config fields) as a Ray Tune "
+        "trial, exactly as 'quad-uneven train' does, into DIR/runs/NAME/; evaluate every model on the sweep's "
+        "suite into DIR/evals/NAME/; write DIR/summary.md, summary.json, summary.csv and summary.png. Needs the "
+        "'distributed' extra. Exit code 1 if a run failed (its row says why), 2 on an invalid sweep file or DIR "
+        "(docs/distributed.md).",
+    )
+    p.add_argument("--config", required=True, type=Path, help="the sweep YAML (e.g. configs/sweeps/example.yaml)")
+    p.add_argument("--out", type=Path, required=True, help="output directory DIR")
+    p.add_argument(
+        "--address",
+        default=None,
+        help="the Ray cluster to join ('auto', HOST:6379 or ray://HOST:10001); default: a local Ray",
+    )
+    p.add_argument(
+        "--ship-code",
+        action="store_true",
+        help="upload this source tree (packages and configs) to the Ray workers instead of using the package "
+        "installed on each node",
+    )
+    p.add_argument(
+        "--num-cpus",
+        type=int,
+        default=None,
+        help=f"CPUs of the local Ray (no --address; default {DEFAULT_LOCAL_CPUS})",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="DIR may hold an earlier sweep: delete its outputs first (other files are kept)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress output")
+    p.set_defaults(func=run_sweep_command)
+    return p
+
+
+def run_sweep_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven sweep``: 0 when every run was trained and evaluated, 1 if one failed, 2 on bad input."""
+    from agents.evaluation.ray_backend import import_tune
+    from agents.rl.sweep import load_sweep, run_sweep
+
+    import_tune("sweep")
+    if args.num_cpus is not None and args.num_cpus < 1:
+        raise ValueError(f"--num-cpus must be >= 1, got {args.num_cpus}")
+    if args.num_cpus is not None and args.address is not None:
+        raise ValueError("--num-cpus is for a local Ray; a cluster given by --address has its own CPUs")
+    sweep = load_sweep(args.config)
+    summary = run_sweep(
+        sweep, args.out, address=args.address, num_cpus=args.num_cpus, overwrite=args.overwrite,
+        progress=not args.no_progress, ship_code=args.ship_code,
+    )  # fmt: skip
+    for row in summary["runs"]:
+        e = row["evaluation"]
+        index = e["mean_stability_index"]
+        index = index if index is None else round(index, 1)
+        result = f"success {e['successes']}/{e['episodes']}  mean index {index} N m"
+        print(f"{row['name']:40s} {'error: ' + row['error'] if row['error'] else result}")
+    print(f"summary: {(Path(args.out) / 'summary.md').resolve()}")
+    return 1 if any(row["error"] for row in summary["runs"]) else 0
+
+
 # ---------------------------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
     """The ``quad-uneven`` parser with every subcommand."""
@@ -495,7 +593,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     for add in (
         add_demo_parser, add_evaluate_parser, add_train_parser, add_export_parser, add_paper_parser,
-        add_plan_paper_parser, add_robustness_parser, add_compare_parser,
+        add_plan_paper_parser, add_robustness_parser, add_compare_parser, add_sweep_parser,
     ):  # fmt: skip
         add(sub)
     return parser

@@ -123,6 +123,12 @@ def test_import_agents_loads_no_torch_or_sb3():
     assert loaded.isdisjoint({"torch", "stable_baselines3"})
 
 
+def test_the_cli_and_the_ray_modules_load_no_ray_torch_or_sb3():
+    """Ray is an optional extra: only running ``--backend ray`` or ``sweep`` imports it."""
+    loaded = _loaded_after("import agents.cli, agents.evaluation.ray_backend, agents.rl.sweep")
+    assert loaded.isdisjoint({"ray", "torch", "stable_baselines3"}), loaded & {"ray", "torch", "stable_baselines3"}
+
+
 def test_gymnasium_imported_after_the_package_still_finds_the_env():
     loaded = _loaded_after(
         "import planners, quad_uneven_env; import gymnasium as gym; gym.make('QuadUneven-v0', terrain='flat')"

@@ -30,6 +30,7 @@ from agents.evaluation.episode import (
 )
 from agents.evaluation.metrics import factor_summary, json_safe, summarize
 from agents.evaluation.policies import SB3_ALGOS, PolicyError, make_policy, policy_kind
+from agents.evaluation.ray_backend import BACKENDS, import_ray, run_on_ray
 from agents.evaluation.report import write_report
 from agents.evaluation.store import (
     check_resume,
@@ -58,14 +59,26 @@ def _run_all(
     workers: int,
     progress: bool,
     on_result: Callable[[EpisodeResult], None],
+    backend: str = "pool",
+    address: str | None = None,
+    ship_code: bool = False,
 ) -> None:
-    """Run every task, in ``workers`` spawned processes if > 1, handing each result to ``on_result`` as it ends.
+    """Run every task, in ``workers`` spawned processes if > 1 (``backend="ray"``: as Ray tasks, see
+    :func:`agents.evaluation.ray_backend.run_on_ray`), handing each result to ``on_result`` as it ends.
 
     An interrupt (Ctrl-C, or SIGTERM under :func:`agents.interrupts.sigterm_as_keyboard_interrupt`)
     stops the workers at once; the results already handed on are kept by the caller.
     """
     bar = tqdm(total=len(tasks), desc="episodes", unit="ep", disable=not progress)
     try:
+        if backend == "ray":
+
+            def keep(result: EpisodeResult) -> None:
+                on_result(result)
+                bar.update(1)
+
+            run_on_ray(tasks, cfg, keep, address=address, num_cpus=workers, ship_code=ship_code)
+            return
         if workers <= 1:
             for t in tasks:
                 on_result(run_task(t, cfg))
@@ -142,6 +155,9 @@ def evaluate(
     wall_time_limit: float = DEFAULT_WALL_TIME_LIMIT,
     allow_pickle: bool = False,
     expert_config: Mapping[str, Any] | None = None,
+    backend: str = "pool",
+    address: str | None = None,
+    ship_code: bool = False,
 ) -> dict[str, Any]:
     """Run ``policy`` on every (terrain entry, seed) of ``suite``; write ``out/results.json``, ``report.md``, PNGs.
 
@@ -162,6 +178,11 @@ def evaluate(
     :param allow_pickle: unpickle files of an SB3 model folder (trusted files only).
     :param expert_config: fields of :class:`agents.expert.ExpertConfig` for ``policy="expert"``, e.g.
         ``{"model": "oracle"}`` (None: the defaults; a residual model keeps the expert of its training).
+    :param backend: ``"pool"`` (``workers`` processes on this machine) or ``"ray"``: one Ray task per episode on
+        the running Ray session, else on the cluster at ``address``, else on a local Ray of ``workers`` CPUs.
+    :param address: the Ray cluster to join (``backend="ray"`` only; None: the running session or a local Ray).
+    :param ship_code: a Ray session started here uploads this source tree to the workers
+        (:func:`agents.evaluation.ray_backend.code_runtime_env`); else they import their installed package.
     :return: the results.json content.
     :raises SuiteError: on an invalid suite; ``PolicyError`` on an unusable policy; ``EnvArgumentError`` on env
         arguments the environment rejects; ``OutputError`` on an unusable ``out`` (a file, an earlier run's
@@ -177,6 +198,12 @@ def evaluate(
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     if isinstance(wall_time_limit, bool) or not (isinstance(wall_time_limit, int | float) and wall_time_limit > 0):
         raise ValueError(f"wall_time_limit must be a number > 0 (s), got {wall_time_limit!r}")
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
+    if (address is not None or ship_code) and backend != "ray":
+        raise ValueError(f"address and ship_code are for backend 'ray' only, got backend {backend!r}")
+    if backend == "ray":
+        import_ray()  # without the extra, fail before anything is written
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
     tasks = episode_tasks(suite, episodes, seed)
     out = open_output_dir(Path(out), resume=resume, overwrite=overwrite)
@@ -208,7 +235,8 @@ def evaluate(
         done[int(record["index"])] = record
 
     try:
-        _run_all(todo, cfg, min(workers, max(1, len(todo))), progress, keep)
+        n = workers if backend == "ray" else min(workers, max(1, len(todo)))
+        _run_all(todo, cfg, n, progress, keep, backend, address, ship_code)
     except KeyboardInterrupt:
         raise EvaluationInterrupted(out, len(done), len(tasks)) from None
 
@@ -220,6 +248,8 @@ def evaluate(
         "episodes_per_entry": episodes,
         "seed_offset": seed,
         "workers": workers,
+        "backend": backend,
+        "ray_address": address,
         "algo": algo if kind == "sb3" else None,
         "env_kwargs": env_kwargs,
         "entries": [e.label for e in suite.terrains],
