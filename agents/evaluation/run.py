@@ -207,7 +207,9 @@ def evaluate(
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
     tasks = episode_tasks(suite, episodes, seed)
     out = open_output_dir(Path(out), resume=resume, overwrite=overwrite)
-    identity = run_identity(suite, str(policy), algo if kind == "sb3" else None, env_kwargs, episodes, seed, len(tasks))
+    identity = run_identity(
+        suite, str(policy), algo if kind == "sb3" else None, env_kwargs, episodes, seed, len(tasks), expert_config
+    )
     resuming = resume and check_resume(out, identity)
     cfg = EvalConfig(
         policy=str(policy),

@@ -48,7 +48,16 @@ RUN_FORMAT = "quad-uneven-eval/1"
 EVAL_OUTPUTS = (RUN_FILE, "results.json", "report.md", "*.png", "episodes", "traces", "videos", ".*.tmp")
 """Top-level names an evaluation writes in ``DIR`` (what ``--overwrite`` deletes; nothing else is touched)."""
 
-IDENTITY_KEYS = ("suite", "policy", "policy_sha256", "algo", "env_kwargs", "episodes_per_entry", "seed_offset")
+IDENTITY_KEYS = (
+    "suite",
+    "policy",
+    "policy_sha256",
+    "algo",
+    "env_kwargs",
+    "expert_config",
+    "episodes_per_entry",
+    "seed_offset",
+)
 """Fields of ``run.json`` that must be equal for ``--resume`` to continue a run."""
 
 
@@ -68,11 +77,13 @@ def run_identity(
     episodes: int | None,
     seed: int,
     n_tasks: int,
+    expert_config: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The ``run.json`` content: everything that decides which episodes run and how (JSON-safe).
 
     :param algo: the SB3 class of a model file, None for a named policy.
     :param n_tasks: number of episodes of the run.
+    :param expert_config: the expert's settings given to the run (``{}``: its defaults).
     """
     is_file = policy not in ("zero", "expert") and Path(policy).is_file()
     return {
@@ -88,6 +99,7 @@ def run_identity(
         "policy_sha256": _sha256(policy) if is_file else None,
         "algo": algo,
         "env_kwargs": json.loads(json.dumps(dict(env_kwargs))),
+        "expert_config": json.loads(json.dumps(dict(expert_config or {}))),
         "episodes_per_entry": episodes,
         "seed_offset": seed,
         "episodes": n_tasks,
@@ -132,7 +144,7 @@ def check_resume(out: Path, identity: Mapping[str, Any]) -> bool:
     if not isinstance(recorded, dict) or recorded.get("format") != RUN_FORMAT:
         raise OutputError(f"--resume: {path} is not a {RUN_FORMAT} run file; pass --overwrite to start over")
     for key in IDENTITY_KEYS:
-        if recorded.get(key) != identity.get(key):
+        if recorded.get(key, {} if key == "expert_config" else None) != identity.get(key):
             raise OutputError(
                 f"--resume: {key} differs from the run recorded in {path} (recorded {recorded.get(key)!r}, "
                 f"now {identity.get(key)!r}); pass --overwrite to start over or choose another --out"

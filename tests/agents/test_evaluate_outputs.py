@@ -112,6 +112,7 @@ def test_resume_refuses_another_run_and_reruns_an_unfinished_episode(tmp_path, m
         ({"env_kwargs": {"frame_skip": 5}}, "env_kwargs"),
         ({"seed": 3}, "seed_offset"),
         ({"episodes": 2}, "episodes_per_entry"),
+        ({"expert_config": {"model": "oracle"}}, "expert_config"),
         ({"policy": "expert"}, "policy"),
     ):
         with pytest.raises(OutputError, match=f"--resume: {field} differs"):
