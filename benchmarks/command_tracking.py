@@ -1,0 +1,119 @@
+"""How well the expert follows a commanded (vx, vy): falls, velocity tracking error and the stability index.
+
+For each fixed command and seed: ``QuadUneven-v0(terrain, command={"vx": ..., "vy": ...})`` with the expert
+attached, walked for ``--seconds``. Printed per command, over the seeds:
+
+- falls (episodes that terminated) and stalls (cycles the expert stood still: "no feasible plan");
+- cycle-mean tracking error (m/s): per whole gait cycle after the first (which starts from rest), the norm of
+  (COG displacement over the cycle / cycle duration - commanded (vx, vy)), yaw-aligned frame; mean over the
+  cycles and episodes (a crawl's velocity within a cycle is not constant, so this is the error of the speed
+  the robot actually travels at);
+- velocity RMSE (m/s): the root mean square over the control steps after the first cycle of the COG's
+  horizontal velocity (yaw-aligned frame) minus the command: the crawl's start-stop profile within a cycle
+  is part of it (what a per-step tracking reward sees);
+- index >= 0: the fraction of control steps with the measured stability index >= 0.
+
+Usage: ``python benchmarks/command_tracking.py [--seeds 5] [--seconds 16] [--amplitude 0.05]
+[--commands "0.1,0 -0.1,0 0,0.05"]`` (commands: space-separated ``vx,vy`` pairs in m/s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import gymnasium as gym
+import numpy as np
+
+import quad_uneven_env  # noqa: F401
+from agents.expert import ExpertConfig, attach_expert
+
+
+def run_episode(vx: float, vy: float, seed: int, seconds: float, amplitude: float) -> dict:
+    """One episode of the expert under the command (vx, vy); its figures."""
+    env = gym.make(
+        "QuadUneven-v0",
+        terrain={"kind": "rough", "amplitude": amplitude},
+        command={"vx": vx, "vy": vy},
+        max_episode_steps=10**7,
+    )
+    config = ExpertConfig()
+    expert = attach_expert(env, config)
+    _, info = env.reset(seed=seed)
+    period = float(sum(config.durations))
+    dt = env.unwrapped.dt
+    steps_per_cycle = round(period / dt)
+    cog, yaw, index_ok, fell = [info["cog"][:2].copy()], [0.0], 0, False
+    vel = [info["cog_vel"][:2].copy()]
+    n = round(seconds / dt)
+    for _ in range(n):
+        _, _, term, trunc, info = env.step(expert.predict(None)[0])
+        cog.append(info["cog"][:2].copy())
+        vel.append(info["cog_vel"][:2].copy())
+        q = env.unwrapped.data.qpos[3:7]
+        yaw.append(math.atan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2)))
+        index_ok += info["stability_index"] >= 0.0
+        if term or trunc:
+            fell = bool(term)
+            break
+    cog = np.array(cog)
+    cmd = np.array([vx, vy])
+    errors = []
+    for k in range(1, (len(cog) - 1) // steps_per_cycle):
+        a, b = k * steps_per_cycle, (k + 1) * steps_per_cycle
+        c, s = math.cos(yaw[a]), math.sin(yaw[a])
+        v_W = (cog[b] - cog[a]) / period
+        v_H = np.array([c * v_W[0] + s * v_W[1], -s * v_W[0] + c * v_W[1]])
+        errors.append(float(np.linalg.norm(v_H - cmd)))
+    whole = (len(cog) - 1) // steps_per_cycle
+    a, b = steps_per_cycle, whole * steps_per_cycle
+    mean_v = (cog[b] - cog[a]) / ((b - a) * dt) if b > a else np.full(2, np.nan)
+    yaw_a, vel_a = np.array(yaw[a:]), np.array(vel[a:])
+    v_H = np.column_stack(
+        [
+            np.cos(yaw_a) * vel_a[:, 0] + np.sin(yaw_a) * vel_a[:, 1],
+            -np.sin(yaw_a) * vel_a[:, 0] + np.cos(yaw_a) * vel_a[:, 1],
+        ]
+    )
+    rmse = float(np.sqrt(np.mean(np.sum((v_H - cmd) ** 2, axis=1)))) if len(v_H) else math.nan
+    stalls = sum("no feasible plan" in m for m in expert.failure_log)
+    env.close()
+    return {
+        "fell": fell,
+        "stalls": stalls,
+        "cycle_errors": errors,
+        "rmse": rmse,
+        "index_ok": index_ok / max(len(cog) - 1, 1),
+        "mean_v": mean_v,
+    }
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run every command over the seeds and print one line each."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--seconds", type=float, default=16.0, help="simulated seconds per episode")
+    parser.add_argument("--amplitude", type=float, default=0.05, help="rough terrain amplitude (m)")
+    parser.add_argument(
+        "--commands",
+        default="0.2,0 0.15,0 0.106,0 0.05,0 0,0 -0.05,0 -0.106,0 -0.15,0 -0.2,0 0,0.05 0,-0.05 0,0.1 0,-0.1 "
+        "0.07,0.04 -0.07,-0.04",
+    )
+    args = parser.parse_args(argv)
+    print(f"rough {args.amplitude} m, {args.seeds} seeds, {args.seconds} s per episode")
+    print("    vx     vy | falls stalls | cycle err (m/s)  | RMSE (m/s) | mean v (m/s)     | index>=0")
+    for pair in args.commands.split():
+        vx, vy = (float(v) for v in pair.split(","))
+        runs = [run_episode(vx, vy, seed, args.seconds, args.amplitude) for seed in range(args.seeds)]
+        cycle = [e for r in runs for e in r["cycle_errors"]]
+        mean_v = np.nanmean([r["mean_v"] for r in runs], axis=0)
+        print(
+            f"{vx:6.3f} {vy:6.3f} | {sum(r['fell'] for r in runs):5d} {sum(r['stalls'] for r in runs):6d} | "
+            f"{np.mean(cycle):6.3f} max {np.max(cycle):5.3f} | {np.mean([r['rmse'] for r in runs]):10.3f} | "
+            f"({mean_v[0]:6.3f}, {mean_v[1]:6.3f}) | {np.mean([r['index_ok'] for r in runs]):.4f}",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
