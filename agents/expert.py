@@ -1,9 +1,10 @@
 """The scripted expert: the paper's planner and inverse-dynamics controller in the loop.
 
 :class:`ExpertPolicy` replans every gait cycle from the measured state (receding horizon:
-footholds, COG path, swing paths) heading +x (or, in an env with a ``command``, advancing by the commanded
-(vx, vy) times the cycle's duration: forwards, backwards, sideways; the yaw rate is not followed), with the body pitched along the slope of the
-footholds (``ExpertConfig.body_pitch``; the paper keeps it level), and runs the computed-torque
+footholds, COG path, swing paths) heading +x (or, in an env with a ``command``, advancing by the
+commanded (vx, vy) times the cycle's duration: forwards, backwards, sideways; the yaw rate is not
+followed), with the body pitched along the slope of the footholds (``ExpertConfig.body_pitch``; the
+paper keeps it level), and runs the computed-torque
 controller (:class:`agents.control.controller.ComputedTorqueController`) at physics rate through the env's
 control hook.
 
