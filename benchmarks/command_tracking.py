@@ -13,13 +13,17 @@ attached, walked for ``--seconds``. Printed per command, over the seeds:
   is part of it (what a per-step tracking reward sees);
 - index >= 0: the fraction of control steps with the measured stability index >= 0.
 
-Usage: ``python benchmarks/command_tracking.py [--seeds 5] [--seconds 16] [--amplitude 0.05]
-[--commands "0.1,0 -0.1,0 0,0.05"]`` (commands: space-separated ``vx,vy`` pairs in m/s).
+The terrain is rough with its grid centred on the spawn point (``x_start`` -4 m, 8 m x 5 m, flat spawn
+disc of radius ``--spawn-radius``), so that walking backwards or sideways does not leave it.
+
+Usage: ``python benchmarks/command_tracking.py [--seeds 5] [--seconds 20] [--amplitude 0.05]
+[--spawn-radius 0.4] [--commands "0.1,0 -0.1,0 0,0.05"]`` (commands: space-separated ``vx,vy`` pairs, m/s).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 
 import gymnasium as gym
@@ -29,11 +33,23 @@ import quad_uneven_env  # noqa: F401
 from agents.expert import ExpertConfig, attach_expert
 
 
-def run_episode(vx: float, vy: float, seed: int, seconds: float, amplitude: float) -> dict:
+def terrain_spec(amplitude: float, spawn_radius: float) -> dict:
+    """Rough terrain of ``amplitude`` (m) on an 8 m x 5 m grid centred on the spawn point."""
+    return {
+        "kind": "rough",
+        "amplitude": amplitude,
+        "x_start": -4.0,
+        "length": 8.0,
+        "width": 5.0,
+        "spawn_radius": spawn_radius,
+    }
+
+
+def run_episode(vx: float, vy: float, seed: int, seconds: float, terrain: dict) -> dict:
     """One episode of the expert under the command (vx, vy); its figures."""
     env = gym.make(
         "QuadUneven-v0",
-        terrain={"kind": "rough", "amplitude": amplitude},
+        terrain=terrain,
         command={"vx": vx, "vy": vy},
         max_episode_steps=10**7,
     )
@@ -92,19 +108,21 @@ def main(argv: list[str] | None = None) -> None:
     """Run every command over the seeds and print one line each."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--seconds", type=float, default=16.0, help="simulated seconds per episode")
+    parser.add_argument("--seconds", type=float, default=20.0, help="simulated seconds per episode")
     parser.add_argument("--amplitude", type=float, default=0.05, help="rough terrain amplitude (m)")
+    parser.add_argument("--spawn-radius", type=float, default=0.4, help="flat disc around the spawn point (m)")
     parser.add_argument(
         "--commands",
         default="0.2,0 0.15,0 0.106,0 0.05,0 0,0 -0.05,0 -0.106,0 -0.15,0 -0.2,0 0,0.05 0,-0.05 0,0.1 0,-0.1 "
         "0.07,0.04 -0.07,-0.04",
     )
     args = parser.parse_args(argv)
-    print(f"rough {args.amplitude} m, {args.seeds} seeds, {args.seconds} s per episode")
+    terrain = terrain_spec(args.amplitude, args.spawn_radius)
+    print(f"terrain {json.dumps(terrain)}, {args.seeds} seeds, {args.seconds} s per episode")
     print("    vx     vy | falls stalls | cycle err (m/s)  | RMSE (m/s) | mean v (m/s)     | index>=0")
     for pair in args.commands.split():
         vx, vy = (float(v) for v in pair.split(","))
-        runs = [run_episode(vx, vy, seed, args.seconds, args.amplitude) for seed in range(args.seeds)]
+        runs = [run_episode(vx, vy, seed, args.seconds, terrain) for seed in range(args.seeds)]
         cycle = [e for r in runs for e in r["cycle_errors"]]
         mean_v = np.nanmean([r["mean_v"] for r in runs], axis=0)
         print(
