@@ -3,7 +3,8 @@
 For each fixed command and seed: ``QuadUneven-v0(terrain, command={"vx": ..., "vy": ...})`` with the expert
 attached, walked for ``--seconds``. Printed per command, over the seeds:
 
-- falls (episodes that terminated) and stalls (cycles the expert stood still: "no feasible plan");
+- falls (episodes that terminated), short (cycle plans that failed at the commanded stride, then retried
+  shorter) and stalls (cycles the expert stood still: "no feasible plan");
 - cycle-mean tracking error (m/s): per whole gait cycle after the first (which starts from rest), the norm of
   (COG displacement over the cycle / cycle duration - commanded (vx, vy)), yaw-aligned frame; mean over the
   cycles and episodes (a crawl's velocity within a cycle is not constant, so this is the error of the speed
@@ -17,7 +18,8 @@ The terrain is rough with its grid centred on the spawn point (``x_start`` -4 m,
 disc of radius ``--spawn-radius``), so that walking backwards or sideways does not leave it.
 
 Usage: ``python benchmarks/command_tracking.py [--seeds 5] [--seconds 20] [--amplitude 0.05]
-[--spawn-radius 0.4] [--commands "0.1,0 -0.1,0 0,0.05"]`` (commands: space-separated ``vx,vy`` pairs, m/s).
+[--spawn-radius 0.4] [--durations 0.5,0.5,0.5,0.1,0.5,0.5,0.5] [--commands="0.1,0 -0.1,0 0,0.05"]``
+(commands: space-separated ``vx,vy`` pairs, m/s; durations: the expert's 7 phases, s).
 """
 
 from __future__ import annotations
@@ -45,15 +47,14 @@ def terrain_spec(amplitude: float, spawn_radius: float) -> dict:
     }
 
 
-def run_episode(vx: float, vy: float, seed: int, seconds: float, terrain: dict) -> dict:
-    """One episode of the expert under the command (vx, vy); its figures."""
+def run_episode(vx: float, vy: float, seed: int, seconds: float, terrain: dict, config: ExpertConfig) -> dict:
+    """One episode of the expert (``config``) under the command (vx, vy); its figures."""
     env = gym.make(
         "QuadUneven-v0",
         terrain=terrain,
         command={"vx": vx, "vy": vy},
         max_episode_steps=10**7,
     )
-    config = ExpertConfig()
     expert = attach_expert(env, config)
     _, info = env.reset(seed=seed)
     period = float(sum(config.durations))
@@ -93,10 +94,12 @@ def run_episode(vx: float, vy: float, seed: int, seconds: float, terrain: dict) 
     )
     rmse = float(np.sqrt(np.mean(np.sum((v_H - cmd) ** 2, axis=1)))) if len(v_H) else math.nan
     stalls = sum("no feasible plan" in m for m in expert.failure_log)
+    short = len({m.split(",")[0] for m in expert.failure_log if ", stride " in m})  # one per cycle start time
     env.close()
     return {
         "fell": fell,
         "stalls": stalls,
+        "short": short,
         "cycle_errors": errors,
         "rmse": rmse,
         "index_ok": index_ok / max(len(cog) - 1, 1),
@@ -110,6 +113,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--seconds", type=float, default=20.0, help="simulated seconds per episode")
     parser.add_argument("--amplitude", type=float, default=0.05, help="rough terrain amplitude (m)")
+    parser.add_argument("--durations", default=None, help="the expert's 7 phase durations (s), comma-separated")
     parser.add_argument("--spawn-radius", type=float, default=0.4, help="flat disc around the spawn point (m)")
     parser.add_argument(
         "--commands",
@@ -118,15 +122,23 @@ def main(argv: list[str] | None = None) -> None:
     )
     args = parser.parse_args(argv)
     terrain = terrain_spec(args.amplitude, args.spawn_radius)
-    print(f"terrain {json.dumps(terrain)}, {args.seeds} seeds, {args.seconds} s per episode")
-    print("    vx     vy | falls stalls | cycle err (m/s)  | RMSE (m/s) | mean v (m/s)     | index>=0")
+    config = (
+        ExpertConfig()
+        if args.durations is None
+        else ExpertConfig(durations=tuple(map(float, args.durations.split(","))))
+    )
+    print(
+        f"terrain {json.dumps(terrain)}, {args.seeds} seeds, {args.seconds} s per episode, durations {config.durations}"
+    )
+    print("    vx     vy | falls short stalls | cycle err (m/s)  | RMSE (m/s) | mean v (m/s)     | index>=0")
     for pair in args.commands.split():
         vx, vy = (float(v) for v in pair.split(","))
-        runs = [run_episode(vx, vy, seed, args.seconds, terrain) for seed in range(args.seeds)]
+        runs = [run_episode(vx, vy, seed, args.seconds, terrain, config) for seed in range(args.seeds)]
         cycle = [e for r in runs for e in r["cycle_errors"]]
         mean_v = np.nanmean([r["mean_v"] for r in runs], axis=0)
+        counts = [sum(r[k] for r in runs) for k in ("fell", "short", "stalls")]
         print(
-            f"{vx:6.3f} {vy:6.3f} | {sum(r['fell'] for r in runs):5d} {sum(r['stalls'] for r in runs):6d} | "
+            f"{vx:6.3f} {vy:6.3f} | {counts[0]:5d} {counts[1]:5d} {counts[2]:6d} | "
             f"{np.mean(cycle):6.3f} max {np.max(cycle):5.3f} | {np.mean([r['rmse'] for r in runs]):10.3f} | "
             f"({mean_v[0]:6.3f}, {mean_v[1]:6.3f}) | {np.mean([r['index_ok'] for r in runs]):.4f}",
             flush=True,
