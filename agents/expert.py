@@ -77,6 +77,9 @@ EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
 DISTURBANCE_CHECK_EVERY = 5
 """physics steps between two checks of the base against its plan (``ExpertConfig.recovery``)."""
 
+SIDE_STEP = 1e-3
+"""m: a cycle's advance to the left beyond which the expert lifts its left legs first (the mirrored swing order)."""
+
 MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
 
@@ -445,6 +448,7 @@ class ExpertPolicy:
             pitch_start = pitch_of_quaternion(physics.base_quat(d))
         plan = None
         sx, sy = self._stride_xy(d)
+        order = "left_first" if sy > SIDE_STEP else "right_first"  # lead with the legs on the side moved to
         for stride in ((sx, sy), (0.5 * sx, 0.5 * sy), (0.0, 0.0)):
             scenario = Scenario(
                 terrain=self._terrain.heightfield,
@@ -458,6 +462,7 @@ class ExpertPolicy:
                 robot=self.cfg,
                 body_pitch=cfgx.body_pitch,
                 pitch_start=pitch_start,
+                swing_order=order,
             )
             tic = time.perf_counter()
             try:
