@@ -1,8 +1,10 @@
 """The scripted expert: the paper's planner and inverse-dynamics controller in the loop.
 
 :class:`ExpertPolicy` replans every gait cycle from the measured state (receding horizon:
-footholds, COG path, swing paths) heading +x, with the body pitched along the slope of the
-footholds (``ExpertConfig.body_pitch``; the paper keeps it level), and runs the computed-torque
+footholds, COG path, swing paths) heading +x (or, in an env with a ``command``, advancing by the
+commanded (vx, vy) times the cycle's duration: forwards, backwards, sideways; the yaw rate is not
+followed), with the body pitched along the slope of the footholds (``ExpertConfig.body_pitch``; the
+paper keeps it level), and runs the computed-torque
 controller (:class:`agents.control.controller.ComputedTorqueController`) at physics rate through the env's
 control hook.
 
@@ -75,6 +77,9 @@ EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
 DISTURBANCE_CHECK_EVERY = 5
 """physics steps between two checks of the base against its plan (``ExpertConfig.recovery``)."""
 
+SIDE_STEP = 1e-3
+"""m: a cycle's advance to the left beyond which the expert lifts its left legs first (the mirrored swing order)."""
+
 MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
 
@@ -96,7 +101,8 @@ class ExpertConfig:
     durations: tuple[float, ...] = (0.5, 0.5, 0.5, 0.1, 0.5, 0.5, 0.5)
     """s: the 7 phases of the walk cycle (paper order; the paper uses 1, 1, 1, 0.1, 1, 1, 1)."""
     stride: float = param(0.33, "m", lo=0.0, hi=1.0, lo_open=True)
-    """m, in (0, 1]: body advance per cycle along +x (0.33 m / 3.1 s = 0.106 m/s nominal)."""
+    """m, in (0, 1]: body advance per cycle along +x (0.33 m / 3.1 s = 0.106 m/s nominal); unused in an env with a
+    ``command``, whose (vx, vy) times the cycle's duration is the advance instead."""
     cog_height: float = param(0.33, "m", lo=0.1, hi=0.5)
     """m, in [0.1, 0.5]: COG height above the mean foothold height."""
     epsilon: float = param(20.0, "N m", lo=0.0, hi=1000.0)
@@ -408,6 +414,23 @@ class ExpertPolicy:
         ground = self._terrain.heightfield.height(sites[:, 0], sites[:, 1])
         return np.column_stack([sites[:, :2], ground])
 
+    def _stride_xy(self, d: mujoco.MjData) -> tuple[float, float]:
+        """(dx, dy) m, world: the body's advance this cycle.
+
+        Without a command: ``ExpertConfig.stride`` along +x. With one (``env.command``, read at the start of
+        every cycle): the commanded (vx, vy) (m/s, yaw-aligned base frame) times the cycle's duration, turned
+        by the measured heading into the world frame; the yaw rate is not followed (the plans hold yaw 0).
+        """
+        command = self.env.command
+        if command is None:
+            return (self.config.stride, 0.0)
+        period = float(sum(self.config.durations))
+        w, x, y, z = physics.base_quat(d)
+        yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        c, s = float(np.cos(yaw)), float(np.sin(yaw))
+        vx, vy = float(command[0]), float(command[1])
+        return (period * (c * vx - s * vy), period * (s * vx + c * vy))
+
     def _start_cycle(self, t0: float, cog_start: dict | None, measured: bool = False) -> None:
         """Plan the cycle starting at ``t0`` (s) from ``cog_start`` (the previous plan's end; None: the
         measured COG at rest); ``measured``: ``cog_start`` is the measured COG state (pitch measured too)."""
@@ -424,7 +447,9 @@ class ExpertPolicy:
             cog_start = {"pos": physics.cog(d, self.env.idx).copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
             pitch_start = pitch_of_quaternion(physics.base_quat(d))
         plan = None
-        for stride in (cfgx.stride, 0.5 * cfgx.stride, 0.0):
+        sx, sy = self._stride_xy(d)
+        order = "left_first" if sy > SIDE_STEP else "right_first"  # lead with the legs on the side moved to
+        for stride in ((sx, sy), (0.5 * sx, 0.5 * sy), (0.0, 0.0)):
             scenario = Scenario(
                 terrain=self._terrain.heightfield,
                 feet_start=feet,
@@ -433,10 +458,11 @@ class ExpertPolicy:
                 epsilon=cfgx.epsilon,
                 clearance=cfgx.clearance,
                 cog_height=cfgx.cog_height,
-                stride=(stride, 0.0),
+                stride=stride,
                 robot=self.cfg,
                 body_pitch=cfgx.body_pitch,
                 pitch_start=pitch_start,
+                swing_order=order,
             )
             tic = time.perf_counter()
             try:
@@ -445,10 +471,10 @@ class ExpertPolicy:
                 with _blas_controller().limit(limits=1, user_api="blas"):
                     plan = plan_gait_cycle(scenario)
             except PlanningError as err:
-                self._log(f"t={t0:.2f} s, stride {stride:.3f} m: {err}")
+                self._log(f"t={t0:.2f} s, stride {_fmt(stride)} m: {err}")
                 continue
             except Exception as err:  # a planner bug or numerical trouble: handled as a failed plan
-                self._log(f"t={t0:.2f} s, stride {stride:.3f} m: planner failed ({type(err).__name__}: {err})")
+                self._log(f"t={t0:.2f} s, stride {_fmt(stride)} m: planner failed ({type(err).__name__}: {err})")
                 continue
             finally:
                 self.planner_times_ms.append(1e3 * (time.perf_counter() - tic))
@@ -465,6 +491,11 @@ class ExpertPolicy:
         self._row_of = getattr(self._current_ref, "row", None)
         self.plans.append((t0, self._current))
         self._t_start, self._t_end = t0, t0 + duration
+
+
+def _fmt(stride: tuple[float, float]) -> str:
+    """A 2-D stride (m) for the failure log: ``0.330`` along +x, ``(-0.150, 0.080)`` otherwise."""
+    return f"{stride[0]:.3f}" if stride[1] == 0.0 else f"({stride[0]:.3f}, {stride[1]:.3f})"
 
 
 def _contact_friction(model: mujoco.MjModel) -> float:

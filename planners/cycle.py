@@ -130,7 +130,7 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
     cfg = scenario.robot_config()
     terrain = scenario.height_map()
     mass = float(scenario.mass or cfg.total_mass)
-    phases = walk_cycle(scenario.durations)
+    phases = walk_cycle(scenario.durations, order=scenario.swing_order)
     start = np.asarray(scenario.feet_start, dtype=float)
     wb = WholeBody(cfg)
     q_nom = standing_joint_angles(cfg, min(scenario.cog_height, 0.95 * cfg.leg_length)).reshape(4, 3)

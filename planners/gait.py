@@ -1,9 +1,12 @@
-"""The paper's walk gait (§4, §6): seven phases per cycle, lifting order RH, RF, LH, LF.
+"""The paper's walk gait (§4, §6): seven phases per cycle, lifting order RH, RF, LH, LF (or its mirror image).
 
 A cycle is: four-leg support, RH swing, RF swing, short four-leg support, LH swing, LF swing,
 four-leg support. Phase durations are configurable (paper: 1, 1, 1, 0.1, 1, 1, 1 s). Cycles
 repeat for continuous walking: the final four-leg support of one cycle is the start of the next
-(the next cycle's first phase may be given a short duration).
+(the next cycle's first phase may be given a short duration). The mirrored order LH, LF, RH, RF
+(``"left_first"``) is the same gait seen in a mirror: what the paper's order does when the body moves to the
+right, the mirrored one does when it moves to the left (side steps to the left need it: with the right legs
+moved first towards the body, no stable COG path is left for the left legs' swings).
 """
 
 from __future__ import annotations
@@ -17,6 +20,12 @@ from quad_uneven_env.constants import LEG_NAMES
 
 SWING_ORDER: tuple[str | None, ...] = (None, "RH", "RF", None, "LH", "LF", None)
 """Swing leg of each of the seven phases (None: four-leg support)."""
+
+MIRRORED_SWING_ORDER: tuple[str | None, ...] = (None, "LH", "LF", None, "RH", "RF", None)
+"""The mirror image of :data:`SWING_ORDER`: left legs first."""
+
+SWING_ORDERS: dict[str, tuple[str | None, ...]] = {"right_first": SWING_ORDER, "left_first": MIRRORED_SWING_ORDER}
+"""The allowed swing orders by name (``Scenario.swing_order``)."""
 
 N_PHASES = len(SWING_ORDER)
 
@@ -60,14 +69,21 @@ def validate_durations(durations: Sequence[float]) -> tuple[float, ...]:
     return tuple(float(x) for x in d)
 
 
-def walk_cycle(durations: Sequence[float] = PAPER_DURATIONS, t0: float = 0.0) -> tuple[Phase, ...]:
-    """The seven phases of one walk cycle starting at ``t0`` (s) with the given durations (s)."""
+def walk_cycle(
+    durations: Sequence[float] = PAPER_DURATIONS, t0: float = 0.0, order: str = "right_first"
+) -> tuple[Phase, ...]:
+    """The seven phases of one walk cycle starting at ``t0`` (s) with the given durations (s).
+
+    :param order: a key of :data:`SWING_ORDERS` (``"right_first"``: the paper's RH, RF, LH, LF).
+    """
+    if order not in SWING_ORDERS:
+        raise ValueError(f"order must be one of {list(SWING_ORDERS)}, got {order!r}")
     d = validate_durations(durations)
     ends = t0 + np.cumsum(d)
     starts = np.concatenate([[t0], ends[:-1]])
     phases = []
     moved = [False] * 4
-    for k, leg in enumerate(SWING_ORDER):
+    for k, leg in enumerate(SWING_ORDERS[order]):
         stance = tuple(leg != name for name in LEG_NAMES)
         phases.append(Phase(k, float(starts[k]), float(ends[k]), leg, stance, tuple(moved)))  # type: ignore[arg-type]
         if leg is not None:

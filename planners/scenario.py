@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from planners.gait import PAPER_DURATIONS, validate_durations
+from planners.gait import PAPER_DURATIONS, SWING_ORDERS, validate_durations
 from planners.types import HeightMap
 from quad_uneven_env.config import RobotConfig, load_robot_config
 
@@ -90,6 +90,9 @@ class Scenario:
     slope of the target footholds, :mod:`planners.pitch`)."""
     pitch_start: float = 0.0
     """base pitch (rad, about world y, positive nose down) at the start; used with ``body_pitch='terrain'``."""
+    swing_order: str = "right_first"
+    """lifting order (:data:`planners.gait.SWING_ORDERS`): "right_first" (RH, RF, LH, LF: the paper) or
+    "left_first" (its mirror image, for a body moving to the left)."""
 
     def __post_init__(self) -> None:
         _feet(self.feet_start, "feet_start")
@@ -106,6 +109,8 @@ class Scenario:
             raise ValueError(f"clearance must be a finite number >= 0 (m), got {self.clearance}")
         if not 0.0 < self.cog_height < 1.0:
             raise ValueError(f"cog_height must be in (0, 1) m, got {self.cog_height}")
+        if self.swing_order not in SWING_ORDERS:
+            raise ValueError(f"swing_order must be one of {list(SWING_ORDERS)}, got {self.swing_order!r}")
         if self.body_pitch not in BODY_PITCH_MODES:
             raise ValueError(f"body_pitch must be one of {list(BODY_PITCH_MODES)}, got {self.body_pitch!r}")
         if not (np.isfinite(self.pitch_start) and abs(self.pitch_start) < 0.5 * np.pi):

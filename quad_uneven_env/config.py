@@ -245,6 +245,14 @@ class RewardWeights:
     """per control step not ended by a fall."""
     fall: float = param(10.0)
     """penalty on the step that ends in a fall or divergence."""
+    command_tracking_lin: float = param(0.0)
+    """per unit of exp(-|v_xy - v_cmd|^2 / command_sigma_lin^2) (needs a ``command``; 0: today's reward)."""
+    command_tracking_yaw: float = param(0.0)
+    """per unit of exp(-(yaw_rate - yaw_rate_cmd)^2 / command_sigma_yaw^2) (needs a ``command``)."""
+    command_sigma_lin: float = param(0.1, "m/s", lo=0.0, hi=10.0, lo_open=True)
+    """m/s, in (0, 10]: velocity error at which ``command_tracking_lin`` has fallen to 1/e of its weight."""
+    command_sigma_yaw: float = param(0.2, "rad/s", lo=0.0, hi=10.0, lo_open=True)
+    """rad/s, in (0, 10]: yaw-rate error at which ``command_tracking_yaw`` has fallen to 1/e of its weight."""
 
     def __post_init__(self) -> None:
         check_fields(self)

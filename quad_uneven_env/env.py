@@ -16,6 +16,7 @@ import numpy as np
 from gymnasium import spaces
 
 from quad_uneven_env import constants as C
+from quad_uneven_env.command import CommandConfig, CommandSchedule, command_arguments_table, load_command
 from quad_uneven_env.config import (
     HeightScanConfig,
     RewardWeights,
@@ -43,7 +44,7 @@ from quad_uneven_env.randomization import (
     draw_episode,
     load_randomization,
 )
-from quad_uneven_env.rewards import REWARD_TERMS, reward_terms
+from quad_uneven_env.rewards import COMMAND_REWARD_TERMS, REWARD_TERMS, command_reward_terms, reward_terms
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT, PhysicsOptions, scene_mjcf
 from quad_uneven_env.termination import FallCheck
@@ -164,7 +165,22 @@ class QuadUnevenEnv(gym.Env):
     **Reward**: the sum of named terms (weights ``reward_weights``, see
     :class:`quad_uneven_env.config.RewardWeights`), each reported in ``info["reward_terms"]``:
     ``forward_progress`` (COG velocity along +x), ``stability`` (normalised index, clipped),
-    ``torque`` (mean squared torque fraction), ``energy`` (|tau qd| / m g), ``alive``, ``fall``.
+    ``torque`` (mean squared torque fraction), ``energy`` (|tau qd| / m g), ``alive``, ``fall``; with a
+    ``command`` also ``command_tracking_lin`` (exp(-|v_xy - v_cmd|^2 / sigma_lin^2)) and ``command_tracking_yaw``
+    (exp(-(yaw_rate - yaw_rate_cmd)^2 / sigma_yaw^2)), of the trunk's velocity at the end of the step in the
+    yaw-aligned base frame against the command in effect during the step (weights 0 by default: the reward is
+    today's unless they are set; nonzero weights without a command are refused).
+
+    **Command** (``command`` not None, see :mod:`quad_uneven_env.command` and docs/commands.md): a commanded
+    planar base velocity (vx, vy in m/s, yaw rate in rad/s) in the yaw-aligned base frame, fixed or drawn at
+    every reset and every ``resample_interval`` s of episode time from a child of ``np_random``
+    (``np_random.spawn``; the terrain, the reset noise and a randomized world are those of the same seed
+    without a command). It is appended to the observation as the field ``command`` and reported in
+    ``info["command"]``: both show the command to follow from now on (a re-draw at the end of a step is
+    already in that step's observation). With ``command=None`` (the default) the observation, reward and
+    ``info`` are exactly those of an env without this feature. Fields:
+
+    COMMAND_TABLE
 
     **Episode end**: terminated on a fall (trunk touches the terrain, trunk origin lower than
     ``min_base_height`` or higher than ``max_base_height`` above the terrain below it, tilt beyond
@@ -204,6 +220,8 @@ class QuadUnevenEnv(gym.Env):
     ``randomization``               dict        the episode's drawn world, floats, the same keys for every
                                                 config (nominal values where a factor is off)
     ``push_force``                  (3,)        N, world: mean push on the trunk over the step (zeros: none)
+    ``command``                     (3,)        only with ``command``: vx, vy (m/s), yaw rate (rad/s), yaw-aligned
+                                                base frame, to be followed from now on (the observation's field)
     ==============================  ==========  ===========================================================
 
     Measured quantities (contacts, COG, feet, stability) are those of the last physics step's
@@ -219,6 +237,8 @@ class QuadUnevenEnv(gym.Env):
     ARGUMENTS_TABLE
 
     ``reset(seed=...)`` takes None or an integer >= 0 (not a bool).
+    ``command``: None (no command, the default), or a mapping of :class:`quad_uneven_env.command.CommandConfig`
+    (see **Command**).
     ``randomization``: None (the nominal world), a preset name of ``configs/randomization/``, a YAML path or
     a mapping (see :class:`quad_uneven_env.randomization.RandomizationConfig` and docs/randomization.md).
 
@@ -254,6 +274,7 @@ class QuadUnevenEnv(gym.Env):
         height: int = 480,
         episode_step_cap: int = 1_000_000,
         randomization: str | Mapping[str, Any] | RandomizationConfig | None = None,
+        command: Mapping[str, Any] | CommandConfig | None = None,
     ) -> None:
         given = dict(
             frame_skip=frame_skip, timestep=timestep, action_mode=action_mode, gait_period=gait_period,
@@ -276,6 +297,16 @@ class QuadUnevenEnv(gym.Env):
         self.reward_weights: RewardWeights = from_mapping(RewardWeights, reward_weights, "reward_weights")
         self.termination: TerminationLimits = from_mapping(TerminationLimits, termination, "termination")
         self.height_scan: HeightScanConfig = from_mapping(HeightScanConfig, height_scan, "height_scan")
+        self.command_config: CommandConfig | None = load_command(command)
+        """the ``command`` argument (None: no command)."""
+        self._command = None if self.command_config is None else CommandSchedule(self.command_config)
+        if self._command is None:
+            for name in COMMAND_REWARD_TERMS:
+                if getattr(self.reward_weights, name) != 0.0:
+                    raise ValueError(
+                        f"reward_weights.{name} must be 0 without a command (command=None), got "
+                        f"{getattr(self.reward_weights, name)!r}; pass command=... to make()"
+                    )
         self.frame_skip = int(frame_skip)
         self.gait_period = args["gait_period"]
         self.reset_noise_scale = args["reset_noise_scale"]
@@ -316,7 +347,7 @@ class QuadUnevenEnv(gym.Env):
             self._make_servos(args["pd_kp"], args["pd_kd"])
 
         self.action_space = spaces.Box(-1.0, 1.0, (C.N_JOINTS,), dtype=np.float32)
-        self._fields = observation_fields(self.height_scan, C.N_JOINTS)
+        self._fields = observation_fields(self.height_scan, C.N_JOINTS, command=self._command is not None)
         self.observation_structure: dict[str, slice] = observation_structure(self._fields)
         self.observation_space = observation_space(self._fields)
 
@@ -367,6 +398,12 @@ class QuadUnevenEnv(gym.Env):
     def episode_draw(self) -> EpisodeDraw:
         """This episode's drawn world (nominal values where a factor is off)."""
         return self._draw
+
+    @property
+    def command(self) -> np.ndarray | None:
+        """(3,) the command to follow now: vx, vy (m/s), yaw rate (rad/s), yaw-aligned base frame (a copy); None
+        without a command."""
+        return None if self._command is None else self._command.value.copy()
 
     @property
     def pushes(self) -> list[Push]:
@@ -426,7 +463,12 @@ class QuadUnevenEnv(gym.Env):
         self._home_joints = self.data.qpos[7:].copy()
         if self.action_mode == "joint_pd":
             self.data.ctrl[:] = self._home_joints
-        self._draw_world()
+        # One child of np_random per reset, for the randomized world and (through its own child) the command:
+        # spawning draws nothing from np_random, and the world keeps the child it has without a command.
+        child = self.np_random.spawn(1)[0] if self.randomization is not None or self._command is not None else None
+        self._draw_world(child)
+        if self._command is not None:
+            self._command.reset(child.spawn(1)[0])
         mujoco.mj_forward(self.model, self.data)
         self._warnings_at_reset = instability_warnings(self._warning_counts)
         if self._controller is not None and hasattr(self._controller, "reset"):
@@ -438,7 +480,8 @@ class QuadUnevenEnv(gym.Env):
         self._start_x = float(meas.cog[0])
         self._last_index_norm = meas.index / (self._mass * self._g)
         self._last_obs = self._observe(meas.obs)
-        info = self._info(meas, terms=dict.fromkeys(REWARD_TERMS, 0.0), diverged=False, reason=None)
+        names = REWARD_TERMS if self._command is None else REWARD_TERMS + COMMAND_REWARD_TERMS
+        info = self._info(meas, terms=dict.fromkeys(names, 0.0), diverged=False, reason=None)
         return self._last_obs.copy(), info
 
     def _spawn_qpos(self) -> np.ndarray:
@@ -471,6 +514,7 @@ class QuadUnevenEnv(gym.Env):
         m, d = self.model, self.data
         x_before = float(self._meas.cog[0])
 
+        command = None if self._command is None else self._command.value.copy()  # in effect during this step
         mujoco.mj_getState(m, d, self._saved_state, _STATE)
         delayed = (self._ctrl_ring.copy(), self._ctrl_prev.copy()) if self._latency else None
         try:
@@ -489,6 +533,8 @@ class QuadUnevenEnv(gym.Env):
         else:
             self._physics_step += self.frame_skip
             self._prev_action[:] = a
+            if self._command is not None:
+                self._command.update(float(d.time))
             reason = self._measure_safely()
         diverged = reason is not None
 
@@ -510,6 +556,8 @@ class QuadUnevenEnv(gym.Env):
         tau_frac = np.zeros(C.N_JOINTS) if diverged else torque / self.idx.torque_limit
         power = 0.0 if diverged else float(np.abs(torque * d.qvel[6:]).sum())
         terms = reward_terms(self.reward_weights, cog_vel_x, index_norm, tau_frac, power, self._mass * self._g, fell)
+        if command is not None:
+            terms.update(self._command_terms(meas, command, diverged))
         reward = float(sum(terms.values()))
         # After a failed step the observation is the last good one (that of the restored state).
         if not diverged:
@@ -520,6 +568,17 @@ class QuadUnevenEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return obs, reward, fell, truncated, info
+
+    def _command_terms(self, meas: StepMeasurement, command: np.ndarray, diverged: bool) -> dict[str, float]:
+        """The command tracking terms of the step just taken (zeros after a failed step)."""
+        if diverged:
+            return dict.fromkeys(COMMAND_REWARD_TERMS, 0.0)
+        v_W, omega_B, R = self.data.qvel[:3], self.data.qvel[3:6], meas.R
+        yaw = math.atan2(R[1, 0], R[0, 0])
+        c, s = math.cos(yaw), math.sin(yaw)
+        v_H = np.array([c * v_W[0] + s * v_W[1], -s * v_W[0] + c * v_W[1]])
+        yaw_rate = float(R[2] @ omega_B)  # world z component of the trunk's angular velocity
+        return command_reward_terms(self.reward_weights, v_H, yaw_rate, command)
 
     # ------------------------------------------------------------------ physics loops
     def _advance(self, a: np.ndarray) -> str | None:
@@ -675,8 +734,10 @@ class QuadUnevenEnv(gym.Env):
         self._noise_scale = None
         self._obs_low64 = self.observation_space.low.astype(np.float64)
         self._obs_high64 = self.observation_space.high.astype(np.float64)
-        if noise is not None and noise.any():
-            self._noise_scale = np.concatenate([np.full(f.size, getattr(noise, f.name)) for f in self._fields])
+        if noise is not None and noise.any():  # the command is an input, not a measurement: never noisy
+            self._noise_scale = np.concatenate(
+                [np.full(f.size, 0.0 if f.name == "command" else getattr(noise, f.name)) for f in self._fields]
+            )
         self._draw = self._nominal_draw()
         self._draw_info = self._draw.as_info()
 
@@ -687,16 +748,16 @@ class QuadUnevenEnv(gym.Env):
         )
         return dataclasses.replace(nominal, total_mass=self._mass)
 
-    def _draw_world(self) -> None:
-        """Draw this episode's world and apply it.
+    def _draw_world(self, rng: np.random.Generator | None) -> None:
+        """Draw this episode's world from ``rng`` and apply it (``rng`` may be None without randomization).
 
         The draws (the world now, pushes and observation noise during the episode) come from a child of
-        ``np_random`` (``np_random.spawn``): the same seed gives the same world whatever the terrain
-        generator consumed, and the terrain and reset noise are those of the nominal env.
+        ``np_random`` (``np_random.spawn``, made by :meth:`reset`): the same seed gives the same world whatever
+        the terrain generator consumed, and the terrain and reset noise are those of the nominal env.
         """
         cfg, r = self.randomization, self.model_randomizer
         if cfg is not None:
-            self._world_rng = self.np_random.spawn(1)[0]
+            self._world_rng = rng
             draw = draw_episode(
                 cfg, self._world_rng, r.nominal_friction, r.nominal_damping, r.nominal_frictionloss, self.physics_dt
             )
@@ -723,7 +784,8 @@ class QuadUnevenEnv(gym.Env):
     def _measure(self) -> StepMeasurement:
         """Refresh :attr:`_meas` (contacts, COG, stability, terrain scan, observation) from ``data``."""
         mujoco.mj_subtreeVel(self.model, self.data)
-        self._meas.update(self.terrain.heightfield, self._prev_action, self.gait_period)
+        command = None if self._command is None else self._command.value
+        self._meas.update(self.terrain.heightfield, self._prev_action, self.gait_period, command)
         return self._meas
 
     def _info(
@@ -747,6 +809,7 @@ class QuadUnevenEnv(gym.Env):
             "reward_terms": dict(terms),
             "randomization": dict(self._draw_info),
             "push_force": self._push_force.copy(),
+            **({} if self._command is None else {"command": self._command.value.copy()}),
         }
 
     @staticmethod
@@ -819,6 +882,11 @@ def _describe(raw: Any) -> str:
 
 
 if QuadUnevenEnv.__doc__:
-    QuadUnevenEnv.__doc__ = QuadUnevenEnv.__doc__.replace(
-        "OBSERVATION_TABLE", observation_table(observation_fields(HeightScanConfig())).replace("\n", "\n    ")
-    ).replace("ARGUMENTS_TABLE", arguments_table().replace("\n", "\n    "))
+    QuadUnevenEnv.__doc__ = (
+        QuadUnevenEnv.__doc__.replace(
+            "OBSERVATION_TABLE",
+            observation_table(observation_fields(HeightScanConfig(), command=True)).replace("\n", "\n    "),
+        )
+        .replace("ARGUMENTS_TABLE", arguments_table().replace("\n", "\n    "))
+        .replace("COMMAND_TABLE", command_arguments_table().replace("\n", "\n    "))
+    )

@@ -41,6 +41,9 @@ OBS_ORDER = (
 )
 """Observation fields in the order the kernel writes them (must match the layout)."""
 
+OPTIONAL_TRAILING = ("command",)
+"""Fields a layout may add after :data:`OBS_ORDER`, written by :meth:`StepMeasurement.update` from its arguments."""
+
 # Offsets of the scalar outputs in StepMeasurement._scalars.
 _INDEX, _N_STANCE, _GROUND, _TRUNK, _OTHER = range(5)
 
@@ -58,7 +61,8 @@ class StepMeasurement:
     :param idx: resolved robot ids of ``model``.
     :param foot_radius: m, foot sphere radius (a foot without contact is measured at its lowest point).
     :param scan_B: (k, 2) m, terrain query points in the yaw-aligned base frame; row 0 is the point under the base.
-    :param fields: the observation layout; its field names must be :data:`OBS_ORDER`.
+    :param fields: the observation layout; its field names must be :data:`OBS_ORDER`, optionally followed by
+        ``"command"`` (:data:`OPTIONAL_TRAILING`).
     :param obs_low: observation lower bounds, same length as the layout.
     :param obs_high: observation upper bounds.
     """
@@ -74,9 +78,11 @@ class StepMeasurement:
         obs_low: np.ndarray,
         obs_high: np.ndarray,
     ) -> None:
-        if tuple(f.name for f in fields) != OBS_ORDER:
-            raise ValueError(f"observation fields must be {OBS_ORDER}, got {tuple(f.name for f in fields)}")
+        names = tuple(f.name for f in fields)
+        if names not in (OBS_ORDER, OBS_ORDER + OPTIONAL_TRAILING):
+            raise ValueError(f"observation fields must be {OBS_ORDER} (+ {OPTIONAL_TRAILING}), got {names}")
         structure = observation_structure(fields)
+        self._command = structure.get("command")
         self._obs_start = np.array([structure[name].start for name in OBS_ORDER], dtype=np.int64)
         self._obs_low = np.ascontiguousarray(obs_low, dtype=np.float64)
         self._obs_high = np.ascontiguousarray(obs_high, dtype=np.float64)
@@ -168,12 +174,19 @@ class StepMeasurement:
         )
 
     # ------------------------------------------------------------------ update
-    def update(self, heightfield: HeightField, prev_action: np.ndarray, gait_period: float) -> None:
+    def update(
+        self,
+        heightfield: HeightField,
+        prev_action: np.ndarray,
+        gait_period: float,
+        command: np.ndarray | None = None,
+    ) -> None:
         """Measure ``data``'s state and build the observation.
 
         :param heightfield: the terrain surface MuJoCo collides with.
         :param prev_action: (12,) the previous clipped action (observation field ``prev_action``).
         :param gait_period: s, period of the observation's gait clock.
+        :param command: (3,) the commanded vx, vy (m/s), yaw rate (rad/s) (field ``command``, when the layout has it).
         """
         flat, nrow, ncol, ox, oy, inv_cell = heightfield.kernel_args
         measure_observe_into(
@@ -214,3 +227,6 @@ class StepMeasurement:
             self._scalars,
             self.obs,
         )
+        sl = self._command
+        if sl is not None:
+            np.clip(command, self._obs_low[sl], self._obs_high[sl], out=self.obs[sl])

@@ -30,8 +30,23 @@ class ObsField:
     description: str
 
 
-def observation_fields(scan: HeightScanConfig, n_actions: int = 12) -> tuple[ObsField, ...]:
-    """The observation layout, in order."""
+COMMAND_FIELD = ObsField(
+    "command",
+    3,
+    -2.0,
+    2.0,
+    "m/s, rad/s",
+    "commanded vx, vy (m/s) and yaw rate (rad/s), yaw-aligned base frame; only with ``command``",
+)
+"""The commanded base velocity (:mod:`quad_uneven_env.command`), appended last when the env has a command."""
+
+
+def observation_fields(scan: HeightScanConfig, n_actions: int = 12, command: bool = False) -> tuple[ObsField, ...]:
+    """The observation layout, in order; ``command``: append :data:`COMMAND_FIELD` (the env has a command).
+
+    The command goes last, so an env without one has exactly the layout it had before commands existed,
+    and the fields before it keep their slices when one is added.
+    """
     nx, ny = scan.shape
     return (
         ObsField("base_height", 1, -1.0, 2.0, "m", "trunk origin above the terrain directly below it"),
@@ -68,7 +83,7 @@ def observation_fields(scan: HeightScanConfig, n_actions: int = 12) -> tuple[Obs
             f"{scan.resolution} m in the yaw-aligned base frame",
         ),
         ObsField("prev_action", n_actions, -1.0, 1.0, "-", "previous (clipped) action"),
-    )
+    ) + ((COMMAND_FIELD,) if command else ())
 
 
 def observation_structure(fields: tuple[ObsField, ...]) -> dict[str, slice]:

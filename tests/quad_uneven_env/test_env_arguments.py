@@ -71,6 +71,8 @@ BAD = [
     ("randomization", {"friction": [0.8, 0.4]}, "randomization.friction must be null or a [low, high] pair"),
     ("randomization", "nonsense", "randomization: unknown randomization config 'nonsense'"),
     ("randomization", {"bogus": 1}, "randomization: unknown field(s) ['bogus']"),
+    ("command", {"vx": 5.0}, "command.vx must be a number in [-1, 1] (m/s), got 5.0"),
+    ("command", "fast", "command must be None or a mapping"),
     ("height_scan", {"size_x": "1"}, "height_scan.size_x must be a number in [0, 10] (m), got '1' of type str"),
     (
         "height_scan",
