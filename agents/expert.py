@@ -35,9 +35,9 @@ It follows SB3's ``predict`` protocol so the evaluation code runs it like a lear
 ``predict`` returns the zero action because the work is done in the physics-rate hook (the
 residual RL agent adds its action on top of it).
 
-When a plan fails (:class:`planners.PlanningError`) the expert degrades: it retries with half
-the stride, then steps in place, then stands still for one cycle (holding the measured pose)
-and replans; every failure is recorded in :attr:`ExpertPolicy.failure_log`. It never raises
+When a plan fails (:class:`planners.PlanningError`) the expert degrades: it retries with the
+strides of :data:`STRIDE_FALLBACKS` (shorter, longer, half with a sideways body shift, then in
+place), then stands still for one cycle (holding the measured pose) and replans; every failure is recorded in :attr:`ExpertPolicy.failure_log`. It never raises
 out of a rollout: any other failure of the planner is handled like a failed plan, and a failure
 of the controller at a physics step (logged with its reason) keeps the last good torques for that
 step.
@@ -74,6 +74,14 @@ EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
 
 DISTURBANCE_CHECK_EVERY = 5
 """physics steps between two checks of the base against its plan (``ExpertConfig.recovery``)."""
+
+STRIDE_FALLBACKS: tuple[tuple[float, float], ...] = (
+    (1.0, 0.0), (0.75, 0.0), (1.25, 0.0), (0.5, 0.0), (0.5, 0.05), (0.5, -0.05), (0.0, 0.0),
+)  # fmt: skip
+"""Strides tried in turn when a plan fails, closest to the nominal first: (fraction of ``ExpertConfig.stride``
+along +x, sideways body shift (m)); the first feasible plan is walked. Shorter and longer strides move every
+nominal foothold (onto the next stone, off a reach limit), a sideways shift moves the body over its
+support; 0 steps in place. If none is feasible the expert stands still for one cycle."""
 
 MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
@@ -424,7 +432,8 @@ class ExpertPolicy:
             cog_start = {"pos": physics.cog(d, self.env.idx).copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
             pitch_start = pitch_of_quaternion(physics.base_quat(d))
         plan = None
-        for stride in (cfgx.stride, 0.5 * cfgx.stride, 0.0):
+        for fx, dy in STRIDE_FALLBACKS:
+            stride = fx * cfgx.stride
             scenario = Scenario(
                 terrain=self._terrain.heightfield,
                 feet_start=feet,
@@ -433,7 +442,7 @@ class ExpertPolicy:
                 epsilon=cfgx.epsilon,
                 clearance=cfgx.clearance,
                 cog_height=cfgx.cog_height,
-                stride=(stride, 0.0),
+                stride=(stride, dy),
                 robot=self.cfg,
                 body_pitch=cfgx.body_pitch,
                 pitch_start=pitch_start,
@@ -445,10 +454,10 @@ class ExpertPolicy:
                 with _blas_controller().limit(limits=1, user_api="blas"):
                     plan = plan_gait_cycle(scenario)
             except PlanningError as err:
-                self._log(f"t={t0:.2f} s, stride {stride:.3f} m: {err}")
+                self._log(f"t={t0:.2f} s, stride ({stride:.3f}, {dy:.3f}) m: {err}")
                 continue
             except Exception as err:  # a planner bug or numerical trouble: handled as a failed plan
-                self._log(f"t={t0:.2f} s, stride {stride:.3f} m: planner failed ({type(err).__name__}: {err})")
+                self._log(f"t={t0:.2f} s, stride ({stride:.3f}, {dy:.3f}) m: planner failed ({type(err).__name__}: {err})")
                 continue
             finally:
                 self.planner_times_ms.append(1e3 * (time.perf_counter() - tic))
