@@ -58,7 +58,7 @@ from agents.control import inverse_dynamics_kernels as IK
 from agents.control.controller import ComputedTorqueController, Gains
 from agents.control.inverse_dynamics import DISTRIBUTIONS
 from agents.control.nominal import NominalModel
-from planners import PlanningError, Scenario, plan_gait_cycle
+from planners import FootholdLimits, PlanningError, Scenario, plan_gait_cycle
 from planners.gait import validate_durations
 from planners.pitch import pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
@@ -243,6 +243,7 @@ class ExpertPolicy:
         self._calm_after = 0.0  # s (controller time): no disturbance replan before
         self._log_dropped = 0
         self._last_controller_error = ""
+        self._foothold_limits = FootholdLimits()
 
     # -------------------------------------------------------------- SB3 protocol
     def predict(
@@ -281,6 +282,7 @@ class ExpertPolicy:
             else:
                 self._model, self._data = nominal.model, nominal.measure(data.qpos, data.qvel, data.time)
         self.controller.reset(self._model, self._data, terrain)
+        self._foothold_limits = foothold_limits_for_friction(self.controller.mu)
         self._start_cycle(0.0, cog_start=None)
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
@@ -446,6 +448,7 @@ class ExpertPolicy:
                 robot=self.cfg,
                 body_pitch=cfgx.body_pitch,
                 pitch_start=pitch_start,
+                foothold_limits=self._foothold_limits,
             )
             tic = time.perf_counter()
             try:
@@ -476,13 +479,27 @@ class ExpertPolicy:
         self._t_start, self._t_end = t0, t0 + duration
 
 
+def foothold_limits_for_friction(mu: float) -> FootholdLimits:
+    """Foothold limits whose slope limit keeps a foot inside the friction pyramid the controller assumes.
+
+    The cones are 4-sided pyramids of ``mu / sqrt(2)`` per tangent axis: a foot on a plane steeper than
+    ``atan(mu / sqrt(2))`` (19.5 deg for mu = 0.5) cannot hold its share of the weight inside them, and on
+    a slope where every foot is that steep the torque QP has no solution (it is relaxed, the feet slip).
+    Such a foothold is refused (the failure log says ``failed test: slope``) rather than walked on.
+
+    :param mu: friction coefficient of the controller's cones (-).
+    """
+    default = FootholdLimits()
+    return dataclasses.replace(default, max_slope=min(default.max_slope, float(np.arctan(mu / np.sqrt(2.0)))))
+
+
 def _contact_friction(model: mujoco.MjModel) -> float:
     """Sliding friction of a foot-terrain contact in ``model`` (MuJoCo's default mix: the larger of the two geoms')."""
     foot = float(model.geom_friction[model.geom(C.FOOT_GEOMS[0]).id, 0])
     return max(foot, float(model.geom_friction[model.geom(C.TERRAIN_GEOM).id, 0]))
 
 
-__all__ = ["EXPERT_MODELS", "ExpertConfig", "ExpertPolicy", "attach_expert"]
+__all__ = ["EXPERT_MODELS", "STRIDE_FALLBACKS", "ExpertConfig", "ExpertPolicy", "attach_expert", "foothold_limits_for_friction"]
 
 
 def attach_expert(env: gym.Env, config: ExpertConfig | None = None) -> ExpertPolicy:

@@ -143,7 +143,7 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         goal_xy = cog0[0, :2] + np.asarray(scenario.stride)
         target = choose_footholds(
             terrain, cfg, start, cog0[0], goal_xy, scenario.cog_height,
-            pitch_start=scenario.pitch_start if follow else None,
+            limits=scenario.foothold_limits, pitch_start=scenario.pitch_start if follow else None,
         )  # fmt: skip
     pitch = BodyPitch(scenario.pitch_start, terrain_pitch(target), phases[-1].t_end) if follow else None
     rotation = None if pitch is None else pitch.rotation

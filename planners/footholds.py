@@ -33,6 +33,7 @@ Returns 3-D points on the terrain surface.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 
@@ -134,16 +135,27 @@ def foothold_costs(
     :param nominal_xy: (2,) the nominal foothold (m, world).
     :param foot_radius: foot sphere radius (m), for the foot-rest test.
     :return: ``cost`` = squared distance (m^2) from the nominal + ``w_slope`` plane slope +
-        ``w_roughness`` plane residual in the edge disc + ``w_edge`` plane residual in the clear disc
-        (shaped like ``x``), and the boolean masks ``slope``, ``edge``, ``hole``, ``foot rest`` of the
-        terrain tests (each on its own, not cumulative). :func:`choose_footholds` adds the
-        kinematic and shank terms.
+        ``w_roughness`` plane residual in the edge disc + ``w_edge`` :func:`edge_nearness`, and the
+        boolean masks ``slope``, ``edge``, ``hole``, ``foot rest`` of the terrain tests (each on its own,
+        not cumulative). :func:`choose_footholds` adds the kinematic and shank terms.
     """
     lim = limits or FootholdLimits()
-    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    cost, tests = _terrain_terms(terrain, np.asarray(x, dtype=float), np.asarray(y, dtype=float), nominal_xy,
+                                 foot_radius, lim)  # fmt: skip
+    return cost + lim.w_edge * edge_nearness(terrain, x, y, lim), tests
+
+
+def edge_nearness(terrain: HeightMap, x: np.ndarray, y: np.ndarray, limits: FootholdLimits | None = None) -> np.ndarray:
+    """Plane residual (m) of the terrain in the ``clear_radius`` disc around world (x, y) (m): 0 on a plane
+    (however steep), about the step height when an edge lies within the disc."""
+    lim = limits or FootholdLimits()
+    return _plane_fit(terrain, np.asarray(x, dtype=float), np.asarray(y, dtype=float), lim.clear_radius)[1]
+
+
+def _terrain_terms(terrain, x, y, nominal_xy, foot_radius, lim):
+    """:func:`foothold_costs` without the edge-nearness term (the dearest to compute)."""
     h = terrain.height(x, y)
     slope, rough = _plane_fit(terrain, x, y, lim.edge_radius)
-    _, near_edge = _plane_fit(terrain, x, y, lim.clear_radius)
     xy = np.column_stack([x.ravel(), y.ravel()])
     tests = {
         "slope": slope <= lim.max_slope,
@@ -155,8 +167,7 @@ def foothold_costs(
         <= h + 0.005 + foot_radius * np.tan(slope),
     }
     d2 = (x - nominal_xy[0]) ** 2 + (y - nominal_xy[1]) ** 2
-    cost = d2 + lim.w_slope * slope + lim.w_roughness * rough + lim.w_edge * near_edge
-    return cost, tests
+    return d2 + lim.w_slope * slope + lim.w_roughness * rough, tests
 
 
 def shank_clearance(
@@ -178,6 +189,7 @@ def shank_clearance(
     return capsule_clearance(terrain, low_end, knee, SHANK_RADIUS_SCALE * cfg.link_radius)
 
 
+@functools.lru_cache(maxsize=8)
 def _search_shells(lim: FootholdLimits) -> list[tuple[float, np.ndarray]]:
     """Grid offsets (K, 2) (m) of each shell and the smallest distance (m) from the nominal of its points.
 
@@ -212,10 +224,14 @@ class _LegSearch:
         self.passed = dict.fromkeys(FOOTHOLD_TESTS, 0)  # candidates passing every test up to this one
 
     def shell(self, offsets: np.ndarray) -> None:
-        """Evaluate one shell of grid ``offsets`` (K, 2) (m) and keep its cheapest acceptable candidate."""
+        """Evaluate one shell of grid ``offsets`` (K, 2) (m) and keep its cheapest acceptable candidate.
+
+        The cheap terms and tests run on the whole shell; the edge-nearness and shank terms (both >= 0)
+        only on candidates, cheapest first, whose cheap cost is below the best full cost found so far.
+        """
         lim, cfg = self.lim, self.cfg
         x, y = self.nominal[0] + offsets[:, 0], self.nominal[1] + offsets[:, 1]
-        cost, tests = foothold_costs(self.terrain, x, y, self.nominal, cfg.foot_radius, lim)
+        cost, tests = _terrain_terms(self.terrain, x, y, self.nominal, cfg.foot_radius, lim)
         h = self.terrain.height(x, y)
         site = np.column_stack([x, y, h + cfg.foot_radius])
         frac = np.max([np.linalg.norm(site - hip, axis=1) for hip, _ in self.poses], axis=0) / cfg.leg_length
@@ -228,17 +244,24 @@ class _LegSearch:
             self.passed[name] += int(np.count_nonzero(ok))
         cand = np.flatnonzero(ok & (cost < self.best_cost))
         order = cand[np.argsort(cost[cand], kind="stable")]
-        batch = 4
-        for start in range(0, len(order), batch):
+        start, batch = 0, 4
+        while start < len(order):
             idx = order[start : start + batch]
+            start, batch = start + batch, 2 * batch  # growing batches: few calls where many candidates fail
             if cost[idx[0]] >= self.best_cost:
-                break  # every remaining candidate costs at least this much before its shank term
+                break  # every remaining candidate costs at least this much before its last two terms
+            full = cost[idx] + lim.w_edge * edge_nearness(self.terrain, x[idx], y[idx], lim)
+            idx, full = idx[full < self.best_cost], full[full < self.best_cost]
+            if len(idx) == 0:
+                continue
             gap = np.full(len(idx), np.inf)
-            for hip, R in self.poses:
-                gap = np.minimum(gap, shank_clearance(self.terrain, cfg, self.leg, site[idx], hip, R))
+            for hip, R in self.poses:  # the next pose only where the previous ones clear
+                live = gap >= lim.shank_clearance
+                if np.any(live):
+                    gap[live] = np.minimum(gap[live], shank_clearance(self.terrain, cfg, self.leg, site[idx[live]], hip, R))
             clear = gap >= lim.shank_clearance
             self.passed["shank clearance"] += int(np.count_nonzero(clear))
-            full = np.where(clear, cost[idx] + lim.w_shank * np.maximum(lim.shank_margin - gap, 0.0), np.inf)
+            full = np.where(clear, full + lim.w_shank * np.maximum(lim.shank_margin - gap, 0.0), np.inf)
             j = int(np.argmin(full))
             if full[j] < self.best_cost:
                 self.best_cost = float(full[j])

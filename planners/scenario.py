@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from planners.footholds import FootholdLimits
 from planners.gait import PAPER_DURATIONS, validate_durations
 from planners.types import HeightMap
 from quad_uneven_env.config import RobotConfig, load_robot_config
@@ -90,6 +91,8 @@ class Scenario:
     slope of the target footholds, :mod:`planners.pitch`)."""
     pitch_start: float = 0.0
     """base pitch (rad, about world y, positive nose down) at the start; used with ``body_pitch='terrain'``."""
+    foothold_limits: FootholdLimits | None = None
+    """acceptance limits and cost weights of the automatic foothold search; None: the defaults."""
 
     def __post_init__(self) -> None:
         _feet(self.feet_start, "feet_start")
@@ -110,6 +113,8 @@ class Scenario:
             raise ValueError(f"body_pitch must be one of {list(BODY_PITCH_MODES)}, got {self.body_pitch!r}")
         if not (np.isfinite(self.pitch_start) and abs(self.pitch_start) < 0.5 * np.pi):
             raise ValueError(f"pitch_start must be a finite angle in (-pi/2, pi/2) rad, got {self.pitch_start}")
+        if self.foothold_limits is not None and not isinstance(self.foothold_limits, FootholdLimits):
+            raise ValueError(f"foothold_limits must be a FootholdLimits or None, got {self.foothold_limits!r}")
 
     def robot_config(self) -> RobotConfig:
         """The robot parameters (Table 1 unless given)."""
