@@ -37,10 +37,11 @@ residual RL agent adds its action on top of it).
 
 When a plan fails (:class:`planners.PlanningError`) the expert degrades: it retries with the
 strides of :data:`STRIDE_FALLBACKS` (shorter, longer, half with a sideways body shift, then in
-place), then stands still for one cycle (holding the measured pose) and replans; every failure is recorded in :attr:`ExpertPolicy.failure_log`. It never raises
-out of a rollout: any other failure of the planner is handled like a failed plan, and a failure
-of the controller at a physics step (logged with its reason) keeps the last good torques for that
-step.
+place), then stands still for one cycle (holding the measured pose) and replans; every failure
+is recorded in :attr:`ExpertPolicy.failure_log`. Footholds steeper than its friction pyramid holds
+are refused (:func:`foothold_limits_for_friction`). It never raises out of a rollout: any other
+failure of the planner is handled like a failed plan, and a failure of the controller at a physics
+step (logged with its reason) keeps the last good torques for that step.
 """
 
 from __future__ import annotations
@@ -460,7 +461,8 @@ class ExpertPolicy:
                 self._log(f"t={t0:.2f} s, stride ({stride:.3f}, {dy:.3f}) m: {err}")
                 continue
             except Exception as err:  # a planner bug or numerical trouble: handled as a failed plan
-                self._log(f"t={t0:.2f} s, stride ({stride:.3f}, {dy:.3f}) m: planner failed ({type(err).__name__}: {err})")
+                why = f"planner failed ({type(err).__name__}: {err})"
+                self._log(f"t={t0:.2f} s, stride ({stride:.3f}, {dy:.3f}) m: {why}")
                 continue
             finally:
                 self.planner_times_ms.append(1e3 * (time.perf_counter() - tic))
@@ -499,7 +501,14 @@ def _contact_friction(model: mujoco.MjModel) -> float:
     return max(foot, float(model.geom_friction[model.geom(C.TERRAIN_GEOM).id, 0]))
 
 
-__all__ = ["EXPERT_MODELS", "STRIDE_FALLBACKS", "ExpertConfig", "ExpertPolicy", "attach_expert", "foothold_limits_for_friction"]
+__all__ = [
+    "EXPERT_MODELS",
+    "STRIDE_FALLBACKS",
+    "ExpertConfig",
+    "ExpertPolicy",
+    "attach_expert",
+    "foothold_limits_for_friction",
+]
 
 
 def attach_expert(env: gym.Env, config: ExpertConfig | None = None) -> ExpertPolicy:

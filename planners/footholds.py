@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 
 import numpy as np
 
@@ -204,7 +205,7 @@ def _search_shells(lim: FootholdLimits) -> list[tuple[float, np.ndarray]]:
     while edges[-1] < lim.reach_window:
         edges.append(edges[-1] + lim.ring)
     shells = []
-    for lo, hi in zip(edges[:-1], edges[1:], strict=False):
+    for lo, hi in itertools.pairwise(edges):
         sel = (cheb > lo) & (cheb <= hi)
         if np.any(sel):
             shells.append((float(cheb[sel].min()), grid[sel]))
@@ -258,7 +259,8 @@ class _LegSearch:
             for hip, R in self.poses:  # the next pose only where the previous ones clear
                 live = gap >= lim.shank_clearance
                 if np.any(live):
-                    gap[live] = np.minimum(gap[live], shank_clearance(self.terrain, cfg, self.leg, site[idx[live]], hip, R))
+                    more = shank_clearance(self.terrain, cfg, self.leg, site[idx[live]], hip, R)
+                    gap[live] = np.minimum(gap[live], more)
             clear = gap >= lim.shank_clearance
             self.passed["shank clearance"] += int(np.count_nonzero(clear))
             full = np.where(clear, full + lim.w_shank * np.maximum(lim.shank_margin - gap, 0.0), np.inf)

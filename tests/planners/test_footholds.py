@@ -143,7 +143,7 @@ def test_footholds_on_a_25_deg_slope(robot_cfg):
     feet = np.column_stack([hip_positions_B(robot_cfg)[:, :2] + base, np.zeros(4)])
     feet[:, 2] = hf.height(feet[:, 0], feet[:, 1])
     cog = np.array([*base, feet[:, 2].mean() + 0.33])
-    out = choose_footholds(hf, robot_cfg, feet, cog, base + [0.33, 0.0], 0.33, pitch_start=np.deg2rad(-25.0))
+    out = choose_footholds(hf, robot_cfg, feet, cog, base + np.array([0.33, 0.0]), 0.33, pitch_start=np.deg2rad(-25.0))
     nominal = hip_positions_B(robot_cfg)[:, :2] + base + [0.33, 0.0]
     assert np.all(np.linalg.norm(out[:, :2] - nominal, axis=1) <= 0.05)
     assert np.all((out[:, 0] > 0.62 + 0.045) & (out[:, 0] < 2.12 - 0.045))  # on the ramp
