@@ -44,6 +44,7 @@ from planners.terrain_query import capsule_clearance, max_height_in_disk
 from planners.types import HeightMap, PlanningError
 from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
+from quad_uneven_env.fields import check_fields, param
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_fk_hip, leg_ik_hip
 
 SHANK_RADIUS_SCALE = 0.7
@@ -57,48 +58,55 @@ FOOTHOLD_TESTS: tuple[str, ...] = ("slope", "edge", "hole", "foot rest", "reach"
 class FootholdLimits:
     """Acceptance limits and cost weights of a foothold (SI units)."""
 
-    window: float = 0.1
+    window: float = param(0.1, "m", lo=0.0, hi=1.0, lo_open=True)
     """half width (m) of the inner square searched first around the nominal foothold."""
-    reach_window: float = 0.25
+    reach_window: float = param(0.25, "m", lo=0.0, hi=1.0, lo_open=True)
     """half width (m) of the whole search square; the reach test cuts it down to the leg's workspace."""
-    ring: float = 0.05
+    ring: float = param(0.05, "m", lo=0.0, hi=1.0, lo_open=True)
     """width (m) of each square ring searched after the inner window."""
-    step: float = 0.01
+    step: float = param(0.01, "m", lo=0.001, hi=0.1)
     """candidate spacing (m)."""
-    max_slope: float = 0.5
+    max_slope: float = param(0.5, "rad", lo=0.0, hi=1.5)
     """largest plane slope (rad) under the foot (0.5 rad = 28.6 deg)."""
-    max_edge: float = 0.01
+    max_edge: float = param(0.01, "m", lo=0.0, hi=1.0)
     """largest distance (m, along z) of a terrain node within ``edge_radius`` from the disc's
     least-squares plane: an edge, a hole's border or a bump under the foot; 0 on any plane."""
-    edge_radius: float = 0.045
+    edge_radius: float = param(0.045, "m", lo=0.0, hi=0.5, lo_open=True)
     """radius (m) of the disc that must hold no edge (the plane fit of the slope and edge tests)."""
-    clear_radius: float = 0.09
+    clear_radius: float = param(0.09, "m", lo=0.0, hi=0.5, lo_open=True)
     """radius (m) of the disc whose plane residual is the edge-nearness cost (an edge within it costs)."""
-    max_drop: float = 0.2
+    max_drop: float = param(0.2, "m", lo=0.0, hi=10.0)
     """a candidate more than this (m) below the highest terrain within ``hole_radius`` is in a hole
     (deeper than a stair riser, shallower than the gaps between stepping stones)."""
-    hole_radius: float = 0.08
+    hole_radius: float = param(0.08, "m", lo=0.0, hi=0.5, lo_open=True)
     """radius (m) of the neighbourhood of the hole test."""
-    reach: float = 0.97
+    reach: float = param(0.97, "-", lo=0.0, hi=1.0, lo_open=True)
     """fraction of the stretched leg length allowed from hip to foot site."""
-    shank_clearance: float = 0.005
+    shank_clearance: float = param(0.005, "m", lo=-1.0, hi=0.1)
     """smallest gap (m) between the stance leg's shank capsule and the terrain at touch-down and at
     the end of the cycle: a foot just past a step edge (or a knee folded below its foot) would rest
     the shank on the nosing and unload the foot."""
-    w_slope: float = 0.01
+    w_slope: float = param(0.01, "1/rad", lo=0.0)
     """cost (1/rad) of the plane slope."""
-    w_roughness: float = 0.5
+    w_roughness: float = param(0.5, "1/m", lo=0.0)
     """cost (1/m) of the plane residual in the edge disc (local roughness)."""
-    w_edge: float = 0.1
+    w_edge: float = param(0.1, "1/m", lo=0.0)
     """cost (1/m) of the plane residual in the ``clear_radius`` disc (nearness of an edge)."""
-    reach_comfort: float = 0.9
+    reach_comfort: float = param(0.9, "-", lo=0.0, hi=1.0)
     """fraction of the stretched leg length beyond which the kinematic-margin cost starts."""
-    w_reach: float = 1.0
+    w_reach: float = param(1.0, "-", lo=0.0)
     """cost (-) of the squared hip-to-site distance fraction beyond ``reach_comfort``."""
-    shank_margin: float = 0.01
+    shank_margin: float = param(0.01, "m", lo=0.0, hi=0.1)
     """shank gap (m) below which the shank-margin cost starts."""
-    w_shank: float = 0.5
+    w_shank: float = param(0.5, "1/m", lo=0.0)
     """cost (1/m) of the shank gap missing to ``shank_margin``."""
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if self.window > self.reach_window:
+            raise ValueError(
+                f"FootholdLimits.window must be <= reach_window = {self.reach_window:g} (m), got {self.window:g}"
+            )
 
 
 def _plane_fit(terrain: HeightMap, x: np.ndarray, y: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:

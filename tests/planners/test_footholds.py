@@ -84,7 +84,7 @@ def test_front_foot_kept_off_the_nosing_when_stepping_down(robot_cfg, pitch_star
     terrain = BlockTerrain(-0.08, blocks=np.array([[-2.0, 0.5, -1.0, 1.0, 0.0]]))
     args = (terrain, robot_cfg, FEET, np.array([0.0, 0.0, 0.33]), np.array([0.33, 0.0]), 0.33)
     free = choose_footholds(
-        *args, pitch_start=pitch_start, limits=FootholdLimits(shank_clearance=-np.inf, w_edge=0.0, w_shank=0.0)
+        *args, pitch_start=pitch_start, limits=FootholdLimits(shank_clearance=-1.0, w_edge=0.0, w_shank=0.0)
     )
     out = choose_footholds(*args, pitch_start=pitch_start)
     np.testing.assert_allclose(free[:2, 0], 0.58)  # nominal: under the hips at the end of the cycle
@@ -197,3 +197,18 @@ def test_failure_names_the_leg_and_the_first_failing_test(robot_cfg):
     steep = BlockTerrain(0.0, slope=(1.0, 0.0))
     with pytest.raises(PlanningError, match=r"for LF .*failed test: slope; of 2601 candidates, .*: 0 slope"):
         choose_footholds(steep, robot_cfg, FEET, np.array([0, 0, 0.33]), np.array([0.2, 0.0]), 0.33)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("ring", 0.0, r"FootholdLimits.ring must be a number in \(0, 1\] \(m\), got 0"),
+        ("step", -0.01, r"FootholdLimits.step must be"),
+        ("max_slope", float("nan"), r"FootholdLimits.max_slope must be"),
+        ("w_edge", -1.0, r"FootholdLimits.w_edge must be"),
+        ("window", 0.3, r"FootholdLimits.window must be <= reach_window"),
+    ],
+)
+def test_bad_limits_name_the_field(field, value, message):
+    with pytest.raises(ValueError, match=message):
+        FootholdLimits(**{field: value})
