@@ -149,8 +149,8 @@ def foothold_costs(
         not cumulative). :func:`choose_footholds` adds the kinematic and shank terms.
     """
     lim = limits or FootholdLimits()
-    cost, tests = _terrain_terms(terrain, np.asarray(x, dtype=float), np.asarray(y, dtype=float), nominal_xy,
-                                 foot_radius, lim)  # fmt: skip
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    cost, tests = _terrain_terms(terrain, x, y, np.asarray(nominal_xy, dtype=float), foot_radius, lim)
     return cost + lim.w_edge * edge_nearness(terrain, x, y, lim), tests
 
 
@@ -311,6 +311,10 @@ def choose_footholds(
     goal_xy = np.asarray(goal_xy, dtype=float)
     nominal = goal_xy + hips[:, :2]
     h_nom = terrain.height(nominal[:, 0], nominal[:, 1])
+    # A nominal point in a hole (a pit between stepping stones) says nothing about where the feet will
+    # stand: take the terrain around it instead, for the body height and pitch.
+    around = max_height_in_disk(terrain, nominal, lim.hole_radius)
+    h_nom = np.where(h_nom < around - lim.max_drop, around, h_nom)
     # Body height at the end: nominal above the mean, but the lowest foothold must stay in reach (stairs).
     z_goal = float(min(np.mean(h_nom), np.min(h_nom) + 0.02)) + cog_height
     phases = walk_cycle(durations)
