@@ -153,6 +153,12 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         "--env-kwargs", default="{}", help="JSON object of extra QuadUneven-v0 arguments, e.g. '{\"frame_skip\": 5}'"
     )
     p.add_argument(
+        "--expert-config",
+        default="{}",
+        help="JSON object of agents.expert.ExpertConfig fields for --policy expert, e.g. '{\"friction\": 0.8}' "
+        "(default: the defaults)",
+    )
+    p.add_argument(
         "--resume",
         action="store_true",
         help="continue the run recorded in DIR: its finished episodes are kept, the others run (refused if the "
@@ -203,6 +209,9 @@ def _json_object(text: str, option: str) -> dict:
 def run_evaluate_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven evaluate``: 0 on success, 2 on an invalid suite, policy or argument."""
     env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
+    expert_config = _json_object(args.expert_config, "--expert-config")
+    if expert_config and args.policy != "expert":
+        raise ValueError(f"--expert-config is for --policy expert only, got --policy {args.policy!r}")
     if args.episodes is not None and args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
     if args.workers is not None and args.workers < 1:
@@ -235,6 +244,7 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
             backend=args.backend,
             address=args.address,
             ship_code=args.ship_code,
+            expert_config=expert_config,
         )
     for kind, g in results["summary"]["by_kind"].items():
         speed = g["mean_speed"]

@@ -37,12 +37,13 @@ It follows SB3's ``predict`` protocol so the evaluation code runs it like a lear
 ``predict`` returns the zero action because the work is done in the physics-rate hook (the
 residual RL agent adds its action on top of it).
 
-When a plan fails (:class:`planners.PlanningError`) the expert degrades: it retries with half
-the stride, then steps in place, then stands still for one cycle (holding the measured pose)
-and replans; every failure is recorded in :attr:`ExpertPolicy.failure_log`. It never raises
-out of a rollout: any other failure of the planner is handled like a failed plan, and a failure
-of the controller at a physics step (logged with its reason) keeps the last good torques for that
-step.
+When a plan fails (:class:`planners.PlanningError`) the expert degrades: it retries with the
+strides of :data:`STRIDE_FALLBACKS` (shorter, longer, half with a sideways body shift, then in
+place), then stands still for one cycle (holding the measured pose) and replans; every failure
+is recorded in :attr:`ExpertPolicy.failure_log`. Footholds steeper than its friction pyramid holds
+are refused (:func:`foothold_limits_for_friction`). It never raises out of a rollout: any other
+failure of the planner is handled like a failed plan, and a failure of the controller at a physics
+step (logged with its reason) keeps the last good torques for that step.
 """
 
 from __future__ import annotations
@@ -60,7 +61,7 @@ from agents.control import inverse_dynamics_kernels as IK
 from agents.control.controller import ComputedTorqueController, Gains
 from agents.control.inverse_dynamics import DISTRIBUTIONS
 from agents.control.nominal import NominalModel
-from planners import PlanningError, Scenario, plan_gait_cycle
+from planners import FootholdLimits, PlanningError, Scenario, plan_gait_cycle
 from planners.gait import validate_durations
 from planners.pitch import pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
@@ -79,6 +80,15 @@ DISTURBANCE_CHECK_EVERY = 5
 
 SIDE_STEP = 1e-3
 """m: a cycle's advance to the left beyond which the expert lifts its left legs first (the mirrored swing order)."""
+
+STRIDE_FALLBACKS: tuple[tuple[float, float], ...] = (
+    (1.0, 0.0), (0.75, 0.0), (1.25, 0.0), (0.5, 0.0), (0.5, 0.05), (0.5, -0.05), (0.0, 0.0),
+)  # fmt: skip
+"""Strides tried in turn when a plan fails, closest to the nominal first: (fraction of the cycle's stride (the
+commanded one, else ``ExpertConfig.stride`` along +x), sideways body shift (m, world y)); the first feasible
+plan is walked. Shorter and longer strides move every nominal foothold (onto the next stone, off a reach
+limit), a sideways shift moves the body over its support; 0 steps in place. If none is feasible the expert
+stands still for one cycle."""
 
 MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
@@ -241,6 +251,7 @@ class ExpertPolicy:
         self._calm_after = 0.0  # s (controller time): no disturbance replan before
         self._log_dropped = 0
         self._last_controller_error = ""
+        self._foothold_limits = FootholdLimits()
 
     # -------------------------------------------------------------- SB3 protocol
     def predict(
@@ -279,6 +290,7 @@ class ExpertPolicy:
             else:
                 self._model, self._data = nominal.model, nominal.measure(data.qpos, data.qvel, data.time)
         self.controller.reset(self._model, self._data, terrain)
+        self._foothold_limits = foothold_limits_for_friction(self.controller.mu)
         self._start_cycle(0.0, cog_start=None)
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
@@ -448,8 +460,9 @@ class ExpertPolicy:
             pitch_start = pitch_of_quaternion(physics.base_quat(d))
         plan = None
         sx, sy = self._stride_xy(d)
-        order = "left_first" if sy > SIDE_STEP else "right_first"  # lead with the legs on the side moved to
-        for stride in ((sx, sy), (0.5 * sx, 0.5 * sy), (0.0, 0.0)):
+        for fx, dy in STRIDE_FALLBACKS:
+            stride = (fx * sx, fx * sy + dy)
+            order = "left_first" if stride[1] > SIDE_STEP else "right_first"  # lead with the legs on that side
             scenario = Scenario(
                 terrain=self._terrain.heightfield,
                 feet_start=feet,
@@ -463,6 +476,7 @@ class ExpertPolicy:
                 body_pitch=cfgx.body_pitch,
                 pitch_start=pitch_start,
                 swing_order=order,
+                foothold_limits=self._foothold_limits,
             )
             tic = time.perf_counter()
             try:
@@ -498,13 +512,34 @@ def _fmt(stride: tuple[float, float]) -> str:
     return f"{stride[0]:.3f}" if stride[1] == 0.0 else f"({stride[0]:.3f}, {stride[1]:.3f})"
 
 
+def foothold_limits_for_friction(mu: float) -> FootholdLimits:
+    """Foothold limits whose slope limit keeps a foot inside the friction pyramid the controller assumes.
+
+    The cones are 4-sided pyramids of ``mu / sqrt(2)`` per tangent axis: a foot on a plane steeper than
+    ``atan(mu / sqrt(2))`` (19.5 deg for mu = 0.5) cannot hold its share of the weight inside them, and on
+    a slope where every foot is that steep the torque QP has no solution (it is relaxed, the feet slip).
+    Such a foothold is refused (the failure log says ``failed test: slope``) rather than walked on.
+
+    :param mu: friction coefficient of the controller's cones (-).
+    """
+    default = FootholdLimits()
+    return dataclasses.replace(default, max_slope=min(default.max_slope, float(np.arctan(mu / np.sqrt(2.0)))))
+
+
 def _contact_friction(model: mujoco.MjModel) -> float:
     """Sliding friction of a foot-terrain contact in ``model`` (MuJoCo's default mix: the larger of the two geoms')."""
     foot = float(model.geom_friction[model.geom(C.FOOT_GEOMS[0]).id, 0])
     return max(foot, float(model.geom_friction[model.geom(C.TERRAIN_GEOM).id, 0]))
 
 
-__all__ = ["EXPERT_MODELS", "ExpertConfig", "ExpertPolicy", "attach_expert"]
+__all__ = [
+    "EXPERT_MODELS",
+    "STRIDE_FALLBACKS",
+    "ExpertConfig",
+    "ExpertPolicy",
+    "attach_expert",
+    "foothold_limits_for_friction",
+]
 
 
 def attach_expert(env: gym.Env, config: ExpertConfig | None = None) -> ExpertPolicy:

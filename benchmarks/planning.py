@@ -1,8 +1,9 @@
 """Planning speed and success: COG time per gait cycle, swing time per leg, fraction solved.
 
-Usage: ``.venv/bin/python benchmarks/planning.py [--cycles 50] [--fd-cycles 10] [--seed 0]``
+Usage: ``.venv/bin/python benchmarks/planning.py [--cycles 50] [--fd-cycles 10] [--slsqp-cycles N] [--seed 0]``
 
-For each terrain (rough, amplitude 5 cm; stepping stones), ``--cycles`` random gait cycles:
+For each terrain (rough, amplitude 5 cm; stepping stones; a 25 deg slope; stones with 15 cm gaps
+and +-5 cm tops), ``--cycles`` random gait cycles:
 a random start position on the course, feet on the surface under the hips, footholds chosen
 automatically, the COG goal above them. Each problem is solved by the SQP (default solver), by
 plain SLSQP with analytic gradients and by SLSQP with finite-difference gradients (the
@@ -32,6 +33,8 @@ from quad_uneven_env.terrain import Terrain, parse_terrain_spec  # noqa: E402
 TERRAINS = {
     "rough (5 cm)": {"kind": "rough", "amplitude": 0.05},
     "stepping stones": {"kind": "stepping_stones"},
+    "slope 25 deg": {"kind": "slope", "angle_deg": 25, "ramp_length": 1.2, "plateau_length": 0.5},
+    "stones, 15 cm gaps": {"kind": "stepping_stones", "gap": 0.15, "height_jitter": 0.1},
 }
 
 
@@ -56,6 +59,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--cycles", type=int, default=50)
     ap.add_argument("--fd-cycles", type=int, default=10)
+    ap.add_argument("--slsqp-cycles", type=int, default=None, help="cycles also solved by SLSQP (default: all)")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
     cfg = load_robot_config("paper")
@@ -84,7 +88,7 @@ def main() -> None:
             fixed = dataclasses.replace(sc, footholds=plan.footholds)
             t_grid = np.linspace(0, plan.duration, 601)
             for method, times, devs, limit in (
-                ("slsqp", slsqp_t, dev_slsqp, args.cycles),
+                ("slsqp", slsqp_t, dev_slsqp, args.cycles if args.slsqp_cycles is None else args.slsqp_cycles),
                 ("slsqp-fd", fd_t, dev_fd, args.fd_cycles),
             ):
                 if len(times) >= limit:

@@ -143,7 +143,7 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         goal_xy = cog0[0, :2] + np.asarray(scenario.stride)
         target = choose_footholds(
             terrain, cfg, start, cog0[0], goal_xy, scenario.cog_height,
-            pitch_start=scenario.pitch_start if follow else None,
+            limits=scenario.foothold_limits, pitch_start=scenario.pitch_start if follow else None,
         )  # fmt: skip
     pitch = BodyPitch(scenario.pitch_start, terrain_pitch(target), phases[-1].t_end) if follow else None
     rotation = None if pitch is None else pitch.rotation
@@ -175,11 +175,14 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
     offsets = [hip_offsets[np.asarray(p.stance)] for p in phases]
     # The given start and goal COGs may already ask for more reach (e.g. a measured state): never
     # let the reach limit make the boundary itself infeasible.
-    reach = STANCE_REACH * cfg.leg_length
+    # The goal's need is capped at REACH_MARGIN; the start's is not: a measured start (the planner's
+    # nominal hips differ from the real ones by a centimetre or two with stretched legs) that already
+    # exceeds the cap would otherwise fail every replan from it, and the robot would stand still forever.
+    need = []
     for k, c, t in ((0, cog0[0], 0.0), (len(phases) - 1, goal[0], phases[-1].t_end)):
         hips_k = hips_at(t)[np.asarray(phases[k].stance)]
-        reach = max(reach, float(np.linalg.norm(c + hips_k - sites[k], axis=1).max()) + 1e-3)
-    reach = min(reach, REACH_MARGIN * cfg.leg_length)
+        need.append(float(np.linalg.norm(c + hips_k - sites[k], axis=1).max()) + 1e-3)
+    reach = max(min(max(STANCE_REACH * cfg.leg_length, need[1]), REACH_MARGIN * cfg.leg_length), need[0])
     problem = CogProblem(
         t_knots, supports, names, targets, cog0, goal, mass, scenario.epsilon,
         tuple(scenario.weights), scenario.smoothing, [p.name() for p in phases],

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from planners.footholds import FootholdLimits
 from planners.gait import PAPER_DURATIONS, SWING_ORDERS, validate_durations
 from planners.types import HeightMap
 from quad_uneven_env.config import RobotConfig, load_robot_config
@@ -93,6 +94,8 @@ class Scenario:
     swing_order: str = "right_first"
     """lifting order (:data:`planners.gait.SWING_ORDERS`): "right_first" (RH, RF, LH, LF: the paper) or
     "left_first" (its mirror image, for a body moving to the left)."""
+    foothold_limits: FootholdLimits | None = None
+    """acceptance limits and cost weights of the automatic foothold search; None: the defaults."""
 
     def __post_init__(self) -> None:
         _feet(self.feet_start, "feet_start")
@@ -115,6 +118,8 @@ class Scenario:
             raise ValueError(f"body_pitch must be one of {list(BODY_PITCH_MODES)}, got {self.body_pitch!r}")
         if not (np.isfinite(self.pitch_start) and abs(self.pitch_start) < 0.5 * np.pi):
             raise ValueError(f"pitch_start must be a finite angle in (-pi/2, pi/2) rad, got {self.pitch_start}")
+        if self.foothold_limits is not None and not isinstance(self.foothold_limits, FootholdLimits):
+            raise ValueError(f"foothold_limits must be a FootholdLimits or None, got {self.foothold_limits!r}")
 
     def robot_config(self) -> RobotConfig:
         """The robot parameters (Table 1 unless given)."""

@@ -107,6 +107,20 @@ CASES: dict[str, Case] = {
         ("r.yaml", "YAML"),
     ),
     "suite not a mapping": Case(lambda t, m: evaluate_argv(t, suite=text_file(t, "s.yaml", "- 1\n")), ("s.yaml",)),
+    # -- --expert-config
+    "expert config not JSON": Case(
+        lambda t, m: evaluate_argv(t, "--expert-config", "{friction", policy="expert"), ("--expert-config", "JSON")
+    ),
+    "expert config unknown field": Case(
+        lambda t, m: evaluate_argv(t, "--expert-config", '{"frictio": 1}', policy="expert"),
+        ("expert_config", "frictio", "allowed"),
+    ),
+    "expert config bad value": Case(
+        lambda t, m: evaluate_argv(t, "--expert-config", '{"friction": 5}', policy="expert"), ("friction",)
+    ),
+    "expert config without the expert": Case(
+        lambda t, m: evaluate_argv(t, "--expert-config", '{"friction": 0.8}'), ("--expert-config", "--policy expert")
+    ),
     # -- --env-kwargs
     "env kwargs not JSON": Case(lambda t, m: env_kwargs(t, "{frame_skip: 5"), ("--env-kwargs", "JSON")),
     "env kwargs not an object": Case(lambda t, m: env_kwargs(t, "[1]"), ("--env-kwargs", "JSON object")),

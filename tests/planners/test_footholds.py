@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planners.footholds import SHANK_RADIUS_SCALE, FootholdLimits, choose_footholds, shank_clearance
+from planners.footholds import SHANK_RADIUS_SCALE, FootholdLimits, choose_footholds, foothold_costs, shank_clearance
 from planners.terrain_query import BlockTerrain, capsule_clearance
 from planners.types import PlanningError
 from quad_uneven_env.robot.kinematics import hip_positions_B
@@ -42,7 +42,7 @@ def test_stepping_stones_footholds_on_stones(robot_cfg, rng):
         hf, robot_cfg, feet, np.array([1.0, 0.0, feet[:, 2].mean() + 0.36]), base + np.array([0.2, 0.0]), 0.36
     )
     s = hf.patch_stats(out[:, 0], out[:, 1], FootholdLimits().edge_radius)
-    assert np.all(s.height_max - s.height_min <= FootholdLimits().max_step + 1e-9)  # no edge or hole under the foot
+    assert np.all(s.height_max - s.height_min <= 1e-9)  # flat stone tops: no edge or hole under the foot
     np.testing.assert_allclose(out[:, 2], hf.height(out[:, 0], out[:, 1]))
 
 
@@ -83,7 +83,9 @@ def test_front_foot_kept_off_the_nosing_when_stepping_down(robot_cfg, pitch_star
     # shank would rest on the edge above the foot; the chosen footholds keep it clear.
     terrain = BlockTerrain(-0.08, blocks=np.array([[-2.0, 0.5, -1.0, 1.0, 0.0]]))
     args = (terrain, robot_cfg, FEET, np.array([0.0, 0.0, 0.33]), np.array([0.33, 0.0]), 0.33)
-    free = choose_footholds(*args, pitch_start=pitch_start, limits=FootholdLimits(shank_clearance=-np.inf))
+    free = choose_footholds(
+        *args, pitch_start=pitch_start, limits=FootholdLimits(shank_clearance=-1.0, w_edge=0.0, w_shank=0.0)
+    )
     out = choose_footholds(*args, pitch_start=pitch_start)
     np.testing.assert_allclose(free[:2, 0], 0.58)  # nominal: under the hips at the end of the cycle
     assert np.all(out[:2, 2] == -0.08) and np.all(out[:2, 0] > free[:2, 0] + 0.01)  # further from the edge
@@ -101,3 +103,112 @@ def test_shank_geometry_matches_the_mujoco_model(robot_cfg):
         assert radius == pytest.approx(SHANK_RADIUS_SCALE * robot_cfg.link_radius)
         # The capsule runs from the knee to foot_radius short of the foot point (where shank_clearance starts it).
         assert 2 * half_length == pytest.approx(robot_cfg.shank.length - robot_cfg.foot_radius)
+
+
+def _slope_field(angle_deg: float):
+    """The env's ``slope`` terrain (a HeightField): flat, a ramp of ``angle_deg`` from x = 0.62 m to 2.12 m, ..."""
+    spec = parse_terrain_spec({"kind": "slope", "angle_deg": angle_deg, "ramp_length": 1.5, "plateau_length": 1.0})
+    return Terrain(spec).generate(np.random.default_rng(0))
+
+
+def test_edge_test_accepts_a_uniform_25_deg_slope_and_rejects_a_step_edge(robot_cfg):
+    lim = FootholdLimits()
+    r = robot_cfg.foot_radius
+    x = np.linspace(1.0, 1.8, 9)  # on the ramp, away from its kinks
+    y = np.zeros_like(x)
+    for terrain in (_slope_field(25.0), BlockTerrain(0.0, slope=(np.tan(np.deg2rad(25.0)), 0.0))):
+        _, tests = foothold_costs(terrain, x, y, np.array([1.4, 0.0]), r, lim)
+        assert tests["slope"].all() and tests["edge"].all()
+        # The raw height range in the edge disc would call it an edge:
+        s = _slope_field(25.0).patch_stats(x, y, lim.edge_radius)
+        assert np.all(s.height_max - s.height_min > 0.03)
+    # A 4 cm step (stairs, a HeightField) and a 10 cm block edge (exact map): rejected within edge_radius of it.
+    stairs = Terrain(parse_terrain_spec({"kind": "stairs", "direction": "up", "riser": 0.04, "tread": 0.3}))
+    hf = stairs.generate(np.random.default_rng(0))
+    edge_x = 0.62 + 0.3  # first step edge at x0 + tread (on the first node at or beyond it)
+    near = np.array([edge_x - 0.02, edge_x, edge_x + 0.02])
+    _, tests = foothold_costs(hf, near, np.zeros(3), np.array([edge_x, 0.0]), r, lim)
+    assert not tests["edge"].any()
+    far = np.array([edge_x - 0.12, edge_x + 0.12])
+    _, tests = foothold_costs(hf, far, np.zeros(2), np.array([edge_x, 0.0]), r, lim)
+    assert tests["edge"].all()
+    block = BlockTerrain(0.0, blocks=np.array([[0.5, 2.0, -1.0, 1.0, 0.1]]))
+    _, tests = foothold_costs(block, np.array([0.48, 0.52, 0.4, 0.6]), np.zeros(4), np.zeros(2), r, lim)
+    np.testing.assert_array_equal(tests["edge"], [False, False, True, True])
+
+
+def test_footholds_on_a_25_deg_slope(robot_cfg):
+    hf = _slope_field(25.0)
+    base = np.array([1.3, 0.0])
+    feet = np.column_stack([hip_positions_B(robot_cfg)[:, :2] + base, np.zeros(4)])
+    feet[:, 2] = hf.height(feet[:, 0], feet[:, 1])
+    cog = np.array([*base, feet[:, 2].mean() + 0.33])
+    out = choose_footholds(hf, robot_cfg, feet, cog, base + np.array([0.33, 0.0]), 0.33, pitch_start=np.deg2rad(-25.0))
+    nominal = hip_positions_B(robot_cfg)[:, :2] + base + [0.33, 0.0]
+    assert np.all(np.linalg.norm(out[:, :2] - nominal, axis=1) <= 0.05)
+    assert np.all((out[:, 0] > 0.62 + 0.045) & (out[:, 0] < 2.12 - 0.045))  # on the ramp
+    np.testing.assert_allclose(out[:, 2], hf.height(out[:, 0], out[:, 1]))
+
+
+def test_stone_beyond_the_inner_window_when_the_nominal_foothold_is_in_a_gap(robot_cfg):
+    # 30 cm deep pits 14 cm wide (x) centred on the nominal footholds, ground between them: nothing
+    # acceptable within the inner window (0.1 m), the ground beyond the pit is.
+    goal = np.array([0.2, 0.0])
+    nominal = hip_positions_B(robot_cfg)[:, :2] + goal  # x = 0.45 (front), -0.05 (hind)
+    ground = np.array([[-2.0, -0.12, -1.0, 1.0, 0.0], [0.02, 0.38, -1.0, 1.0, 0.0], [0.52, 2.0, -1.0, 1.0, 0.0]])
+    terrain = BlockTerrain(-0.3, blocks=ground)
+    args = (terrain, robot_cfg, FEET, np.array([0.0, 0.0, 0.33]), goal, 0.33)
+    with pytest.raises(PlanningError, match=r"for LF within 0.1 m .*failed test: hole"):
+        choose_footholds(*args, limits=FootholdLimits(reach_window=0.1))
+    out = choose_footholds(*args)
+    np.testing.assert_allclose(out[:, 2], 0.0)
+    dist = np.abs(out[:, 0] - nominal[:, 0])
+    # beyond the inner window, and no further from the pit than the edge-nearness cost asks (clear_radius)
+    assert np.all(dist > 0.1) and np.all(dist <= 0.07 + FootholdLimits().clear_radius + 0.01)
+    np.testing.assert_allclose(out[:, 1], nominal[:, 1], atol=0.02)
+
+
+def test_cost_ordering_on_a_hand_made_height_map(robot_cfg):
+    # Flat ground at 0 and a 10 cm block from x = 0.3 on; a tilted plane.
+    lim = FootholdLimits()
+    r = robot_cfg.foot_radius
+    block = BlockTerrain(0.0, blocks=np.array([[0.3, 2.0, -1.0, 1.0, 0.1]]))
+    nominal = np.array([0.1, 0.0])
+    pts = np.array([[0.1, 0.0], [0.12, 0.0], [0.1, 0.05], [0.1, 0.15], [0.25, 0.0], [0.1, -0.15], [0.2, 0.0]])
+    cost, tests = foothold_costs(block, pts[:, 0], pts[:, 1], nominal, r, lim)
+    assert np.all(tests["edge"])
+    # Flat and clear of the edge (>= clear_radius): the squared distance alone, nearer is cheaper.
+    np.testing.assert_allclose(cost[[0, 1, 2, 3, 5, 6]], [0.0, 0.02**2, 0.05**2, 0.15**2, 0.15**2, 0.1**2], atol=1e-12)
+    # 0.15 m from the nominal, 5 cm from the block edge (inside the clear disc) costs more than 0.15 m away
+    # from it, by the edge-nearness term (the plane residual of that disc: the 10 cm of the block).
+    assert cost[4] == pytest.approx(0.15**2 + lim.w_edge * 0.1)
+    # A tilted plane: the slope term.
+    tilted = BlockTerrain(0.0, slope=(np.tan(np.deg2rad(10.0)), 0.0))
+    c_tilt, _ = foothold_costs(tilted, pts[:1, 0], pts[:1, 1], nominal, r, lim)
+    assert c_tilt[0] == pytest.approx(lim.w_slope * np.deg2rad(10.0))
+
+
+def test_failure_names_the_leg_and_the_first_failing_test(robot_cfg):
+    flat = BlockTerrain(0.0)
+    # Body 0.9 m above the ground: nothing within reach.
+    with pytest.raises(PlanningError, match=r"for LF within 0.25 m .*failed test: reach; of 2601 candidates"):
+        choose_footholds(flat, robot_cfg, FEET, np.array([0, 0, 0.9]), np.array([0.2, 0.0]), 0.9)
+    # A 45 deg plane: too steep everywhere.
+    steep = BlockTerrain(0.0, slope=(1.0, 0.0))
+    with pytest.raises(PlanningError, match=r"for LF .*failed test: slope; of 2601 candidates, .*: 0 slope"):
+        choose_footholds(steep, robot_cfg, FEET, np.array([0, 0, 0.33]), np.array([0.2, 0.0]), 0.33)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("ring", 0.0, r"FootholdLimits.ring must be a number in \(0, 1\] \(m\), got 0"),
+        ("step", -0.01, r"FootholdLimits.step must be"),
+        ("max_slope", float("nan"), r"FootholdLimits.max_slope must be"),
+        ("w_edge", -1.0, r"FootholdLimits.w_edge must be"),
+        ("window", 0.3, r"FootholdLimits.window must be <= reach_window"),
+    ],
+)
+def test_bad_limits_name_the_field(field, value, message):
+    with pytest.raises(ValueError, match=message):
+        FootholdLimits(**{field: value})
