@@ -1,0 +1,46 @@
+"""The shipped residual baseline (models/ppo_residual_hard): loads as data, runs with the expert, matches its config."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.evaluation.policies import make_policy, policy_env_kwargs
+from agents.rl.config import load_train_config
+from agents.rl.expert_features import EXPERT_FEATURE_SIZE
+from agents.rl.model_io import SB3Policy, read_metadata
+from agents.rl.residual_env import ResidualController
+
+ROOT = Path(__file__).resolve().parents[2]
+MODEL = ROOT / "models" / "ppo_residual_hard" / "model.zip"
+
+
+def test_the_shipped_model_was_trained_with_the_shipped_config():
+    """``make rl-baseline`` retrains it: its recorded config is the YAML's, field for field."""
+    recorded = json.loads((MODEL.parent / "train_config.json").read_text())
+    assert recorded == json.loads(json.dumps(load_train_config(ROOT / "configs/rl/ppo_residual_hard.yaml").to_dict()))
+    meta = read_metadata(MODEL)
+    assert meta["residual"] and meta["expert_features"] and meta["randomization"] == "hard"
+    assert not list(MODEL.parent.glob("*.pkl"))
+
+
+def test_the_shipped_model_drives_the_expert_in_a_randomized_world():
+    env = gym.make("QuadUneven-v0", terrain="rough", randomization="hard", **policy_env_kwargs(str(MODEL)))
+    policy = make_policy(str(MODEL), env)  # the safe loader: nothing unpickled
+    assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
+    assert policy.model.observation_space.shape == (env.observation_space.shape[0] + EXPERT_FEATURE_SIZE,)
+    obs, _ = env.reset(seed=100)
+    x0 = env.unwrapped.data.qpos[0]
+    actions = []
+    for _ in range(100):
+        action, _ = policy.predict(obs)
+        actions.append(action)
+        obs, _, terminated, truncated, info = env.step(action)
+        assert not (terminated or truncated), info["termination_reason"]
+    actions = np.array(actions)
+    assert np.all(np.abs(actions) <= 1.0) and np.abs(actions).max() > 0  # a residual, not the zero policy
+    assert env.unwrapped.data.qpos[0] - x0 > 0.1  # it walks (2 s)
