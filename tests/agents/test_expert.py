@@ -110,14 +110,7 @@ def test_stance_shanks_stay_off_the_stair_nosings():
         {"kind": "stairs", "direction": "pyramid", "riser": 0.08},
         "stepping_stones",
         {"kind": "slope", "angle_deg": 10},
-        pytest.param(
-            "paper",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="known regression: on the paper blocks the nominal expert (cones at mu 0.5) with the 7.5 ms "
-                "contacts keeps index > 0 for 97.7 % of the time (98.9 % with cones at 1.0); see docs/robustness.md",
-            ),
-        ),
+        "paper",
     ],
 )
 def test_expert_crosses_hard_terrain(terrain):
