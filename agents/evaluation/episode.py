@@ -188,7 +188,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     state, start = None, np.ones(1, dtype=bool)
     work, success, end_reason, fall_reason, error = 0.0, False, "time_limit", None, None
     step = 0
-    residual_gain = getattr(u.controller, "gain", None)  # a ResidualController's N m per unit action
+    residual_torque = getattr(u.controller, "residual_torque", None)  # a ResidualController's (N m)
     residual_sum = 0.0
     try:
         if writer is not None:
@@ -198,8 +198,8 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
             start = np.zeros(1, dtype=bool)
             obs, _, terminated, truncated, info = env.step(action)
             step += 1
-            if residual_gain is not None:
-                residual_sum += float(np.mean(np.abs(np.clip(action, -1.0, 1.0) * residual_gain)))
+            if residual_torque is not None:
+                residual_sum += residual_torque(action)
             times.append(float(u.data.time))
             cogs.append(info["cog"])
             feet.append(info["feet_pos"])
@@ -255,7 +255,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
         "failure_log": [str(s) for s in failure_log[:MAX_FAILURE_LOG]] if failure_log is not None else None,
         "failure_count": len(failure_log) if failure_log is not None else None,
         "expert_model": expert_model_of(policy),
-        "mean_residual_torque": residual_sum / step if residual_gain is not None and step else None,
+        "mean_residual_torque": residual_sum / step if residual_torque is not None and step else None,
         "error": error,
         "randomization": drawn,
         "factors": _factors(drawn, pushes),

@@ -138,6 +138,11 @@ def terrain_list(terrain: Any) -> list[Any]:
     return [terrain]
 
 
+def terrain_label(spec: Any) -> str:
+    """A short name of one terrain spec: the string itself, or a mapping's ``kind``."""
+    return spec if isinstance(spec, str) else str(dict(spec).get("kind"))
+
+
 def default_config_path(algo: str) -> Path:
     """``configs/rl/{algo}_residual.yaml``."""
     return RL_CONFIG_DIR / f"{algo}_residual.yaml"
@@ -181,5 +186,6 @@ __all__ = [
     "TrainConfigError",
     "default_config_path",
     "load_train_config",
+    "terrain_label",
     "terrain_list",
 ]

@@ -82,6 +82,11 @@ class ResidualController:
         if hasattr(self.expert, "reset"):
             self.expert.reset(model, data, terrain)
 
+    def residual_torque(self, action: np.ndarray) -> float:
+        """N m: mean over the 12 joints of |residual torque| that ``action`` commands (clipped to [-1, 1]),
+        before the motor limit."""
+        return float(np.mean(np.abs(np.clip(np.asarray(action, dtype=float), -1.0, 1.0) * self.gain)))
+
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
         """Joint torques (12, N m): expert + residual, clipped to the motor limits.
 
@@ -176,9 +181,9 @@ class ResidualExpertEnv(gym.Wrapper):
         """One control step of expert + residual ``action``; see :meth:`QuadUnevenEnv.step`."""
         obs, reward, terminated, truncated, info = self.env.step(action)
         info["residual_scale"] = self.residual_scale
-        a = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
-        info["residual_torque"] = float(np.mean(np.abs(a * self.controller.gain)))
+        info["residual_torque"] = self.controller.residual_torque(action)
         if self.residual_penalty > 0:
+            a = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
             term = -self.residual_penalty * float(np.mean(a * a))
             info["reward_terms"]["residual"] = term
             reward = float(reward) + term

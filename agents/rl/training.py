@@ -27,7 +27,7 @@ from tqdm.auto import tqdm
 
 from agents.interrupts import sigterm_as_keyboard_interrupt
 from agents.outputs import prepare_output_dir
-from agents.rl.config import TrainConfig, TrainConfigError
+from agents.rl.config import TrainConfig, TrainConfigError, terrain_label, terrain_list
 from agents.rl.learning_curve import plot_learning_curve
 from agents.rl.model_io import write_metadata
 from agents.rl.normalization import ObsNormalization, norm_path
@@ -193,8 +193,7 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
 
 
 def _terrain_label(terrain: Any) -> str:
-    specs = terrain if isinstance(terrain, list | tuple) else [terrain]
-    return " + ".join(s if isinstance(s, str) else str(dict(s).get("kind")) for s in specs)
+    return " + ".join(terrain_label(s) for s in terrain_list(terrain))
 
 
 def _make_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) -> Any:

@@ -14,7 +14,7 @@ import numpy as np
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
-from agents.rl.config import TrainConfig
+from agents.rl.config import TrainConfig, terrain_label
 from agents.rl.residual_env import RESIDUAL_ENV_ID
 from agents.rl.terrain_mix import TerrainMixEnv
 
@@ -101,7 +101,7 @@ def make_train_env(
         )
 
     if isinstance(terrain, list | tuple):
-        names = [spec if isinstance(spec, str) else str(dict(spec).get("kind")) for spec in terrain]
+        names = [terrain_label(spec) for spec in terrain]
         env: gym.Env = TerrainMixEnv([functools.partial(one, spec) for spec in terrain], names=names)
     else:
         env = one(terrain)

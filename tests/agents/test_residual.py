@@ -172,3 +172,22 @@ def test_residual_env_needs_torque_mode_and_no_controller():
     with pytest.raises(ValueError, match="QuadUneven-v0"):
         install_residual_controller(gym.make("Pendulum-v1"))
     assert issubclass(ResidualExpertEnv, gym.Wrapper)
+
+
+def test_residual_penalty_is_a_named_reward_term():
+    """reward(penalty w) = reward(no penalty) - w * mean(action^2), the same trajectory otherwise."""
+    action = np.linspace(-1.0, 1.0, 12).astype(np.float32)
+    plain = gym.make(RESIDUAL_ENV_ID, terrain="flat")
+    paid = gym.make(RESIDUAL_ENV_ID, terrain="flat", residual_penalty=2.0)
+    _, info0 = paid.reset(seed=0)
+    plain.reset(seed=0)
+    assert info0["reward_terms"]["residual"] == 0.0 and "residual" not in plain.reset(seed=0)[1]["reward_terms"]
+    for _ in range(3):
+        _, r_plain, *_ = plain.step(action)
+        _, r_paid, _, _, info = paid.step(action)
+        want = -2.0 * float(np.mean(action.astype(float) ** 2))
+        assert info["reward_terms"]["residual"] == pytest.approx(want)
+        assert r_paid == pytest.approx(r_plain + want)
+        assert info["residual_torque"] == pytest.approx(float(np.mean(np.abs(action) * 12.0)))
+    with pytest.raises(ValueError, match="residual_penalty must be a finite number >= 0"):
+        gym.make(RESIDUAL_ENV_ID, terrain="flat", residual_penalty=-1.0)

@@ -48,6 +48,8 @@ def test_shipped_configs_are_valid(algo):
         (["--n-envs", "0"], "n_envs"),
         (["--seed", "-1"], "seed"),
         (["--terrain", "lava"], "terrain"),
+        (["--terrain", "rough", "lava"], "terrain[1]"),
+        (["--randomization", "stormy"], "randomization"),
         (["--residual-scale", "2"], "residual_scale"),
         (["--time-limit-min", "-1"], "time_limit_min"),
         (["--algo", "sac", "--config", str(default_config_path("ppo"))], "algo"),
@@ -167,6 +169,7 @@ def test_tiny_ppo_run_saves_a_model_that_evaluate_runs_with_the_expert(tmp_path,
         e = res["episodes"][0]
         assert e["error"] is None and e["sim_time"] == pytest.approx(0.4)
         assert e["planner_calls"] >= 1  # the expert is in the loop
+        assert e["mean_residual_torque"] is not None and 0.0 <= e["mean_residual_torque"] <= 12.0
 
     rc = main(["evaluate", "--policy", str(run / "model.zip"), "--algo", "sac", "--suite", "smoke",
                "--out", str(tmp_path / "e2"), "--no-progress"])  # fmt: skip
