@@ -7,13 +7,16 @@ Three protocols, each printing ratios measured in the same run:
 2. **Random actions** (``--random-steps``): uniform random actions from the action space
    (QuadUneven-v0 in torque mode on rough terrain, i.e. uniform torques over the full motor range;
    Ant-v5 as registered), resets included in the timing, per env step and per physics step.
-   ``--legacy`` adds the same rows for the collision/solver model before the stiffer contacts (elliptic cones,
-   contact time constant 20 ms), applied to the compiled model at run time.
+   Averaged over ``--random-seeds`` seeds (the two envs alternate seed by seed, so machine load
+   hits both alike), with the share of the time spent in ``reset``. ``--ablation`` adds the same rows
+   for earlier contact models and for the current one with one change undone at a time
+   (:data:`CONTACT_VARIANTS`, applied to the compiled model at run time).
 3. **SB3 PPO training** (``--ppo-steps``, 0 to skip): ``PPO.learn`` wall time for QuadUneven-v0,
    QuadUnevenResidual-v0 and Ant-v5 with the same PPO settings (2 envs in a DummyVecEnv, the
    hyperparameters of configs/rl/ppo_residual.yaml, torch on 1 thread), env steps/s.
 
-Usage: ``python benchmarks/env_throughput.py [--steps N] [--random-steps N] [--ppo-steps N] [--legacy]``.
+Usage: ``python benchmarks/env_throughput.py [--steps N] [--random-steps N] [--random-seeds K] [--ppo-steps N]
+[--ablation]``.
 No assertions: the figures and the targets are in docs/results.md.
 """
 
@@ -28,20 +31,44 @@ import mujoco
 import numpy as np
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from quad_uneven_env import constants as C
 
 RANDOM_SEED = 0
 
 
-def legacy_contacts(env: gym.Env) -> None:
-    """Turn the compiled model into the collision/solver model before the stiffer contacts (20 ms; in place).
-
-    Elliptic cones and MuJoCo's default contact time constant (0.02 s) on every geom; everything
-    else (geometry, impratio 10, friction, solimp) was and is the same.
-    """
+def _contact_model(
+    env: gym.Env, foot_tc: float, limb_tc: float, limb_priority: int, native_ccd: bool, sparse: bool
+) -> None:
+    """Set the contact stiffness (s), the limbs' priority, the convex collider and the Jacobian layout (in place)."""
     m = env.unwrapped.model
     m.opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-    m.geom_solref[:, 0] = 0.02
+    limbs = _limb_geoms(m)
+    m.geom_solref[:, 0] = foot_tc
     m.geom_solref[:, 1] = 1.0
+    m.geom_solref[limbs, 0] = limb_tc
+    m.geom_priority[:] = 0
+    m.geom_priority[limbs] = limb_priority
+    if native_ccd:
+        m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
+    else:
+        m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
+    m.opt.jacobian = mujoco.mjtJacobian.mjJAC_SPARSE if sparse else mujoco.mjtJacobian.mjJAC_DENSE
+
+
+def _limb_geoms(m: mujoco.MjModel) -> np.ndarray:
+    """(ngeom,) bool: the trunk, thigh and shank geoms."""
+    names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, i) or "" for i in range(m.ngeom)]
+    return np.array([n == C.TRUNK_GEOM or n.endswith(("_thigh_geom", "_shank_geom")) for n in names])
+
+
+CONTACT_VARIANTS: dict[str, Callable[[gym.Env], None]] = {
+    "pre-13 (20 ms, native CCD, dense)": lambda env: _contact_model(env, 0.02, 0.02, 0, True, False),
+    "7.5 ms everywhere, native CCD, dense": lambda env: _contact_model(env, 0.0075, 0.0075, 0, True, False),
+    "current with native CCD": lambda env: _contact_model(env, 0.0075, 0.004, 1, True, True),
+    "current with 7.5 ms limbs": lambda env: _contact_model(env, 0.0075, 0.0075, 0, False, True),
+    "current with a dense Jacobian": lambda env: _contact_model(env, 0.0075, 0.004, 1, False, False),
+}
+"""Earlier contact models, and the current one with one change undone, as run-time edits of the compiled model."""
 
 
 def measure(env_id: str, steps: int, **kwargs) -> dict[str, float]:
@@ -100,8 +127,9 @@ def measure_random(
     the timed loop, as an RL rollout does. Also counts the contacts after each env step and the
     episodes.
 
-    :param setup: called with the env after ``gym.make`` (e.g. :func:`legacy_contacts`).
-    :return: env steps/s, physics steps/s (env steps x frame_skip / wall), mean contacts, episodes.
+    :param setup: called with the env after ``gym.make`` (e.g. one of :data:`CONTACT_VARIANTS`).
+    :return: env steps/s, physics steps/s (env steps x frame_skip / wall), mean contacts, episodes, wall (s)
+        and the part of it spent in ``reset`` (s).
     """
     env = gym.make(env_id, **kwargs)
     u = env.unwrapped
@@ -116,12 +144,15 @@ def measure_random(
     data = u.data
     ncon = 0
     episodes = 1
+    t_reset = 0.0
     t0 = time.perf_counter()
     for a in actions:
         _, _, terminated, truncated, _ = env.step(a)
         ncon += data.ncon
         if terminated or truncated:
+            t1 = time.perf_counter()
             env.reset()
+            t_reset += time.perf_counter() - t1
             episodes += 1
     wall = time.perf_counter() - t0
     env.close()
@@ -131,7 +162,35 @@ def measure_random(
         "frame_skip": u.frame_skip,
         "contacts": ncon / steps,
         "episodes": episodes,
+        "wall": wall,
+        "reset_wall": t_reset,
     }
+
+
+def measure_random_seeds(
+    rows: dict[str, tuple[str, Callable[[gym.Env], None] | None, dict]], steps: int, seeds: int
+) -> dict[str, dict[str, float]]:
+    """:func:`measure_random` for every row over seeds 0..seeds-1, the rows alternating seed by seed.
+
+    :param rows: name -> (env id, setup or None, make kwargs).
+    :return: name -> totals over the seeds (rates from the summed wall time, contacts per step averaged).
+    """
+    runs: dict[str, list[dict[str, float]]] = {name: [] for name in rows}
+    for seed in range(seeds):
+        for name, (env_id, setup, kwargs) in rows.items():
+            runs[name].append(measure_random(env_id, steps, seed=seed, setup=setup, **kwargs))
+    out = {}
+    for name, rs in runs.items():
+        wall = sum(r["wall"] for r in rs)
+        n = steps * len(rs)
+        out[name] = {
+            "env_steps_per_s": n / wall,
+            "physics_steps_per_s": n * rs[0]["frame_skip"] / wall,
+            "contacts": sum(r["contacts"] for r in rs) / len(rs),
+            "episodes": sum(r["episodes"] for r in rs),
+            "reset_share": sum(r["reset_wall"] for r in rs) / wall,
+        }
+    return out
 
 
 def measure_ppo(env_id: str, steps: int, seed: int = RANDOM_SEED, **kwargs) -> dict[str, float]:
@@ -176,7 +235,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--steps", type=int, default=2000, help="env steps per overhead measurement (0: skip)")
     parser.add_argument("--random-steps", type=int, default=3000, help="env steps of random actions (0: skip)")
     parser.add_argument("--ppo-steps", type=int, default=4096, help="PPO env steps per env (0: skip)")
-    parser.add_argument("--legacy", action="store_true", help="also measure the former contact model (20 ms)")
+    parser.add_argument("--random-seeds", type=int, default=3, help="seeds of the random-action protocol")
+    parser.add_argument(
+        "--ablation", action="store_true", help="also measure earlier contact models and each change undone"
+    )
     args = parser.parse_args(argv)
 
     if args.steps > 0:
@@ -206,24 +268,25 @@ def main(argv: list[str] | None = None) -> None:
         )
 
     if args.random_steps > 0:
-        rows = {}
-        if args.legacy:
-            rows["QuadUneven-v0 (rough, torque), pre-13 contacts"] = measure_random(
-                "QuadUneven-v0", args.random_steps, setup=legacy_contacts, terrain="rough"
-            )
-        rows["QuadUneven-v0 (rough, torque)"] = measure_random("QuadUneven-v0", args.random_steps, terrain="rough")
-        rows["Ant-v5"] = measure_random("Ant-v5", args.random_steps)
+        spec: dict[str, tuple[str, Callable[[gym.Env], None] | None, dict]] = {}
+        if args.ablation:
+            for name, setup in CONTACT_VARIANTS.items():
+                spec[f"QuadUneven-v0, {name}"] = ("QuadUneven-v0", setup, {"terrain": "rough"})
+        spec["QuadUneven-v0 (rough, torque)"] = ("QuadUneven-v0", None, {"terrain": "rough"})
+        spec["Ant-v5"] = ("Ant-v5", None, {})
+        rows = measure_random_seeds(spec, args.random_steps, args.random_seeds)
         ant = rows["Ant-v5"]
-        print(f"random actions, resets included, {args.random_steps} env steps each")
+        print(f"random actions, resets included, {args.random_steps} env steps x {args.random_seeds} seeds each")
         print(
-            f"{'env':46s} {'env steps/s':>12s} {'physics/s':>10s} {'x Ant env':>9s} {'x Ant phys':>10s} "
-            f"{'contacts':>8s} {'episodes':>8s}"
+            f"{'env':58s} {'env steps/s':>12s} {'physics/s':>10s} {'x Ant env':>9s} {'x Ant phys':>10s} "
+            f"{'contacts':>8s} {'episodes':>8s} {'in reset':>8s}"
         )
         for name, r in rows.items():
             print(
-                f"{name:46s} {r['env_steps_per_s']:12.0f} {r['physics_steps_per_s']:10.0f} "
+                f"{name:58s} {r['env_steps_per_s']:12.0f} {r['physics_steps_per_s']:10.0f} "
                 f"{r['env_steps_per_s'] / ant['env_steps_per_s']:9.2f} "
-                f"{r['physics_steps_per_s'] / ant['physics_steps_per_s']:10.2f} {r['contacts']:8.1f} {r['episodes']:8d}"
+                f"{r['physics_steps_per_s'] / ant['physics_steps_per_s']:10.2f} {r['contacts']:8.1f} "
+                f"{r['episodes']:8d} {r['reset_share']:8.0%}"
             )
         print("targets for QuadUneven-v0: >= 1000 env steps/s and >= 0.5 x Ant-v5's physics steps/s\n")
 

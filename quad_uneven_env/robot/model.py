@@ -34,6 +34,16 @@ class PhysicsOptions:
     """friction cone model; elliptic with a high impratio keeps stance feet from creeping (pyramidal
     cones make the solver ~3 x cheaper per contact but let the expert's stance feet slide out of
     reach: docs/results.md section 7)."""
+    jacobian: str = "sparse"
+    """constraint Jacobian layout. MuJoCo's "auto" picks dense below 60 dofs, but each contact row of
+    this tree touches at most 9 of the 18 dofs: sparse gives the same solution (to rounding, ~1e-14)
+    at 25-35 % less time per physics step in contact-rich states (docs/results.md section 7)."""
+    native_ccd: bool = False
+    """MuJoCo's own convex collider (GJK/EPA, the default since 3.2) instead of libccd's MPR for the
+    height-field prisms. Under impacts a native-CCD sphere deeper than about half its radius gets
+    contacts from the prisms' interior side walls, whose horizontal normals and vertical friction
+    hold it in the ground ("sucked in"): random torques then bury feet and shanks 2-12 cm deep with
+    40-90 contacts. libccd's MPR reports the top faces and lets them out (docs/results.md section 7)."""
     impratio: float = 10.0
     """ratio of frictional to normal constraint impedance (stiff friction: the paper assumes no slip)."""
     contact_timeconst: float = 0.0075
@@ -46,6 +56,21 @@ class PhysicsOptions:
     expert tip over on rough seed 0 (docs/results.md section 7)."""
     contact_dampratio: float = 1.0
     """damping ratio of every contact (MJCF geom ``solref[1]``; 1 = critical, MuJoCo's default)."""
+    limb_contact_timeconst: float | None = None
+    """s: time constant of the contacts of the trunk, thighs and shanks with the terrain (None: 2 x
+    ``timestep``, the stiffest value MuJoCo keeps stable). These geoms carry ``priority="1"`` so their
+    own ``solref`` (not the mean with the terrain's) sets the contact; their friction equals the
+    terrain's (randomization sets both), so only the stiffness differs from the feet. A limb that hits
+    the ground at speed then sinks a few mm instead of 1-3 cm, so it no longer catches the height
+    field's side walls and stays planted in the ground (docs/results.md section 7). The feet keep
+    ``contact_timeconst``: the expert never touches the ground with anything but its feet, so its
+    trajectories do not change."""
+
+    def limb_timeconst(self) -> float:
+        """s: the limbs' contact time constant (``limb_contact_timeconst`` or 2 x ``timestep``)."""
+        if self.limb_contact_timeconst is not None:
+            return float(self.limb_contact_timeconst)
+        return 2.0 * self.timestep
 
 
 def _fmt(values) -> str:
@@ -58,11 +83,12 @@ def _link_inertia(link: LinkParams) -> np.ndarray:
     return np.array([other1, other2, axial])
 
 
-def _leg_xml(cfg: RobotConfig, leg: str, hip_pos: np.ndarray) -> str:
+def _leg_xml(cfg: RobotConfig, leg: str, hip_pos: np.ndarray, limb: str) -> str:
     rng = cfg.joint_range
     kfe = cfg.knee_range(leg)
     l1, l2 = cfg.thigh.length, cfg.shank.length
     group = f'contype="{C.ROBOT_CONTYPE}" conaffinity="{C.ROBOT_CONAFFINITY}"'
+    limb_group = f"{group} {limb}".rstrip()
     fr = f'friction="{cfg.friction:.6g} 0.005 0.0001"'
     return f"""
       <body name="{C.thigh_body(leg)}" pos="{_fmt(hip_pos)}">
@@ -70,22 +96,23 @@ def _leg_xml(cfg: RobotConfig, leg: str, hip_pos: np.ndarray) -> str:
         <joint name="{C.joint_name(leg, "HFE")}" axis="0 1 0" range="{_fmt(rng["HFE"])}" damping="{cfg.joint_damping:.6g}" armature="{cfg.joint_armature:.6g}"/>
         <inertial pos="0 0 {-cfg.thigh.com:.10g}" mass="{cfg.thigh.mass:.10g}" diaginertia="{_fmt(_link_inertia(cfg.thigh))}"/>
         <site name="{C.hip_site(leg)}" pos="0 0 0" size="0.01"/>
-        <geom name="{leg}_thigh_geom" type="capsule" fromto="0 0 0 0 0 {-l1:.10g}" size="{cfg.link_radius:.6g}" mass="0" {group} {fr} rgba="0.3 0.3 0.35 1"/>
+        <geom name="{leg}_thigh_geom" type="capsule" fromto="0 0 0 0 0 {-l1:.10g}" size="{cfg.link_radius:.6g}" mass="0" {limb_group} {fr} rgba="0.3 0.3 0.35 1"/>
         <body name="{C.shank_body(leg)}" pos="0 0 {-l1:.10g}">
           <joint name="{C.joint_name(leg, "KFE")}" axis="0 1 0" range="{_fmt(kfe)}" damping="{cfg.joint_damping:.6g}" armature="{cfg.joint_armature:.6g}"/>
           <inertial pos="0 0 {-cfg.shank.com:.10g}" mass="{cfg.shank.mass:.10g}" diaginertia="{_fmt(_link_inertia(cfg.shank))}"/>
-          <geom name="{leg}_shank_geom" type="capsule" fromto="0 0 0 0 0 {-(l2 - cfg.foot_radius):.10g}" size="{0.7 * cfg.link_radius:.6g}" mass="0" {group} {fr} rgba="0.55 0.55 0.6 1"/>
+          <geom name="{leg}_shank_geom" type="capsule" fromto="0 0 0 0 0 {-(l2 - cfg.foot_radius):.10g}" size="{0.7 * cfg.link_radius:.6g}" mass="0" {limb_group} {fr} rgba="0.55 0.55 0.6 1"/>
           <geom name="{C.foot_geom(leg)}" type="sphere" pos="0 0 {-l2:.10g}" size="{cfg.foot_radius:.6g}" mass="0" {group} {fr} rgba="0.1 0.1 0.1 1"/>
           <site name="{C.foot_site(leg)}" pos="0 0 {-l2:.10g}" size="0.012" rgba="1 0.2 0.2 1"/>
         </body>
       </body>"""
 
 
-def _trunk_xml(cfg: RobotConfig, with_camera: bool) -> str:
+def _trunk_xml(cfg: RobotConfig, with_camera: bool, limb: str = "") -> str:
+    """The trunk body and its legs; ``limb``: extra MJCF attributes of the trunk, thigh and shank geoms."""
     b = cfg.body
     half = np.asarray(b.size) / 2.0
     hips = hip_positions_B(cfg)
-    legs = "".join(_leg_xml(cfg, leg, hips[i]) for i, leg in enumerate(C.LEG_NAMES))
+    legs = "".join(_leg_xml(cfg, leg, hips[i], limb) for i, leg in enumerate(C.LEG_NAMES))
     camera = (
         f'<camera name="{C.TRACK_CAMERA}" mode="trackcom" pos="0.3 -1.7 0.75" xyaxes="1 0 0 0 0.4 1"/>'
         if with_camera
@@ -96,7 +123,7 @@ def _trunk_xml(cfg: RobotConfig, with_camera: bool) -> str:
     <body name="{C.TRUNK_BODY}" pos="0 0 {h0:.10g}">
       <freejoint name="{C.ROOT_JOINT}"/>
       <inertial pos="0 0 0" mass="{b.mass:.10g}" diaginertia="{_fmt(b.inertia)}"/>
-      <geom name="{C.TRUNK_GEOM}" type="box" size="{_fmt(half)}" mass="0" contype="{C.ROBOT_CONTYPE}" conaffinity="{C.ROBOT_CONAFFINITY}" rgba="0.85 0.55 0.15 1"/>
+      <geom name="{C.TRUNK_GEOM}" type="box" size="{_fmt(half)}" mass="0" contype="{C.ROBOT_CONTYPE}" conaffinity="{C.ROBOT_CONAFFINITY}" {limb} rgba="0.85 0.55 0.15 1"/>
       {camera}{legs}
     </body>"""
 
@@ -162,9 +189,12 @@ def scene_mjcf(
     :param hfield_geom: the ``<geom type="hfield" .../>`` element of the terrain.
     """
     p = physics or PhysicsOptions()
+    limb = f'priority="1" solref="{p.limb_timeconst():.6g} {p.contact_dampratio:.6g}"'
     return f"""<mujoco model="{cfg.name}_on_terrain">
   <compiler angle="radian" autolimits="true"/>
-  <option timestep="{p.timestep:.6g}" integrator="{p.integrator}" cone="{p.cone}" impratio="{p.impratio:.6g}"/>
+  <option timestep="{p.timestep:.6g}" integrator="{p.integrator}" cone="{p.cone}" jacobian="{p.jacobian}" impratio="{p.impratio:.6g}">
+    <flag nativeccd="{"enable" if p.native_ccd else "disable"}"/>
+  </option>
   <default>
     <geom solref="{p.contact_timeconst:.6g} {p.contact_dampratio:.6g}"/>
   </default>
@@ -180,7 +210,7 @@ def scene_mjcf(
   </asset>
   <worldbody>
     <light name="sun" directional="true" pos="0 0 5" dir="-0.3 0.3 -1" castshadow="true"/>
-    {hfield_geom}{_trunk_xml(cfg, with_camera=True)}
+    {hfield_geom}{_trunk_xml(cfg, with_camera=True, limb=limb)}
   </worldbody>
   <actuator>
 {actuators_xml(cfg)}

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from quad_uneven_env import constants as C
 from quad_uneven_env.robot.model import PhysicsOptions
 from quad_uneven_env.stability import stability_index
 
@@ -70,15 +71,29 @@ def _reference_forces(env):
 
 
 def test_contact_parameters():
-    """Every geom carries the contact time constant, which respects MuJoCo's 2-step stability bound."""
+    """Feet and terrain carry the contact time constant, the limbs (trunk, thighs, shanks) the stiffest
+    stable one with priority over the terrain; both respect MuJoCo's 2-step stability bound."""
     env = gym.make("QuadUneven-v0")
     m = env.unwrapped.model
     p = PhysicsOptions()
     assert m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
     assert m.opt.impratio == pytest.approx(10.0)
-    np.testing.assert_allclose(m.geom_solref, np.tile([p.contact_timeconst, p.contact_dampratio], (m.ngeom, 1)))
+    assert m.opt.jacobian == mujoco.mjtJacobian.mjJAC_SPARSE
+    assert m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_NATIVECCD
+    names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, i) for i in range(m.ngeom)]
+    limbs = np.array([n == C.TRUNK_GEOM or n.endswith(("_thigh_geom", "_shank_geom")) for n in names])
+    assert limbs.sum() == 9
+    np.testing.assert_allclose(
+        m.geom_solref[~limbs], np.tile([p.contact_timeconst, p.contact_dampratio], ((~limbs).sum(), 1))
+    )
+    np.testing.assert_allclose(m.geom_solref[limbs], np.tile([2.0 * m.opt.timestep, p.contact_dampratio], (9, 1)))
+    np.testing.assert_array_equal(m.geom_priority, limbs.astype(int))
+    # The limbs' own friction is the terrain's: priority changes the stiffness, not the friction.
+    np.testing.assert_array_equal(m.geom_friction[limbs], np.tile(m.geom_friction[names.index(C.TERRAIN_GEOM)], (9, 1)))
     assert p.contact_timeconst >= 2.0 * m.opt.timestep
     assert p.contact_timeconst < 0.02  # stiffer than MuJoCo's default
+    assert PhysicsOptions(timestep=0.001).limb_timeconst() == pytest.approx(0.002)
+    assert PhysicsOptions(limb_contact_timeconst=0.01).limb_timeconst() == pytest.approx(0.01)
 
 
 def test_standing_forces_and_index_match_reference_and_pre13_model():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from quad_uneven_env.terrain.grid import SPAWN_XY, Grid, spawn_blend_radius, with_positive_range
@@ -24,25 +26,44 @@ def blend_width(p: Params) -> float:
     return max(0.5 * p["wavelength"], 2.0 * p["cell_size"])
 
 
+@functools.lru_cache(maxsize=8)
+def _spectral_filter(grid: Grid, wavelength: float) -> np.ndarray:
+    """(nrow, ncol // 2 + 1) real gain on ``rfft2`` of the noise: a band around 1 / wavelength (1/m).
+
+    Amplitude ring / sqrt(f): the power per frequency band (ring area ~ f) then peaks at f0 itself.
+    Depends on the grid and the wavelength only, so one array serves every episode (read-only).
+    """
+    fy = np.fft.fftfreq(grid.nrow, d=grid.cell_size)[:, None]
+    fx = np.fft.rfftfreq(grid.ncol, d=grid.cell_size)[None, :]
+    f0 = 1.0 / wavelength
+    f = np.hypot(fx, fy)
+    f[0, 0] = 1.0
+    ring = np.exp(-0.5 * ((f - f0) / (BANDWIDTH * f0)) ** 2) / np.sqrt(f / f0)
+    ring[0, 0] = 0.0
+    ring.flags.writeable = False
+    return ring
+
+
+@functools.lru_cache(maxsize=8)
+def _fade_in(grid: Grid, flat_radius: float, width: float) -> np.ndarray:
+    """(nrow, ncol) smoothstep weight in [0, 1]: 0 within ``flat_radius`` (m) of the spawn, 1 beyond ``+ width``."""
+    x, y = grid.mesh()
+    t = np.clip((np.hypot(x - SPAWN_XY[0], y - SPAWN_XY[1]) - flat_radius) / width, 0.0, 1.0)
+    w = t * t * (3.0 - 2.0 * t)
+    w.flags.writeable = False
+    return w
+
+
 def _generate(p: Params, grid: Grid, rng: np.random.Generator) -> np.ndarray:
     amplitude = p["amplitude"]
     noise = rng.standard_normal((grid.nrow, grid.ncol))
     if amplitude == 0.0:
         return np.zeros_like(noise)
     # Spectral synthesis: white noise filtered to a band of spatial frequencies around f0 = 1 / wavelength.
-    fy = np.fft.fftfreq(grid.nrow, d=grid.cell_size)[:, None]
-    fx = np.fft.rfftfreq(grid.ncol, d=grid.cell_size)[None, :]
-    f0 = 1.0 / p["wavelength"]
-    f = np.hypot(fx, fy)
-    f[0, 0] = 1.0
-    # Amplitude ring / sqrt(f): the power per frequency band (ring area ~ f) then peaks at f0 itself.
-    ring = np.exp(-0.5 * ((f - f0) / (BANDWIDTH * f0)) ** 2) / np.sqrt(f / f0)
-    ring[0, 0] = 0.0
+    ring = _spectral_filter(grid, float(p["wavelength"]))
     field = np.fft.irfft2(np.fft.rfft2(noise) * ring, s=noise.shape)
     # Fade in from 0 outside the spawn disc (smoothstep), so every triangle touching the disc is flat.
-    x, y = grid.mesh()
-    t = np.clip((np.hypot(x - SPAWN_XY[0], y - SPAWN_XY[1]) - spawn_blend_radius(p)) / blend_width(p), 0.0, 1.0)
-    h = t * t * (3.0 - 2.0 * t) * field
+    h = _fade_in(grid, float(spawn_blend_radius(p)), float(blend_width(p))) * field
     ptp = float(np.ptp(h))
     return h * (amplitude / ptp) if ptp > 0.0 else np.zeros_like(h)
 
