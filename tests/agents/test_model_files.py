@@ -73,7 +73,8 @@ def test_onnx_export_matches_predict(tmp_path, algo):
     assert np.abs(want).max() > 0.05, "a degenerate policy would not test the graph"
     session = ort.InferenceSession(str(tmp_path / "p.onnx"), providers=["CPUExecutionProvider"])
     got = session.run(None, {"obs": obs})[0]
-    np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
+    # float32 both ways; folding 1 / std (std down to 0.01 here) into the first layer scales its rounding.
+    np.testing.assert_allclose(got, want, rtol=0, atol=5e-5)
     props = {p.key: p.value for p in onnx.load(str(tmp_path / "p.onnx")).metadata_props}
     layout = json.loads(props["observation_layout"])
     assert layout["stability_index"] == [38, 39] and props["observation_normalization"] == "folded"

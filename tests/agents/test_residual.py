@@ -46,7 +46,12 @@ def test_zero_residual_reproduces_the_expert(distribution):
     residual = gym.make(RESIDUAL_ENV_ID, terrain="rough", expert_config=cfg, max_episode_steps=STEPS + 1)
     zeros = np.zeros((STEPS, 12), dtype=np.float32)
     a, b = _rollout(plain, zeros, seed=0), _rollout(residual, zeros, seed=0)
-    assert len(a["reward"]) == STEPS and a["qpos"][-1, 0] - a["qpos"][0, 0] > 0.15  # the expert walked
+    if distribution == "qp":
+        assert len(a["reward"]) == STEPS and a["qpos"][-1, 0] - a["qpos"][0, 0] > 0.15  # the expert walked
+    else:
+        # The paper's pinv distribution pulls on the ground and tips the robot over after ~2.5-3 s on
+        # any terrain (docs/results.md section 7); the comparison runs until that fall.
+        assert len(a["reward"]) >= 100 and a["done"][-1]
     n_env = a["obs"].shape[1]
     assert b["obs"].shape[1] == n_env + EXPERT_FEATURE_SIZE
     b["obs"] = b["obs"][:, :n_env]
