@@ -41,6 +41,10 @@ class TrainConfig:
 
     algo: str = param("ppo", kind="choice", choices=ALGOS)
     """``ppo`` or ``sac``."""
+    residual: bool = param(True, kind="bool")
+    """true: a residual on the expert (``QuadUnevenResidual-v0``); false: a policy from scratch on
+    ``QuadUneven-v0`` in ``joint_pd`` mode (the reference RL users compare with; no expert in the loop,
+    so ``expert_features`` and ``residual_penalty`` must be off)."""
     terrain: Any = "rough"
     """terrain kind, preset (``configs/terrain/``), YAML path or ``{kind: ..., params}`` mapping, or a list of
     them (a terrain mix: each episode on one drawn uniformly, :class:`agents.rl.terrain_mix.TerrainMixEnv`);
@@ -123,6 +127,11 @@ def validate(cfg: TrainConfig) -> TrainConfig:
     bad = sorted(set(env_kwargs) & set(FORBIDDEN_ENV_KWARGS))
     if bad:
         raise TrainConfigError(f"env_kwargs may not set {bad} (the trainer and the residual env own them)")
+    if not cfg.residual and (cfg.expert_features or cfg.residual_penalty):
+        raise TrainConfigError(
+            "residual: false trains from scratch without the expert, so expert_features must be false and "
+            f"residual_penalty 0, got expert_features={cfg.expert_features}, residual_penalty={cfg.residual_penalty}"
+        )
     _mapping("hyperparams", cfg.hyperparams)
     _mapping("policy_kwargs", cfg.policy_kwargs)
     for key in ("policy_kwargs", "env", "seed", "verbose", "device", "policy"):

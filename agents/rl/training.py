@@ -32,7 +32,7 @@ from agents.rl.learning_curve import plot_learning_curve
 from agents.rl.model_io import write_metadata
 from agents.rl.normalization import ObsNormalization, norm_path
 from agents.rl.residual_env import RESIDUAL_ENV_ID
-from agents.rl.vec_env import EVAL_SEED_OFFSET, build_vec_env, normalize
+from agents.rl.vec_env import EVAL_SEED_OFFSET, SCRATCH_ENV_KWARGS, build_vec_env, normalize
 
 __all__ = [
     "TRAIN_OUTPUTS",
@@ -176,6 +176,20 @@ def _in_main_thread() -> bool:
 def _metadata(cfg: TrainConfig) -> dict[str, Any]:
     import stable_baselines3
 
+    if not cfg.residual:
+        return {
+            "algo": cfg.algo,
+            "residual": False,
+            "env_id": "QuadUneven-v0",
+            "env_kwargs": {**SCRATCH_ENV_KWARGS, **cfg.env_kwargs},
+            "expert_features": False,
+            "terrain": cfg.terrain,
+            "randomization": cfg.randomization if not isinstance(cfg.randomization, dict) else dict(cfg.randomization),
+            "max_episode_steps": cfg.max_episode_steps,
+            "normalize_obs": cfg.normalize_obs,
+            "seed": cfg.seed,
+            "stable_baselines3": stable_baselines3.__version__,
+        }
     return {
         "algo": cfg.algo,
         "residual": True,
@@ -213,7 +227,8 @@ def _make_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) ->
         )
     except TypeError as err:  # an unknown keyword of the algorithm or of its policy
         raise TrainConfigError(f"hyperparams/policy_kwargs: {err}") from None
-    _zero_mean_action(model)
+    if cfg.residual:
+        _zero_mean_action(model)
     return model
 
 
@@ -327,8 +342,10 @@ def train(
         out / "monitor",
         out / "eval" / "evaluations.npz",
         out / "learning_curve.png",
-        title=f"residual {cfg.algo.upper()} on {_terrain_label(cfg.terrain)}"
-        f"{'' if cfg.randomization is None else f', randomization {cfg.randomization}'} (scale {cfg.residual_scale})",
+        title=(f"residual {cfg.algo.upper()}" if cfg.residual else f"{cfg.algo.upper()} from scratch (joint_pd)")
+        + f" on {_terrain_label(cfg.terrain)}"
+        + ("" if cfg.randomization is None else f", randomization {cfg.randomization}")
+        + (f" (scale {cfg.residual_scale})" if cfg.residual else ""),
     )
     summary = {
         "timesteps": int(model.num_timesteps),

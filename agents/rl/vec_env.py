@@ -18,6 +18,9 @@ from agents.rl.config import TrainConfig, terrain_label
 from agents.rl.residual_env import RESIDUAL_ENV_ID
 from agents.rl.terrain_mix import TerrainMixEnv
 
+SCRATCH_ENV_KWARGS: dict[str, Any] = {"action_mode": "joint_pd"}
+"""QuadUneven-v0 arguments of a policy trained from scratch (``TrainConfig.residual = False``)."""
+
 EPISODE_KEYS = ("ep_stability_mean", "ep_stability_min", "ep_distance", "ep_diverged", "ep_fell", "ep_residual_torque")
 """Keys :class:`EpisodeStats` puts in the last info of an episode (and Monitor writes to its CSV)."""
 
@@ -75,6 +78,7 @@ def make_train_env(
     randomization: Any = None,
     expert_features: bool = True,
     residual_penalty: float = 0.0,
+    residual: bool = True,
 ) -> gym.Env:
     """One residual env (expert in the loop) with a time limit and :class:`EpisodeStats`.
 
@@ -86,9 +90,19 @@ def make_train_env(
     :param randomization: the training world's randomization (None: nominal).
     :param expert_features: append the expert features to the observation.
     :param residual_penalty: reward penalty per unit of mean(action^2).
+    :param residual: false: plain ``QuadUneven-v0`` in ``joint_pd`` mode instead (training from scratch).
     """
 
     def one(spec: Any) -> gym.Env:
+        if not residual:
+            return gym.make(
+                "QuadUneven-v0",
+                terrain=spec,
+                max_episode_steps=max_episode_steps,
+                randomization=randomization,
+                **SCRATCH_ENV_KWARGS,
+                **(env_kwargs or {}),
+            )
         return gym.make(
             RESIDUAL_ENV_ID,
             terrain=spec,
@@ -140,6 +154,7 @@ def build_vec_env(
         cfg.randomization,
         cfg.expert_features,
         float(cfg.residual_penalty),
+        cfg.residual,
     )
     if kind == "subproc":
         env_fn = functools.partial(_ignoring_interrupts, env_fn)
@@ -169,4 +184,12 @@ def normalize(venv: VecEnv, cfg: TrainConfig, training: bool) -> VecEnv:
     )
 
 
-__all__ = ["EPISODE_KEYS", "EVAL_SEED_OFFSET", "EpisodeStats", "build_vec_env", "make_train_env", "normalize"]
+__all__ = [
+    "EPISODE_KEYS",
+    "EVAL_SEED_OFFSET",
+    "SCRATCH_ENV_KWARGS",
+    "EpisodeStats",
+    "build_vec_env",
+    "make_train_env",
+    "normalize",
+]
