@@ -473,13 +473,20 @@ class ExpertPolicy:
             q = physics.base_quat(d)
             return yaw_pitch_of_quaternion(q)[1] if turning else pitch_of_quaternion(q)
 
+        def measure_yaw() -> None:
+            """A turning body starts from its measured yaw (unwrapped next to the planned one), not the plan's."""
+            if turning:
+                y = yaw_pitch_of_quaternion(physics.base_quat(d))[0]
+                self._yaw += (y - self._yaw + np.pi) % (2.0 * np.pi) - np.pi
+
         pitch_start = previous.end if previous is not None and not measured else measured_pitch()
-        if not measured and (
-            cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, self.env.idx)) > 0.05
-        ):
+        if measured:
+            measure_yaw()
+        elif cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, self.env.idx)) > 0.05:
             # First cycle, after a hold, or drifted: start from the measured COG (and pitch) at rest.
             cog_start = {"pos": physics.cog(d, self.env.idx).copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
             pitch_start = measured_pitch()
+            measure_yaw()
         plan = None
         turn = 0.0
         for fx, dy in STRIDE_FALLBACKS:
