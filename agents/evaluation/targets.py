@@ -45,6 +45,8 @@ measured stability index >= 0 for >= 99% of its time."""
 def _matches(target: Target, entry: TerrainEntry) -> bool:
     if entry.kind != target.kind or entry.randomization is not None:  # the targets are for the nominal world
         return False
+    if entry.command is not None or entry.waypoints is not None:  # walking to the goal, not where it is told
+        return False
     params = parse_terrain_spec(entry.spec).params
     return all(params.get(k) == v for k, v in target.params.items())
 
