@@ -169,3 +169,35 @@ def test_expert_evaluation_with_a_command_and_waypoints(tmp_path):
         assert (out / png).stat().st_size > 10_000 and f"]({png})" in report
     tr = np.load(out / "traces" / "ep001.npz")
     assert tr["command"].shape == (len(tr["time"]) - 1, 3) and tr["waypoints"].shape == (1, 2)
+
+
+def test_goal_targets_skip_commanded_and_waypoint_entries_and_the_command_targets_pool_them():
+    from agents.evaluation.targets import check_command_targets, check_targets
+
+    raw = {
+        "name": "t",
+        "goal_distance": 5.0,
+        "time_limit": 5.0,
+        "terrains": [
+            {"kind": "flat", "command": {"vx": 0.1}, "seeds": list(range(10))},
+            {"kind": "rough", "params": {"amplitude": 0.05}, "command": {"yaw_rate": 0.3}, "seeds": list(range(10))},
+            {"kind": "rough", "params": {"amplitude": 0.05}, "command": {"vx": -0.1}, "seeds": list(range(10))},
+            {"kind": "flat", "waypoints": {"points": [[1, 0]]}, "seeds": list(range(10))},
+        ],
+    }
+    entries = suite_from_dict(raw).terrains
+    group = {"episodes": 10, "success_rate": 1.0, "mean_speed_success": 0.2, "successes_index_ok": 10, "successes": 10}
+    assert check_targets(entries, [{"entry": i, **group} for i in range(4)], 5.0) == []
+
+    def rec(entry, k, fell=False):
+        return {"entry": entry, "success": not fell, "end_reason": "fall" if fell else "time_limit",
+                "velocity_error": 0.01 * k, "yaw_rate_error": 0.001}  # fmt: skip
+
+    records = [rec(e, k, fell=(e == 2 and k == 0)) for e in (0, 1, 2) for k in range(10)]
+    records += [{"entry": 3, "success": k < 9, "end_reason": "waypoints"} for k in range(10)]
+    commanded, course = check_command_targets(entries, records)
+    assert commanded["entries"] == [1, 2] and commanded["episodes"] == 20  # flat is not rough 5 cm
+    assert commanded["measured"]["no_fall_rate"] == pytest.approx(0.95)
+    assert commanded["measured"]["velocity_error"] == pytest.approx(0.045)
+    assert commanded["passed"] is False and "velocity_error 0.045 m/s > 0.03" in commanded["why_not"]
+    assert course["measured"]["success_rate"] == pytest.approx(0.9) and course["passed"]
