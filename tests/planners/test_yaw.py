@@ -12,8 +12,6 @@ import pytest
 from planners import Scenario, plan_gait_cycle
 from planners.footholds import choose_footholds
 from planners.pitch import BodyPitch, planar_rotation, terrain_pitch, yaw_pitch_of_quaternion
-from quad_uneven_env import constants as C
-from quad_uneven_env.robot import robot_mjcf
 from quad_uneven_env.robot.kinematics import hip_positions_B
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec
 
@@ -121,46 +119,6 @@ def test_a_turned_plan_is_the_unturned_plan_rotated(turn):
         np.testing.assert_allclose(b.p_base_W, Rz @ a.p_base_W, atol=1e-9)
         np.testing.assert_allclose(b.q_joints, a.q_joints, atol=1e-9)
         np.testing.assert_allclose(b.omega_base_B, 0.0, atol=1e-15)
-
-
-@pytest.fixture(scope="module")
-def turning_ref():
-    plan = plan_gait_cycle(dataclasses.replace(_flat_scenario(0.4, 0.5, (0.05, 0.02)), body_pitch="terrain",
-                                               pitch_start=0.05))  # fmt: skip
-    assert plan.pitch.yawed and plan.pitch.start == 0.05
-    return plan.reference()
-
-
-def test_turning_reference_com_feet_and_orientation_match_mujoco(turning_ref, robot_cfg):
-    """Every sample's whole-body COM is the planned COG and its feet are the planned foot sites (MuJoCo's
-    kinematics of the sampled pose); its orientation and rates are the plan's yawing profile."""
-    m = mujoco.MjModel.from_xml_string(robot_mjcf(robot_cfg))
-    d = mujoco.MjData(m)
-    plan = turning_ref.plan
-    t = np.linspace(0.0, plan.duration, 13)
-    x, _, _ = turning_ref.feet(t)
-    trunk = m.body(C.TRUNK_BODY).id
-    sites = [m.site(C.foot_site(leg)).id for leg in C.LEG_NAMES]
-    for k, tk in enumerate(t):
-        s = turning_ref.sample(tk)
-        d.qpos[:] = s.qpos
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
-        np.testing.assert_allclose(d.subtree_com[trunk], plan.cog.position(t[k : k + 1])[0], atol=1e-9)
-        np.testing.assert_allclose(d.site_xpos[sites], x[k], atol=1e-9)
-        np.testing.assert_allclose(d.xmat[trunk].reshape(3, 3), plan.pitch.rotation(tk), atol=1e-12)
-        w, a = plan.pitch.omega_base(np.array(tk))
-        np.testing.assert_allclose(s.omega_base_B, w, atol=1e-12)
-        np.testing.assert_allclose(s.domega_base_B, a, atol=1e-12)
-
-
-def test_turning_reference_derivatives_match_finite_differences(turning_ref):
-    t = np.array([0.37, 0.81, 1.41, 1.77, 2.63, 3.05])
-    h = 1e-5
-    out, plus, minus = turning_ref.evaluate(t, 8), turning_ref.evaluate(t + h, 8), turning_ref.evaluate(t - h, 8)
-    for i in (0, 3):  # base position and joints
-        np.testing.assert_allclose((plus[i] - minus[i]) / (2 * h), out[i + 1], atol=1e-6)
-        np.testing.assert_allclose((plus[i + 1] - minus[i + 1]) / (2 * h), out[i + 2], atol=1e-4)
 
 
 def test_no_turn_plans_as_without_yaw():
