@@ -255,6 +255,10 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
     for t in results["targets"]:
         verdict = "PASS" if t["passed"] else f"FAIL ({t['why_not']})"
         print(f"target {t['target']:18s} entry {t['entry']}: {verdict}")
+    for t in results.get("command_targets", []):
+        verdict = "PASS" if t["passed"] else f"FAIL ({t['why_not']})"
+        measured = ", ".join(f"{k} {v:.4g}" if v is not None else f"{k} -" for k, v in t["measured"].items())
+        print(f"target {t['target']}: {measured}: {verdict}")
     print(f"report written to {Path(args.out).resolve()}/report.md")
     return 0
 

@@ -2,9 +2,9 @@
 
 :class:`ExpertPolicy` replans every gait cycle from the measured state (receding horizon:
 footholds, COG path, swing paths) heading +x (or, in an env with a ``command``, advancing by the
-commanded (vx, vy) times the cycle's duration: forwards, backwards, sideways; the yaw rate is not
-followed), with the body pitched along the slope of the footholds (``ExpertConfig.body_pitch``; the
-paper keeps it level), and runs the computed-torque
+commanded (vx, vy) times the cycle's duration and turning by the commanded yaw rate times it: forwards,
+backwards, sideways, turning, in place), with the body pitched along the slope of the footholds
+(``ExpertConfig.body_pitch``; the paper keeps it level), and runs the computed-torque
 controller (:class:`agents.control.controller.ComputedTorqueController`) at physics rate through the env's
 control hook.
 
@@ -63,7 +63,7 @@ from agents.control.inverse_dynamics import DISTRIBUTIONS
 from agents.control.nominal import NominalModel
 from planners import FootholdLimits, PlanningError, Scenario, plan_gait_cycle
 from planners.gait import validate_durations
-from planners.pitch import pitch_of_quaternion
+from planners.pitch import pitch_of_quaternion, yaw_pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
 from planners.scenario import BODY_PITCH_MODES
 from planners.types import ReferenceSample
@@ -89,6 +89,9 @@ commanded one, else ``ExpertConfig.stride`` along +x), sideways body shift (m, w
 plan is walked. Shorter and longer strides move every nominal foothold (onto the next stone, off a reach
 limit), a sideways shift moves the body over its support; 0 steps in place. If none is feasible the expert
 stands still for one cycle."""
+
+MAX_TURN = 1.2
+"""rad: the largest yaw change the expert plans in one gait cycle (0.39 rad/s with the default 3.1 s cycle)."""
 
 MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
@@ -252,6 +255,7 @@ class ExpertPolicy:
         self._log_dropped = 0
         self._last_controller_error = ""
         self._foothold_limits = FootholdLimits()
+        self._yaw = 0.0  # rad: the planned base yaw at the end of the current plan (0 until a command turns it)
 
     # -------------------------------------------------------------- SB3 protocol
     def predict(
@@ -278,6 +282,7 @@ class ExpertPolicy:
         self._steps = 0
         self._calm_after = 0.0
         self.recoveries = 0
+        self._yaw = 0.0
         nominal = self.nominal
         if nominal is None:  # oracle: the simulator's model, and the friction of its foot-terrain contacts
             self.shares_simulator_data = True
@@ -426,12 +431,13 @@ class ExpertPolicy:
         ground = self._terrain.heightfield.height(sites[:, 0], sites[:, 1])
         return np.column_stack([sites[:, :2], ground])
 
-    def _stride_xy(self, d: mujoco.MjData) -> tuple[float, float]:
-        """(dx, dy) m, world: the body's advance this cycle.
+    def _stride_xy(self, d: mujoco.MjData, turn: float = 0.0) -> tuple[float, float]:
+        """(dx, dy) m, world: the body's advance this cycle, which turns the body by ``turn`` (rad).
 
         Without a command: ``ExpertConfig.stride`` along +x. With one (``env.command``, read at the start of
         every cycle): the commanded (vx, vy) (m/s, yaw-aligned base frame) times the cycle's duration, turned
-        by the measured heading into the world frame; the yaw rate is not followed (the plans hold yaw 0).
+        into the world frame by the measured heading plus half the cycle's turn (the mid-cycle heading), and
+        shortened to the chord of the arc a constant yaw rate would drive: ``sin(turn / 2) / (turn / 2)``.
         """
         command = self.env.command
         if command is None:
@@ -439,9 +445,19 @@ class ExpertPolicy:
         period = float(sum(self.config.durations))
         w, x, y, z = physics.base_quat(d)
         yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        if turn != 0.0:
+            yaw, period = yaw + 0.5 * turn, period * float(np.sin(0.5 * turn) / (0.5 * turn))
         c, s = float(np.cos(yaw)), float(np.sin(yaw))
         vx, vy = float(command[0]), float(command[1])
         return (period * (c * vx - s * vy), period * (s * vx + c * vy))
+
+    def _turn(self) -> float:
+        """rad: the body's yaw change over a whole cycle, the commanded yaw rate times the cycle's duration
+        (0 without a command), capped at :data:`MAX_TURN`."""
+        command = self.env.command
+        if command is None or command[2] == 0.0:
+            return 0.0
+        return float(np.clip(float(command[2]) * sum(self.config.durations), -MAX_TURN, MAX_TURN))
 
     def _start_cycle(self, t0: float, cog_start: dict | None, measured: bool = False) -> None:
         """Plan the cycle starting at ``t0`` (s) from ``cog_start`` (the previous plan's end; None: the
@@ -449,20 +465,41 @@ class ExpertPolicy:
         d, cfgx = self._data, self.config
         feet = self._measured_footholds()
         previous = getattr(self._current, "pitch", None)
-        pitch_start = (
-            previous.end if previous is not None and not measured else pitch_of_quaternion(physics.base_quat(d))
-        )
-        if not measured and (
-            cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, self.env.idx)) > 0.05
-        ):
+        full_turn = self._turn()
+        # A turning body plans in its yawed frame (pitch about the yawed y axis); otherwise exactly as without yaw.
+        turning = full_turn != 0.0 or self._yaw != 0.0
+
+        def measured_pitch() -> float:
+            q = physics.base_quat(d)
+            return yaw_pitch_of_quaternion(q)[1] if turning else pitch_of_quaternion(q)
+
+        def measure_yaw() -> None:
+            """A turning body starts from its measured yaw (unwrapped next to the planned one), not the plan's."""
+            if turning:
+                y = yaw_pitch_of_quaternion(physics.base_quat(d))[0]
+                self._yaw += (y - self._yaw + np.pi) % (2.0 * np.pi) - np.pi
+
+        pitch_start = previous.end if previous is not None and not measured else measured_pitch()
+        if measured:
+            measure_yaw()
+        elif cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, self.env.idx)) > 0.05:
             # First cycle, after a hold, or drifted: start from the measured COG (and pitch) at rest.
             cog_start = {"pos": physics.cog(d, self.env.idx).copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
-            pitch_start = pitch_of_quaternion(physics.base_quat(d))
+            pitch_start = measured_pitch()
+            measure_yaw()
         plan = None
-        sx, sy = self._stride_xy(d)
+        turn = 0.0
         for fx, dy in STRIDE_FALLBACKS:
-            stride = (fx * sx, fx * sy + dy)
-            order = "left_first" if stride[1] > SIDE_STEP else "right_first"  # lead with the legs on that side
+            turn = min(fx, 1.0) * full_turn  # a shorter stride turns less; a longer one no more than commanded
+            sx, sy = self._stride_xy(d, turn)
+            if turning:  # the sideways shift and the side stepped to are the body's (its mid-cycle heading)
+                c, s = float(np.cos(self._yaw + 0.5 * turn)), float(np.sin(self._yaw + 0.5 * turn))
+                stride = (fx * sx - s * dy, fx * sy + c * dy)
+                left = c * stride[1] - s * stride[0]
+            else:
+                stride = (fx * sx, fx * sy + dy)
+                left = stride[1]
+            order = "left_first" if left > SIDE_STEP else "right_first"  # lead with the legs on that side
             scenario = Scenario(
                 terrain=self._terrain.heightfield,
                 feet_start=feet,
@@ -475,6 +512,8 @@ class ExpertPolicy:
                 robot=self.cfg,
                 body_pitch=cfgx.body_pitch,
                 pitch_start=pitch_start,
+                yaw_start=self._yaw,
+                turn=turn,
                 swing_order=order,
                 foothold_limits=self._foothold_limits,
             )
@@ -502,6 +541,7 @@ class ExpertPolicy:
         else:
             self._current, self._current_ref = plan, plan.reference(self.cfg)
             duration = plan.duration
+            self._yaw += turn
         self._row_of = getattr(self._current_ref, "row", None)
         self.plans.append((t0, self._current))
         self._t_start, self._t_end = t0, t0 + duration

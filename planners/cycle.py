@@ -62,7 +62,7 @@ class GaitCyclePlan:
     robot: RobotConfig | None = None
     """the robot planned for (the reference's default)."""
     pitch: BodyPitch | None = None
-    """the base pitch over the cycle; None: level (identity orientation, the paper)."""
+    """the base pitch and yaw over the cycle; None: level and unturned (identity orientation, the paper)."""
 
     @property
     def duration(self) -> float:
@@ -137,6 +137,7 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
     com_to_base = -wb.com_offset(q_nom)  # base minus whole-body COM (m), nominal pose
     cog0 = scenario.start_boundary()
     follow = scenario.body_pitch == "terrain"
+    yaw0, yaw1 = scenario.yaw_start, scenario.yaw_start + scenario.turn
     if scenario.footholds is not None:
         target = np.asarray(scenario.footholds, dtype=float)
     else:
@@ -144,8 +145,15 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         target = choose_footholds(
             terrain, cfg, start, cog0[0], goal_xy, scenario.cog_height,
             limits=scenario.foothold_limits, pitch_start=scenario.pitch_start if follow else None,
+            yaw_start=yaw0, yaw_end=yaw1,
         )  # fmt: skip
-    pitch = BodyPitch(scenario.pitch_start, terrain_pitch(target), phases[-1].t_end) if follow else None
+    pitch = None
+    if follow or yaw0 != 0.0 or yaw1 != 0.0:
+        pitch = BodyPitch(
+            scenario.pitch_start if follow else 0.0,
+            terrain_pitch(target, yaw=yaw1) if follow else 0.0,
+            phases[-1].t_end, yaw0, yaw1,
+        )  # fmt: skip
     rotation = None if pitch is None else pitch.rotation
     hip_offsets = wb.hips + com_to_base  # hips minus whole-body COM (m, base frame), nominal pose
 

@@ -39,7 +39,7 @@ import itertools
 import numpy as np
 
 from planners.gait import PAPER_DURATIONS, walk_cycle
-from planners.pitch import BodyPitch, terrain_pitch
+from planners.pitch import BodyPitch, planar_rotation, terrain_pitch
 from planners.terrain_query import capsule_clearance, max_height_in_disk
 from planners.types import HeightMap, PlanningError
 from quad_uneven_env.config import RobotConfig
@@ -294,6 +294,8 @@ def choose_footholds(
     durations: tuple[float, ...] = PAPER_DURATIONS,
     limits: FootholdLimits | None = None,
     pitch_start: float | None = None,
+    yaw_start: float = 0.0,
+    yaw_end: float = 0.0,
 ) -> np.ndarray:
     """Target footholds (4, 3) on the terrain surface for one walk cycle (m, world, leg order).
 
@@ -303,13 +305,17 @@ def choose_footholds(
     :param cog_height: nominal COG height above the footholds (m).
     :param pitch_start: None: the body stays level (the paper); else its pitch (rad) at the start,
         going to the slope of the nominal footholds by the end (:class:`planners.pitch.BodyPitch`).
+    :param yaw_start, yaw_end: body yaw (rad, about world z) at the start and the end of the cycle: each
+        nominal foothold is under its hip turned by ``yaw_end`` about the goal COG, and the reach and
+        shank tests see the hips turning from ``yaw_start`` to ``yaw_end``; the pitch is the slope
+        along the end heading.
     :raises PlanningError: naming the leg and the first test no candidate within reach passes.
     """
     lim = limits or FootholdLimits()
     hips = hip_positions_B(cfg)
     cog_start = np.asarray(cog_start, dtype=float)
     goal_xy = np.asarray(goal_xy, dtype=float)
-    nominal = goal_xy + hips[:, :2]
+    nominal = goal_xy + (hips[:, :2] if yaw_end == 0.0 else hips[:, :2] @ planar_rotation(yaw_end).T)
     h_nom = terrain.height(nominal[:, 0], nominal[:, 1])
     # A nominal point in a hole (a pit between stepping stones) says nothing about where the feet will
     # stand: take the terrain around it instead, for the body height and pitch.
@@ -321,7 +327,10 @@ def choose_footholds(
     total = phases[-1].t_end
     pitch = None
     if pitch_start is not None:
-        pitch = BodyPitch(pitch_start, terrain_pitch(np.column_stack([nominal, h_nom])), total)
+        end = terrain_pitch(np.column_stack([nominal, h_nom]), yaw=yaw_end)
+        pitch = BodyPitch(pitch_start, end, total, yaw_start, yaw_end)
+    elif yaw_start != 0.0 or yaw_end != 0.0:
+        pitch = BodyPitch(0.0, 0.0, total, yaw_start, yaw_end)
     shells = _search_shells(lim)
     out = np.zeros((4, 3))
     for i, leg in enumerate(LEG_NAMES):

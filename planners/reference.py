@@ -2,7 +2,7 @@
 
 From a :class:`~planners.cycle.GaitCyclePlan`: the base is placed so the whole-robot COG (legs
 included) follows the planned COG path, with the plan's base orientation: identity (the paper)
-or the plan's pitch profile (:class:`planners.pitch.BodyPitch`); swing-leg joints follow the
+or the plan's pitch and yaw profile (:class:`planners.pitch.BodyPitch`); swing-leg joints follow the
 swing paths by closed-form IK; stance-leg joints hold the feet on their footholds (IK against
 the planned base), so the controller can use them as a fallback. Velocities and accelerations
 come from the analytic leg Jacobians and their time derivatives (:mod:`planners.wholebody`),
@@ -128,7 +128,7 @@ class Reference:
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if self.pitch.level:
             return np.tile(_IDENTITY, (len(t), 1)), np.zeros((len(t), 3)), np.zeros((len(t), 3))
-        w, dw = self.pitch.omega(t)  # about y: the same vectors in the world and the base frame
+        w, dw = self.pitch.omega_base(t)
         return self.pitch.quaternion(t), w, dw
 
     def sample(self, t: float) -> ReferenceSample:

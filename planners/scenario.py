@@ -91,6 +91,13 @@ class Scenario:
     slope of the target footholds, :mod:`planners.pitch`)."""
     pitch_start: float = 0.0
     """base pitch (rad, about world y, positive nose down) at the start; used with ``body_pitch='terrain'``."""
+    yaw_start: float = 0.0
+    """base yaw (rad, about world z, counter-clockwise from above) at the start; 0 with ``turn`` 0: the
+    paper's unturned body, exactly."""
+    turn: float = 0.0
+    """rad, in (-pi/2, pi/2): the body's yaw change over the cycle (a commanded yaw rate times the cycle's
+    duration); the nominal footholds are the hips turned by ``yaw_start + turn`` about the goal COG and the
+    base yaw follows a smoothstep from ``yaw_start`` (:class:`planners.pitch.BodyPitch`)."""
     swing_order: str = "right_first"
     """lifting order (:data:`planners.gait.SWING_ORDERS`): "right_first" (RH, RF, LH, LF: the paper) or
     "left_first" (its mirror image, for a body moving to the left)."""
@@ -118,6 +125,10 @@ class Scenario:
             raise ValueError(f"body_pitch must be one of {list(BODY_PITCH_MODES)}, got {self.body_pitch!r}")
         if not (np.isfinite(self.pitch_start) and abs(self.pitch_start) < 0.5 * np.pi):
             raise ValueError(f"pitch_start must be a finite angle in (-pi/2, pi/2) rad, got {self.pitch_start}")
+        if not np.isfinite(self.yaw_start):
+            raise ValueError(f"yaw_start must be a finite angle (rad), got {self.yaw_start}")
+        if not (np.isfinite(self.turn) and abs(self.turn) < 0.5 * np.pi):
+            raise ValueError(f"turn must be a finite angle in (-pi/2, pi/2) rad, got {self.turn}")
         if self.foothold_limits is not None and not isinstance(self.foothold_limits, FootholdLimits):
             raise ValueError(f"foothold_limits must be a FootholdLimits or None, got {self.foothold_limits!r}")
 

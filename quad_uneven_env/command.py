@@ -143,6 +143,20 @@ class CommandSchedule:
         self._next += interval * (math.floor((t - self._next) / interval) + 1)  # type: ignore[operator]
         return True
 
+    def set(self, value: np.ndarray) -> None:
+        """Replace the current command by ``value`` (3,) (m/s, m/s, rad/s), checked against the bounds.
+
+        :raises ValueError: naming ``command`` and the allowed values.
+        """
+        v = np.asarray(value, dtype=float)
+        bounds = np.array([MAX_LIN, MAX_LIN, MAX_YAW_RATE])
+        if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(np.abs(v) > bounds):
+            raise ValueError(
+                f"command must be 3 finite numbers (vx, vy in [-{MAX_LIN:g}, {MAX_LIN:g}] m/s, yaw_rate in "
+                f"[-{MAX_YAW_RATE:g}, {MAX_YAW_RATE:g}] rad/s), got {value!r}"
+            )
+        self.value[:] = v
+
     def _draw(self) -> None:
         for k, (low, high) in self._ranged:
             self.value[k] = self._rng.uniform(low, high)  # type: ignore[union-attr]

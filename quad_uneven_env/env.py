@@ -405,6 +405,18 @@ class QuadUnevenEnv(gym.Env):
         without a command."""
         return None if self._command is None else self._command.value.copy()
 
+    def set_command(self, value: np.ndarray) -> None:
+        """Set the command to follow from now on (an outside source: a waypoint follower, a joystick).
+
+        :param value: (3,) vx, vy (m/s, each in [-1, 1]) and yaw rate (rad/s, in [-2, 2]), yaw-aligned base frame.
+            It shows in the next step's observation and ``info``; ranged axes are still re-drawn at the next
+            resample time, and a reset restores the configured command.
+        :raises ValueError: without a command (``command=None``), or on a value of the wrong shape or out of range.
+        """
+        if self._command is None:
+            raise ValueError("set_command needs an env made with a command (command={...}); this one has none")
+        self._command.set(value)
+
     @property
     def pushes(self) -> list[Push]:
         """The pushes started so far this episode (start time, impulse, direction, duration, force)."""

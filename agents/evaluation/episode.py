@@ -16,9 +16,16 @@ import gymnasium as gym
 import numpy as np
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
-from agents.evaluation.metrics import cost_of_transport, stability_metrics, timing_metrics
+from agents.evaluation.metrics import (
+    COMMAND_METRICS,
+    command_metrics,
+    cost_of_transport,
+    stability_metrics,
+    timing_metrics,
+)
 from agents.evaluation.policies import expert_model_of, make_policy, policy_env_kwargs
 from agents.evaluation.suites import EpisodeTask
+from agents.waypoints import WaypointFollower, load_waypoints
 from quad_uneven_env.constants import LEG_NAMES
 from quad_uneven_env.randomization import factor_values
 
@@ -102,7 +109,8 @@ class EpisodeResult:
     """the results.json episode record (JSON-safe)."""
     trace: dict[str, np.ndarray]
     """per control step: ``time`` (s), ``cog`` (N, 3, m, world), ``feet`` (N, 4, 3, m, world), ``index`` (N m),
-    ``contact`` (N, 4) foot contact flags."""
+    ``contact`` (N, 4) foot contact flags, ``yaw`` (N,) trunk heading (rad, unwrapped); with a command also
+    ``command`` (N - 1, 3) the command in effect during each step, with waypoints ``waypoints`` (K, 2) (m)."""
     terrain: dict[str, Any] | None
     """for an entry's first episode: ``heights`` (m), ``origin`` (m), ``cell_size`` (m) of its surface."""
 
@@ -110,11 +118,17 @@ class EpisodeResult:
 def make_env(task: EpisodeTask, cfg: EvalConfig, render: bool = False) -> gym.Env:
     """The QuadUneven-v0 env of ``task`` with the policy's arguments and a time limit of ``cfg.time_limit``.
 
-    The entry's ``randomization`` (if any) overrides one given in ``cfg.env_kwargs``.
+    The entry's ``randomization`` and ``command`` (if any) override those given in ``cfg.env_kwargs``; an entry
+    with waypoints and no command gets the command ``{}`` (all zero, steered by the waypoint follower) unless
+    ``cfg.env_kwargs`` gives one.
     """
     kwargs = {**policy_env_kwargs(cfg.policy), **cfg.env_kwargs}
     if task.randomization is not None:
         kwargs["randomization"] = task.randomization
+    if task.command is not None:
+        kwargs["command"] = task.command
+    elif task.waypoints is not None and kwargs.get("command") is None:
+        kwargs["command"] = {}
     try:
         dt = float(kwargs.get("timestep", 0.002)) * int(kwargs.get("frame_skip", 10))
         steps = max(1, round(cfg.time_limit / dt))
@@ -151,11 +165,19 @@ def _policy_phase(policy: Any) -> str | None:
     return None
 
 
+def _yaw(quat: np.ndarray) -> float:
+    """Heading (rad, about world z) of a trunk orientation (w, x, y, z)."""
+    w, x, y, z = (float(v) for v in quat)
+    return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
 def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     """Run one episode; never raises for a policy or env error inside the episode (recorded as ``error``).
 
     Success: the COG has travelled ``goal_distance`` along +x (``info["distance"]``) before any fall and
-    within the time limit; ``cfg.wall_time_limit`` s of wall-clock time end it as ``wall_time_limit``.
+    within the time limit; for an entry with waypoints, every waypoint reached (in order) before any fall and
+    within the time limit; for an entry with a command (and no waypoints), no fall (nor leaving the terrain)
+    until the time limit. ``cfg.wall_time_limit`` s of wall-clock time end it as ``wall_time_limit``.
     Energy for the cost of transport is |tau . qd| sampled once per control step.
     """
     wall0 = time.perf_counter()
@@ -185,6 +207,13 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     times, cogs, feet, index = [0.0], [info["cog"]], [info["feet_pos"]], []
     contact = [info["foot_contact"]]
     index0 = float(info["stability_index"])
+    yaws = [_yaw(u.data.qpos[3:7])]
+    commands: list[np.ndarray] | None = [] if u.command is not None else None
+    follower = None
+    if task.waypoints is not None:
+        follower = WaypointFollower(load_waypoints(task.waypoints))
+        follower.reset(yaws[0])
+    tracked = task.command is not None or task.waypoints is not None
     state, start = None, np.ones(1, dtype=bool)
     work, success, end_reason, fall_reason, error = 0.0, False, "time_limit", None, None
     step = 0
@@ -194,6 +223,13 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
         if writer is not None:
             writer.append_data(env.render())
         while True:
+            if follower is not None:
+                u.set_command(follower.update(np.asarray(info["cog"][:2]), yaws[-1]))
+                if follower.done:
+                    success, end_reason = True, "waypoints"
+                    break
+            if commands is not None:
+                commands.append(u.command)  # in effect during the step
             action, state = policy.predict(obs, state=state, episode_start=start, deterministic=True)
             start = np.zeros(1, dtype=bool)
             obs, _, terminated, truncated, info = env.step(action)
@@ -205,6 +241,8 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
             feet.append(info["feet_pos"])
             contact.append(info["foot_contact"])
             index.append(info["stability_index"])
+            y = _yaw(u.data.qpos[3:7])
+            yaws.append(yaws[-1] + (y - yaws[-1] + np.pi) % (2.0 * np.pi) - np.pi)  # unwrapped
             if not info["diverged"]:
                 work += float(np.abs(u.data.actuator_force * u.data.qvel[6:]).sum()) * dt
             if writer is not None and step % frame_every == 0:
@@ -212,10 +250,11 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
             if terminated:
                 end_reason, fall_reason = _end_reason(info), info["termination_reason"]
                 break
-            if info["distance"] >= cfg.goal_distance:
+            if not tracked and info["distance"] >= cfg.goal_distance:
                 success, end_reason = True, "goal"
                 break
             if truncated:
+                success = task.command is not None and task.waypoints is None  # walked the whole time limit
                 break
             if time.perf_counter() - wall0 > cfg.wall_time_limit:
                 end_reason = "wall_time_limit"
@@ -256,6 +295,10 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
         "failure_count": len(failure_log) if failure_log is not None else None,
         "expert_model": expert_model_of(policy),
         "mean_residual_torque": residual_sum / step if residual_torque is not None and step else None,
+        "command": task.command,
+        "waypoints_reached": follower.reached if follower is not None else None,
+        "waypoints_total": len(follower.config.points) if follower is not None else None,
+        **_tracking(commands, cogs, yaws, dt),
         "error": error,
         "randomization": drawn,
         "factors": _factors(drawn, pushes),
@@ -270,5 +313,21 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
         "feet": np.asarray(feet, dtype=np.float32).reshape(-1, 4, 3),
         "index": np.asarray([index0, *index], dtype=np.float64),
         "contact": np.asarray(contact, dtype=bool).reshape(-1, 4),
+        "yaw": np.asarray(yaws, dtype=np.float64),
     }
+    if commands is not None:
+        trace["command"] = np.asarray(commands, dtype=np.float64).reshape(-1, 3)
+    if follower is not None:
+        trace["waypoints"] = np.asarray(follower.config.points, dtype=np.float64).reshape(-1, 2)
+        trace["waypoint_radius"] = np.float64(follower.config.radius)
     return EpisodeResult(record, trace, terrain)
+
+
+def _tracking(commands: list[np.ndarray] | None, cogs: list, yaws: list[float], dt: float) -> dict[str, Any]:
+    """The command-tracking fields of the record (:func:`agents.evaluation.metrics.command_metrics`; None
+    without a command). Only the steps taken count (an error before a step leaves a command without one)."""
+    if commands is None:
+        return dict.fromkeys(COMMAND_METRICS)
+    n = min(len(commands), len(cogs) - 1)
+    xy = np.asarray(cogs, dtype=float)[: n + 1, :2]
+    return command_metrics(dt, xy, np.asarray(yaws[: n + 1]), np.asarray(commands[:n]).reshape(-1, 3))

@@ -62,6 +62,69 @@ def stability_metrics(index: np.ndarray, dt: float) -> dict[str, float | None]:
     }
 
 
+TRACKING_WINDOW = 5.0
+"""s: length of the consecutive windows of ``velocity_error_window`` (see :func:`command_metrics`)."""
+
+COMMAND_METRICS: tuple[str, ...] = (
+    "velocity_error", "velocity_error_window", "velocity_rmse", "yaw_rate_error", "heading_error",
+)  # fmt: skip
+"""The command-tracking fields of an episode record (None without a command)."""
+
+
+def commanded_path(dt: float, xy0: np.ndarray, yaw: np.ndarray, commands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The path the command asks for: positions (N + 1, 2) (m, world) and headings (N + 1,) (rad).
+
+    Step k (1..N) of ``dt`` s starts at the measured heading ``yaw[k - 1]`` and moves by ``dt`` times the
+    command ``commands[k - 1] = (vx, vy, yaw_rate)`` in effect during it, its (vx, vy) turned by that heading into
+    the world frame; the commanded heading starts at ``yaw[0]`` and integrates the commanded yaw rate.
+
+    :param xy0: (2,) start position (m). :param yaw: (N + 1,) measured (unwrapped) headings (rad).
+    """
+    c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
+    v = np.column_stack([c * commands[:, 0] - s * commands[:, 1], s * commands[:, 0] + c * commands[:, 1]])
+    path = np.vstack([np.asarray(xy0, dtype=float)[None], xy0 + np.cumsum(dt * v, axis=0)])
+    heading = yaw[0] + np.concatenate([[0.0], np.cumsum(dt * commands[:, 2])])
+    return path, heading
+
+
+def command_metrics(dt: float, xy: np.ndarray, yaw: np.ndarray, commands: np.ndarray) -> dict[str, float | None]:
+    """How well an episode followed its command (all None when it has no step).
+
+    :param dt: control step (s). :param xy: (N + 1, 2) measured COG positions (m, world) at reset and after
+        every step. :param yaw: (N + 1,) measured trunk headings (rad, unwrapped). :param commands: (N, 3) the
+        command in effect during each step (vx, vy m/s, yaw rate rad/s, yaw-aligned base frame).
+    :return: with ``d = xy - commanded_path`` (m) (:func:`commanded_path`) and ``T = N dt``:
+
+        - ``velocity_error`` (m/s): ``|d[N]| / T``, the error of the episode's mean velocity;
+        - ``velocity_error_window`` (m/s): the mean over consecutive windows of :data:`TRACKING_WINDOW` s (a
+          shorter last one dropped unless it is the only one) of each window's ``|d[end] - d[start]|`` over its
+          length: the error of the mean velocity over a few seconds (errors cannot cancel over the episode);
+        - ``velocity_rmse`` (m/s): the RMS over the steps of the step's mean velocity (its displacement over
+          ``dt``) minus its command, in the world frame: what a per-step tracking reward sees, including the
+          start-stop of a crawl within its gait cycle;
+        - ``yaw_rate_error`` (rad/s): ``|(yaw[N] - yaw[0]) - integral of the commanded yaw rate| / T``;
+        - ``heading_error`` (rad): the RMS over the steps of the measured minus the commanded heading.
+    """
+    xy, yaw, commands = (np.asarray(a, dtype=float) for a in (xy, yaw, commands))
+    n = len(commands)
+    if n == 0:
+        return dict.fromkeys(COMMAND_METRICS)
+    path, heading = commanded_path(dt, xy[0], yaw, commands)
+    d = xy - path
+    T = n * dt
+    w = max(1, round(TRACKING_WINDOW / dt))
+    ends = list(range(w, n + 1, w)) or [n]
+    windows = [np.linalg.norm(d[b] - d[b - min(w, b)]) / (min(w, b) * dt) for b in ends]
+    step_err = np.diff(d, axis=0) / dt
+    return {
+        "velocity_error": float(np.linalg.norm(d[-1]) / T),
+        "velocity_error_window": float(np.mean(windows)),
+        "velocity_rmse": float(np.sqrt(np.mean(np.sum(step_err**2, axis=1)))),
+        "yaw_rate_error": float(abs((yaw[-1] - yaw[0]) - (heading[-1] - heading[0])) / T),
+        "heading_error": float(np.sqrt(np.mean((yaw[1:] - heading[1:]) ** 2))),
+    }
+
+
 def timing_metrics(times_ms: Sequence[float] | None) -> dict[str, float | None]:
     """Median and 95th percentile (ms) of the policy's planner times; None if it exposes none."""
     if times_ms is None or len(times_ms) == 0:
@@ -96,7 +159,9 @@ def group_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
 
     ``min_stability_index`` is the minimum over episodes, the other ``mean_*`` the mean of the episodes'
     values (episodes with None left out); ``mean_speed_success`` is over successes only;
-    ``successes_index_ok`` counts successes whose index was >= 0 for >= 99% of their time.
+    ``successes_index_ok`` counts successes whose index was >= 0 for >= 99% of their time; ``falls`` counts the
+    episodes that fell (or diverged); ``mean_<m>`` of every :data:`COMMAND_METRICS` field is over the episodes
+    with a command (None if none has one).
     """
     n = len(episodes)
     successes = [e for e in episodes if e["success"]]
@@ -124,6 +189,8 @@ def group_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "planner_ms_median": _mean(e["planner_ms_median"] for e in episodes),
         "planner_ms_p95": _max_or_none(e["planner_ms_p95"] for e in episodes),
         "end_reasons": reasons,
+        "falls": sum(e.get("end_reason") in ("fall", "diverged") for e in episodes),
+        **{f"mean_{m}": _mean(e.get(m) for e in episodes) for m in COMMAND_METRICS},
     }
 
 

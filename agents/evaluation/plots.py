@@ -132,3 +132,54 @@ def plot_terrain_paths(
     ax[1].legend(fontsize=7, ncol=5, loc="upper left", bbox_to_anchor=(0.0, -0.18))
     save(fig, path, dpi=110, bbox_tight=True)
     return path
+
+
+def plot_commanded_paths(
+    panels: list[dict],
+    heights: np.ndarray,
+    origin: tuple,
+    cell_size: float,
+    title: str,
+    path: Path,
+) -> Path:
+    """Commanded and measured COG paths (world, m) over the terrain's height map (top view).
+
+    :param panels: one dict per episode drawn together: ``cog`` (N, 2) measured path, ``commanded`` (N, 2) the
+        commanded path (:func:`agents.evaluation.metrics.commanded_path`), ``label`` (str), and optionally
+        ``waypoints`` (K, 2) (m) and ``radius`` (m) of the waypoints.
+    :param heights: (nrow, ncol) terrain heights (m), rows along +y, columns along +x from ``origin``.
+    """
+    plt = pyplot()
+    nrow, ncol = heights.shape
+    xs = origin[0] + cell_size * np.arange(ncol)
+    ys = origin[1] + cell_size * np.arange(nrow)
+    pts = [p[k] for p in panels for k in ("cog", "commanded")] + [p["waypoints"] for p in panels if "waypoints" in p]
+    allp = np.vstack(pts)
+    centre = 0.5 * (allp.min(axis=0) + allp.max(axis=0))
+    half = max(0.5 * float(np.ptp(allp, axis=0).max()) + 0.4, 1.0)
+    cols = (xs >= centre[0] - half) & (xs <= centre[0] + half)
+    rows = (ys >= centre[1] - half) & (ys <= centre[1] + half)
+    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    sub = heights[np.ix_(rows, cols)]
+    ext = (xs[cols][0], xs[cols][-1], ys[rows][0], ys[rows][-1])
+    im = ax.imshow(sub, origin="lower", extent=ext, cmap="terrain", aspect="equal", interpolation="nearest")
+    fig.colorbar(im, ax=ax, label="terrain height (m)", fraction=0.04, pad=0.01)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, p in enumerate(panels):
+        c = colours[k % len(colours)]
+        ax.plot(p["commanded"][:, 0], p["commanded"][:, 1], "--", color=c, lw=1.3, label=f"{p['label']}: commanded")
+        ax.plot(p["cog"][:, 0], p["cog"][:, 1], "-", color=c, lw=2.0, label=f"{p['label']}: measured COG")
+        ax.plot(p["cog"][-1, 0], p["cog"][-1, 1], "o", color=c, ms=5)
+        if "waypoints" in p:
+            wp = np.asarray(p["waypoints"])
+            ax.plot(wp[:, 0], wp[:, 1], "x", color="k", ms=8, mew=2)
+            for j, (x, y) in enumerate(wp):
+                ax.add_patch(plt.Circle((x, y), float(p.get("radius", 0.3)), fill=False, color="k", lw=0.8))
+                ax.text(x, y, f" {j + 1}", fontsize=8, va="bottom")
+    ax.plot(allp[0, 0], allp[0, 1], "k^", ms=7, label="start")
+    ax.set(xlabel="x (m)", ylabel="y (m)", title=title)
+    ax.set_xlim(ext[0], ext[1])
+    ax.set_ylim(ext[2], ext[3])
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.09), ncol=2)
+    save(fig, path, dpi=110, bbox_tight=True)
+    return path

@@ -6,8 +6,16 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from agents.evaluation.episode import EpisodeResult
-from agents.evaluation.plots import plot_distance_per_episode, plot_stability_over_time, plot_terrain_paths
+from agents.evaluation.metrics import commanded_path
+from agents.evaluation.plots import (
+    plot_commanded_paths,
+    plot_distance_per_episode,
+    plot_stability_over_time,
+    plot_terrain_paths,
+)
 
 MAX_STABILITY_PANELS = 6
 """At most this many episodes (the first of each terrain entry) in the stability plot."""
@@ -149,6 +157,71 @@ def _targets(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     return [*lines, ""]
 
 
+COMMAND_HEADER = (
+    "| entry | episodes | falls | success rate | velocity error, episode (m/s) | velocity error, "
+    "5 s windows (m/s) | velocity RMSE, per step (m/s) | yaw-rate error (rad/s) | heading error, RMS (rad) |"
+)
+
+
+def _command_tables(summary: Mapping[str, Any], targets: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The command-tracking table per entry with a command (means over its episodes) and the command targets."""
+    rows = [g for g in summary["by_entry"] if g.get("mean_velocity_error") is not None]
+    if not rows:
+        return []
+    lines = [
+        "## Command tracking",
+        "",
+        "Means over each entry's episodes (definitions: docs/commands.md, *Evaluation*): the velocity errors "
+        "compare the COG with the path the command asks for from the measured heading; the yaw-rate error is "
+        "the error of the episode's mean yaw rate; the heading error is the RMS of the measured minus the "
+        "integrated commanded heading.",
+        "",
+        COMMAND_HEADER,
+        "|" + "---|" * (COMMAND_HEADER.count("|") - 1),
+    ]
+    for g in rows:
+        cells = [
+            f"[{g['entry']}] {g['label']}",
+            str(g["episodes"]),
+            str(g["falls"]),
+            f"{g['success_rate']:.0%}",
+            _f(g["mean_velocity_error"]),
+            _f(g["mean_velocity_error_window"]),
+            _f(g["mean_velocity_rmse"]),
+            _f(g["mean_yaw_rate_error"]),
+            _f(g["mean_heading_error"]),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines.append("")
+    if targets:
+        head = "| target | entries | episodes | measured | required | passed | why not |"
+        lines += [head, "|" + "---|" * (head.count("|") - 1)]
+        for t in targets:
+            measured = ", ".join(f"{k} {_f(v)}" for k, v in t["measured"].items())
+            required = ", ".join(f"{k} {v}" for k, v in t["required"].items())
+            cells = [t["target"], ", ".join(map(str, t["entries"])), str(t["episodes"]), measured, required,
+                     "**yes**" if t["passed"] else "**no**", _f(t["why_not"])]  # fmt: skip
+            lines.append("| " + " | ".join(cells) + " |")
+        lines.append("")
+    return lines
+
+
+def _command_plot(e: EpisodeResult, title: str, png: Path) -> Path:
+    """The commanded and the measured path of an entry's first episode over its terrain."""
+    tr, t = e.trace, e.terrain
+    cmd = np.asarray(tr["command"], dtype=float).reshape(-1, 3)
+    n = len(cmd)
+    times = np.asarray(tr["time"], dtype=float)
+    dt = float(times[1] - times[0]) if len(times) > 1 else 0.02
+    cog = np.asarray(tr["cog"], dtype=float)[: n + 1, :2]
+    path, _ = commanded_path(dt, cog[0], np.asarray(tr["yaw"], dtype=float)[: n + 1], cmd)
+    panel: dict[str, Any] = {"cog": cog, "commanded": path, "label": f"seed {e.record['seed']}"}
+    if "waypoints" in tr:
+        panel["waypoints"] = np.asarray(tr["waypoints"])
+        panel["radius"] = float(tr["waypoint_radius"])
+    return plot_commanded_paths([panel], t["heights"], t["origin"], t["cell_size"], title, png)
+
+
 def _failures(records: Sequence[Mapping[str, Any]], labels: Sequence[str]) -> list[str]:
     failed = [r for r in records if not r["success"]]
     lines = ["## Failures", ""]
@@ -197,6 +270,9 @@ def write_report(
             tr["cog"], tr["feet"], t["heights"], t["origin"], t["cell_size"], title, png, contact=tr["contact"]
         )
         plots.append((f"COG and foot paths over the terrain: {title}", png))
+        if "command" in tr and len(tr["command"]):
+            png = _command_plot(e, title, out / f"command_entry{r['entry']}.png")
+            plots.append((f"Commanded and measured path: {title}", png))
 
     lines = [
         f"# Evaluation: suite `{results['suite']}`, policy `{results['policy']}`",
@@ -213,6 +289,7 @@ def write_report(
         *_targets(results.get("targets", [])),
         *_tables(results["summary"]),
         *_factor_table(results["summary"].get("by_factor", [])),
+        *_command_tables(results["summary"], results.get("command_targets", [])),
         *_failures(records, labels),
         *_episode_table(records),
         "## Plots",

@@ -42,7 +42,7 @@ from agents.evaluation.store import (
     write_episode,
 )
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite
-from agents.evaluation.targets import check_targets
+from agents.evaluation.targets import check_command_targets, check_targets
 from agents.outputs import OutputError, write_json_atomic
 
 __all__ = ["EvaluationInterrupted", "evaluate", "make_policy", "write_results"]
@@ -135,6 +135,7 @@ def _results(suite: Suite, policy: str, records: list[dict[str, Any]], meta: dic
         "episodes": records,
         "summary": summary,
         "targets": json_safe(check_targets(suite.terrains, summary["by_entry"], suite.goal_distance)),
+        "command_targets": json_safe(check_command_targets(suite.terrains, records)),
         "meta": json_safe(meta),
     }
 

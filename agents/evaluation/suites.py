@@ -1,6 +1,7 @@
 """Terrain suites: named lists of terrains x seeds with a goal distance and a time limit (configs/suites/).
 
-File format (every field required except ``params`` and ``randomization``; no other fields)::
+File format (every field required except ``params``, ``randomization``, ``command`` and ``waypoints``; no
+other fields)::
 
     name: rough-mild
     goal_distance: 5.0      # m along +x from the spawn point
@@ -9,7 +10,14 @@ File format (every field required except ``params`` and ``randomization``; no ot
       - kind: rough         # any terrain kind of the environment (docs/terrain.md)
         params: {amplitude: 0.04, wavelength: 0.6}
         randomization: mild # optional: a preset name or a mapping (docs/randomization.md); default nominal
+        command: {vx: 0.1, yaw_rate: 0.2}  # optional: the env's command (docs/commands.md)
+        waypoints: {points: [[1, 0], [2, 1]], radius: 0.3}  # optional (agents.waypoints.WaypointConfig)
         seeds: [0, 1, 2, 3, 4]
+
+An entry with a ``command`` (and no waypoints) walks for the whole time limit: success is not falling
+(nor leaving the terrain), and the goal distance is not used. An entry with ``waypoints`` succeeds once every
+waypoint is reached (in order); its env gets the command ``{}`` (all zero) unless it gives one, which the
+waypoint follower then steers (:mod:`agents.waypoints`).
 
 Terrain parameters are validated by :func:`quad_uneven_env.terrain.parse_terrain_spec`. Errors are
 ``SuiteError`` (a ``ValueError``) whose message starts with the offending field, e.g.
@@ -25,6 +33,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from agents.waypoints import load_waypoints
+from quad_uneven_env.command import load_command
 from quad_uneven_env.config import CONFIG_DIR, read_yaml, resolve_config_path
 from quad_uneven_env.fields import REQUIRED, Param
 from quad_uneven_env.randomization import load_randomization
@@ -37,8 +47,9 @@ SUITE_DIR = CONFIG_DIR / "suites"
 SUITE_FIELDS = ("name", "goal_distance", "time_limit", "terrains")
 """Top-level fields of a suite file (all required)."""
 
-ENTRY_FIELDS = ("kind", "params", "seeds", "randomization")
-"""Fields of one ``terrains`` entry (``params`` optional, default ``{}``; ``randomization`` optional, default None)."""
+ENTRY_FIELDS = ("kind", "params", "seeds", "randomization", "command", "waypoints")
+"""Fields of one ``terrains`` entry (``params`` optional, default ``{}``; ``randomization``, ``command`` and
+``waypoints`` optional, default None)."""
 
 EXIT_MARGIN = 0.3
 """m: the environment ends an episode whose base comes this close to the grid's edge ("left the terrain")."""
@@ -60,6 +71,10 @@ class TerrainEntry:
     """episode seeds (>= 0, distinct): each seeds the env's reset and hence the terrain."""
     randomization: str | dict[str, Any] | None = None
     """the env's ``randomization=`` argument as written (a preset name or a mapping; None: the nominal world)."""
+    command: dict[str, Any] | None = None
+    """the env's ``command=`` argument as written (None: no command; see docs/commands.md)."""
+    waypoints: dict[str, Any] | None = None
+    """the waypoints to follow as written (:class:`agents.waypoints.WaypointConfig` fields; None: none)."""
 
     @property
     def spec(self) -> dict[str, Any]:
@@ -71,6 +86,11 @@ class TerrainEntry:
         """Short human-readable name, e.g. ``stairs(direction=up)`` or ``rough(amplitude=0.05) + mild``."""
         inner = ", ".join(f"{k}={v}" for k, v in self.params.items())
         label = f"{self.kind}({inner})" if inner else self.kind
+        if self.command is not None:
+            fixed = ", ".join(f"{k}={v}" for k, v in self.command.items() if k != "ranges")
+            label += f" cmd({fixed}{', ranges' if 'ranges' in self.command else ''})"
+        if self.waypoints is not None:
+            label += f" {len(self.waypoints['points'])} waypoints"
         if self.randomization is None:
             return label
         return f"{label} + {self.randomization if isinstance(self.randomization, str) else 'randomization'}"
@@ -110,6 +130,10 @@ class EpisodeTask:
     """True for the entry's first episode (plotted, and filmed with --video)."""
     randomization: str | dict[str, Any] | None = None
     """the entry's ``randomization`` (None: the nominal world)."""
+    command: dict[str, Any] | None = None
+    """the entry's ``command`` (None: none)."""
+    waypoints: dict[str, Any] | None = None
+    """the entry's ``waypoints`` (None: none)."""
 
 
 def suite_names() -> list[str]:
@@ -154,6 +178,15 @@ def _rename_terrain_error(msg: str, i: int) -> str:
     return msg if msg.startswith(f"terrains[{i}]") else f"terrains[{i}]: {msg}"
 
 
+def _plain(value: Any) -> Any:
+    """``value`` with mappings turned into dicts and tuples into lists (JSON-friendly, as written)."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return value
+
+
 def _seeds(value: Any, field: str) -> tuple[int, ...]:
     if not isinstance(value, list) or not value:
         raise SuiteError(f"{field} must be a non-empty list of integers >= 0, got {value!r}")
@@ -196,7 +229,32 @@ def _entry(raw: Any, i: int, goal_distance: float) -> TerrainEntry:
         except ValueError as e:
             raise SuiteError(str(e)) from None
         randomization = randomization if isinstance(randomization, str) else dict(randomization)
+    command = raw.get("command")
+    if command is not None:
+        try:
+            load_command(command)
+        except ValueError as e:
+            raise SuiteError(f"{where}.{e}") from None
+        command = _plain(command)
     grid = KINDS[kind].grid(spec.params)
+    waypoints = raw.get("waypoints")
+    if waypoints is not None:
+        try:
+            wp = load_waypoints(waypoints, f"{where}.waypoints")
+        except ValueError as e:
+            raise SuiteError(str(e)) from None
+        lo = [grid.origin[k] + EXIT_MARGIN for k in (0, 1)]
+        hi = [grid.origin[k] + grid.size[k] - EXIT_MARGIN for k in (0, 1)]
+        for k, (x, y) in enumerate(wp.points):
+            if not (lo[0] < x < hi[0] and lo[1] < y < hi[1]):
+                raise SuiteError(
+                    f"{where}.waypoints.points[{k}] = [{x:g}, {y:g}] m is off the terrain: it must lie within x in "
+                    f"({lo[0]:.2f}, {hi[0]:.2f}) m and y in ({lo[1]:.2f}, {hi[1]:.2f}) m (the grid less "
+                    f"{EXIT_MARGIN} m)"
+                )
+        waypoints = _plain(waypoints)
+    if command is not None or waypoints is not None:  # no goal distance: walks for the time limit or the waypoints
+        return TerrainEntry(kind, dict(params), seeds, randomization, command, waypoints)
     x_exit = grid.origin[0] + grid.size[0] - EXIT_MARGIN
     if goal_distance >= x_exit:
         raise SuiteError(
@@ -245,7 +303,12 @@ def episode_tasks(suite: Suite, episodes: int | None = None, seed_offset: int = 
             seed = s + seed_offset
             if seed < 0:
                 raise ValueError(f"seed: offset {seed_offset} makes terrains[{e}] seed {s} negative")
-            tasks.append(EpisodeTask(len(tasks), e, entry.kind, dict(entry.params), seed, k == 0, entry.randomization))
+            first = k == 0
+            task = EpisodeTask(
+                len(tasks), e, entry.kind, dict(entry.params), seed, first, entry.randomization, entry.command,
+                entry.waypoints,
+            )  # fmt: skip
+            tasks.append(task)
     return tasks
 
 

@@ -45,6 +45,8 @@ measured stability index >= 0 for >= 99% of its time."""
 def _matches(target: Target, entry: TerrainEntry) -> bool:
     if entry.kind != target.kind or entry.randomization is not None:  # the targets are for the nominal world
         return False
+    if entry.command is not None or entry.waypoints is not None:  # walking to the goal, not where it is told
+        return False
     params = parse_terrain_spec(entry.spec).params
     return all(params.get(k) == v for k, v in target.params.items())
 
@@ -96,3 +98,88 @@ def check_targets(
                 }
             )
     return rows
+
+
+COMMAND_TERRAIN = ("rough", {"amplitude": 0.05})
+"""The terrain the commanded-walking target is judged on: rough terrain of amplitude 0.05 m."""
+
+COMMAND_TARGET = {"no_fall_rate": 0.95, "velocity_error": 0.03, "yaw_rate_error": 0.05}
+"""Commanded walking (entries with a ``command`` on :data:`COMMAND_TERRAIN`, all together): at least this
+fraction of episodes without a fall (nor leaving the terrain), at most this mean ``velocity_error`` (m/s)
+and mean ``yaw_rate_error`` (rad/s) over the episodes."""
+
+COURSE_TARGET = 0.9
+"""Waypoint courses (entries with ``waypoints``, all together): at least this fraction reach every waypoint."""
+
+
+def check_command_targets(
+    entries: Sequence[TerrainEntry], records: Sequence[Mapping[str, Any]]
+) -> list[dict[str, Any]]:
+    """The commanded-walking and course targets over the matching entries of the nominal world (all pooled).
+
+    Each row: ``target``, ``entries`` (indices), ``episodes``, ``measured`` and ``required`` (dicts of the
+    values above), ``passed`` and ``why_not``. Each entry must have >= ``MIN_SEEDS`` episodes.
+    """
+    kind, params = COMMAND_TERRAIN
+    rows = []
+
+    def nominal(e: TerrainEntry) -> bool:
+        return e.randomization is None
+
+    def on_terrain(e: TerrainEntry) -> bool:
+        p = parse_terrain_spec(e.spec).params
+        return e.kind == kind and all(p.get(k) == v for k, v in params.items())
+
+    commanded = [
+        i
+        for i, e in enumerate(entries)
+        if nominal(e) and e.command is not None and e.waypoints is None and on_terrain(e)
+    ]
+    course = [i for i, e in enumerate(entries) if nominal(e) and e.waypoints is not None]
+    groups = [("commanded walking (rough 5 cm)", commanded), ("course (every waypoint reached)", course)]
+    for name, idx in groups:
+        eps = [r for r in records if r["entry"] in idx]
+        if not eps:
+            continue
+        why = [
+            f"entry {i}: {n} < {MIN_SEEDS} episodes"
+            for i in idx
+            if (n := sum(r["entry"] == i for r in eps)) < MIN_SEEDS
+        ]
+        n = len(eps)
+        if name.startswith("commanded"):
+            no_fall = sum(r["end_reason"] not in ("fall", "diverged", "left_terrain", "error") for r in eps) / n
+            v = [r["velocity_error"] for r in eps if r.get("velocity_error") is not None]
+            y = [r["yaw_rate_error"] for r in eps if r.get("yaw_rate_error") is not None]
+            measured = {
+                "no_fall_rate": no_fall,
+                "velocity_error": sum(v) / len(v) if v else None,
+                "yaw_rate_error": sum(y) / len(y) if y else None,
+            }
+            required = dict(COMMAND_TARGET)
+            if no_fall < required["no_fall_rate"]:
+                why.append(f"no-fall rate {no_fall:.0%} < {required['no_fall_rate']:.0%}")
+            for key, unit in (("velocity_error", "m/s"), ("yaw_rate_error", "rad/s")):
+                if measured[key] is None or measured[key] > required[key]:
+                    why.append(f"mean {key} {_round(measured[key])} {unit} > {required[key]} {unit}")
+        else:
+            rate = sum(bool(r["success"]) for r in eps) / n
+            measured, required = {"success_rate": rate}, {"success_rate": COURSE_TARGET}
+            if rate < COURSE_TARGET:
+                why.append(f"success rate {rate:.0%} < {COURSE_TARGET:.0%}")
+        rows.append(
+            {
+                "target": name,
+                "entries": idx,
+                "episodes": n,
+                "measured": measured,
+                "required": required,
+                "passed": not why,
+                "why_not": "; ".join(why) or None,
+            }
+        )
+    return rows
+
+
+def _round(v: float | None) -> float | None:
+    return None if v is None else round(v, 4)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import planners
-from planners.pitch import MAX_PITCH, BodyPitch, pitch_of_quaternion, terrain_pitch
+from planners.pitch import MAX_PITCH, BodyPitch, pitch_of_quaternion, planar_rotation, terrain_pitch
 from planners.wholebody import WholeBody
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot import robot_mjcf
@@ -70,34 +70,62 @@ def pitched_ref():
     return plan.reference()
 
 
-def test_pitched_reference_com_and_feet_match_mujoco(pitched_ref, robot_cfg):
+@pytest.fixture(scope="module")
+def turning_ref():
+    """A cycle on flat ground turning by 0.5 rad from a yaw of 0.4 rad, pitched from 0.05 rad (terrain mode)."""
+    feet = np.column_stack([FEET_XY @ planar_rotation(0.4).T, np.zeros(4)])
+    zero = (0.0, 0.0, 0.0)
+    sc = planners.Scenario(
+        terrain="flat", feet_start=feet, cog_start={"pos": (0.0, 0.0, 0.33), "vel": zero, "acc": zero},
+        durations=(0.5, 0.5, 0.5, 0.1, 0.5, 0.5, 0.5), epsilon=20.0, cog_height=0.33, stride=(0.05, 0.02),
+        body_pitch="terrain", pitch_start=0.05, yaw_start=0.4, turn=0.5,
+    )  # fmt: skip
+    plan = planners.plan_gait_cycle(sc)
+    assert plan.pitch.yawed and plan.pitch.start == 0.05
+    return plan.reference()
+
+
+@pytest.mark.parametrize("name", ["pitched_ref", "turning_ref"])
+def test_reference_com_feet_and_orientation_match_mujoco(name, request, robot_cfg):
+    """Every sample's whole-body COM is the planned COG and its feet are the planned foot sites (MuJoCo's
+    kinematics of the sampled pose); its orientation and base-frame rates are the plan's profile."""
+    ref = request.getfixturevalue(name)
     m = mujoco.MjModel.from_xml_string(robot_mjcf(robot_cfg))
     d = mujoco.MjData(m)
-    plan = pitched_ref.plan
+    plan = ref.plan
     t = np.linspace(0.0, plan.duration, 17)
-    x, _, _ = pitched_ref.feet(t)
+    x, _, _ = ref.feet(t)
     trunk = m.body(C.TRUNK_BODY).id
     sites = [m.site(C.foot_site(leg)).id for leg in C.LEG_NAMES]
     for k, tk in enumerate(t):
-        s = pitched_ref.sample(tk)
+        s = ref.sample(tk)
         d.qpos[:] = s.qpos
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
         np.testing.assert_allclose(d.subtree_com[trunk], plan.cog.position(t[k : k + 1])[0], atol=1e-9)
         np.testing.assert_allclose(d.site_xpos[sites], x[k], atol=1e-9)
-        assert pitch_of_quaternion(s.quat_WB) == pytest.approx(plan.pitch.angle(tk))
+        np.testing.assert_allclose(d.xmat[trunk].reshape(3, 3), plan.pitch.rotation(tk), atol=1e-12)
+        w, a = plan.pitch.omega_base(np.array(tk))
+        np.testing.assert_allclose(s.omega_base_B, w, atol=1e-12)
+        np.testing.assert_allclose(s.domega_base_B, a, atol=1e-12)
+        if name == "pitched_ref":
+            assert pitch_of_quaternion(s.quat_WB) == pytest.approx(plan.pitch.angle(tk))
 
 
-def test_pitched_reference_derivatives_match_finite_differences(pitched_ref):
-    t = np.array([0.37, 1.41, 1.77, 2.63, 3.05, 4.52, 5.33, 5.91])
+@pytest.mark.parametrize("name", ["pitched_ref", "turning_ref"])
+def test_reference_derivatives_match_finite_differences(name, request):
+    ref = request.getfixturevalue(name)
+    t = np.array([0.37, 1.41, 1.77, 2.63, 3.05, 4.52, 5.33, 5.91]) * ref.plan.duration / 6.1
     h = 1e-5
-    out, plus, minus = pitched_ref.evaluate(t, 8), pitched_ref.evaluate(t + h, 8), pitched_ref.evaluate(t - h, 8)
+    out, plus, minus = ref.evaluate(t, 8), ref.evaluate(t + h, 8), ref.evaluate(t - h, 8)
     for i in (0, 3):  # base position and joints
         np.testing.assert_allclose((plus[i] - minus[i]) / (2 * h), out[i + 1], atol=1e-6)
         np.testing.assert_allclose((plus[i + 1] - minus[i + 1]) / (2 * h), out[i + 2], atol=1e-4)
-    pitch = pitched_ref.plan.pitch
+    if name == "turning_ref":
+        return
+    pitch = ref.plan.pitch
     for tk in t:
-        s = pitched_ref.sample(tk)
+        s = ref.sample(tk)
         np.testing.assert_allclose(s.omega_base_B, [0.0, pitch.rate(tk), 0.0], atol=1e-15)
         np.testing.assert_allclose(s.domega_base_B, [0.0, pitch.accel(tk), 0.0], atol=1e-15)
 
