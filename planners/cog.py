@@ -264,9 +264,20 @@ def _dense_index(red: _Reduced, coef: np.ndarray, n: int = 241) -> list[tuple[np
 def _solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lo: np.ndarray) -> np.ndarray | None:
     """min 1/2 z'Hz + g'z s.t. C z >= lo; None when infeasible. quadprog (Goldfarb-Idnani dual
     active set): exact, and on these ~120-variable problems faster than ProxQP and DAQP
-    (docs/results_planning.md)."""
+    (docs/results_planning.md).
+
+    Every row is scaled to unit norm first: the rows' norms span 0 to ~3e4 (reach, stability and
+    friction rows in their own units), and on some such problems quadprog's active set cycles forever
+    inside its C loop, where no signal or time limit reaches it. Zero rows are dropped (infeasible if
+    their bound is positive).
+    """
+    norms = np.linalg.norm(C, axis=1)
+    live = norms > 0.0
+    if np.any(lo[~live] > 0.0):
+        return None
+    scale = 1.0 / norms[live]
     try:
-        return quadprog.solve_qp(H, -g, C.T, lo, 0)[0]
+        return quadprog.solve_qp(H, -g, (C[live] * scale[:, None]).T, lo[live] * scale, 0)[0]
     except ValueError:  # "constraints are inconsistent, no solution"
         return None
 
