@@ -80,6 +80,8 @@ def test_argparse_rejects_unknown_algo_and_non_integer_timesteps(tmp_path, capsy
         ({"normalize_obs": "yes"}, "normalize_obs"),
         ({"vec_env": "threads"}, "vec_env"),
         ({"eval_episodes": 0}, "eval_episodes"),
+        ({"residual": False}, "residual"),  # expert_features still on
+        ({"residual": "no"}, "residual"),
     ],
 )
 def test_bad_config_fields_are_named(tmp_path, changes, field):
@@ -174,6 +176,30 @@ def test_tiny_ppo_run_saves_a_model_that_evaluate_runs_with_the_expert(tmp_path,
     rc = main(["evaluate", "--policy", str(run / "model.zip"), "--algo", "sac", "--suite", "smoke",
                "--out", str(tmp_path / "e2"), "--no-progress"])  # fmt: skip
     assert rc == 2 and "algo" in capsys.readouterr().err
+
+
+def test_tiny_run_from_scratch_evaluates_on_the_plain_env(tmp_path):
+    """residual: false trains on QuadUneven-v0 in joint_pd mode: no expert in the loop at training or in
+    evaluate, and the recorded env_kwargs rebuild that env; the shipped config is valid."""
+    from agents.evaluation.run import evaluate
+    from agents.evaluation.suites import suite_from_dict
+    from agents.rl.training import train
+
+    shipped = load_train_config(Path("configs/rl/ppo_scratch.yaml"))
+    assert shipped.residual is False and shipped.time_limit_min == 50
+    cfg = load_train_config(
+        write_config(tmp_path / "c.yaml", residual=False, expert_features=False, residual_penalty=0.0)
+    )
+    train(cfg, tmp_path / "run", progress=False)
+    meta = json.loads((tmp_path / "run" / "rl_meta.json").read_text())
+    assert meta["residual"] is False and meta["env_id"] == "QuadUneven-v0"
+    assert meta["env_kwargs"] == {"action_mode": "joint_pd"}
+    suite = suite_from_dict(
+        {"name": "t", "goal_distance": 5.0, "time_limit": 0.4, "terrains": [{"kind": "rough", "seeds": [0]}]},
+        source="test",
+    )
+    e = evaluate(suite, str(tmp_path / "run" / "model.zip"), tmp_path / "eval", progress=False)["episodes"][0]
+    assert e["error"] is None and e["planner_calls"] is None and e["mean_residual_torque"] is None
 
 
 def test_residual_policy_installs_expert_and_normalizes(tmp_path):
