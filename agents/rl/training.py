@@ -176,33 +176,30 @@ def _in_main_thread() -> bool:
 def _metadata(cfg: TrainConfig) -> dict[str, Any]:
     import stable_baselines3
 
-    if not cfg.residual:
-        return {
-            "algo": cfg.algo,
-            "residual": False,
-            "env_id": "QuadUneven-v0",
-            "env_kwargs": {**SCRATCH_ENV_KWARGS, **cfg.env_kwargs},
-            "expert_features": False,
-            "terrain": cfg.terrain,
-            "randomization": cfg.randomization if not isinstance(cfg.randomization, dict) else dict(cfg.randomization),
-            "max_episode_steps": cfg.max_episode_steps,
-            "normalize_obs": cfg.normalize_obs,
-            "seed": cfg.seed,
-            "stable_baselines3": stable_baselines3.__version__,
-        }
-    return {
+    common = {
         "algo": cfg.algo,
-        "residual": True,
-        "residual_scale": float(cfg.residual_scale),
-        "env_id": RESIDUAL_ENV_ID,
-        "env_kwargs": dict(cfg.env_kwargs),
-        "expert_features": bool(cfg.expert_features),
         "terrain": cfg.terrain,
         "randomization": cfg.randomization if not isinstance(cfg.randomization, dict) else dict(cfg.randomization),
         "max_episode_steps": cfg.max_episode_steps,
         "normalize_obs": cfg.normalize_obs,
         "seed": cfg.seed,
         "stable_baselines3": stable_baselines3.__version__,
+    }
+    if not cfg.residual:
+        return {
+            **common,
+            "residual": False,
+            "env_id": "QuadUneven-v0",
+            "env_kwargs": {**SCRATCH_ENV_KWARGS, **cfg.env_kwargs},
+            "expert_features": False,
+        }
+    return {
+        **common,
+        "residual": True,
+        "residual_scale": float(cfg.residual_scale),
+        "env_id": RESIDUAL_ENV_ID,
+        "env_kwargs": dict(cfg.env_kwargs),
+        "expert_features": bool(cfg.expert_features),
     }
 
 
