@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -95,7 +96,7 @@ def plot_learning_curve(monitor_dir: Path, eval_file: Path | None, out_png: Path
         ax.legend(fontsize=8, loc="best")
     axes[-1].set_xlabel("environment steps")
     if title:
-        axes[0].set_title(title)
+        axes[0].set_title(textwrap.fill(title, 70), fontsize=10)
     fig.tight_layout()
     out_png.parent.mkdir(parents=True, exist_ok=True)
     save(fig, out_png, dpi=110, tight=False)
