@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out/demo
 
-.PHONY: venv demo test test-slow lint bench rl-baseline clean
+.PHONY: venv demo test test-slow lint bench rl-baseline rl-scratch clean
 
 $(STAMP): pyproject.toml Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -61,6 +61,14 @@ rl-baseline: venv
 	$(EVAL) --policy $(RL_MODEL)/model.zip --suite targets --out runs/eval_targets_residual
 	$(PY) -m agents.cli compare --baseline runs/eval_targets_expert --candidate runs/eval_targets_residual \
 	  --out runs/compare_targets
+
+# The from-scratch PPO reference (docs/rl.md), about 40 min on 2 cores.
+rl-scratch: venv
+	$(PY) -m agents.cli train --config configs/rl/ppo_scratch.yaml --out runs/ppo_scratch --overwrite --time-limit-min 35
+	mkdir -p models/ppo_scratch
+	for f in model.zip model_obs_norm.npz rl_meta.json train_config.json train_summary.json learning_curve.png; do \
+	  cp runs/ppo_scratch/$$f models/ppo_scratch/$$f; done
+	$(EVAL) --policy models/ppo_scratch/model.zip --suite rough --out runs/eval_scratch_rough
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

@@ -1,4 +1,4 @@
-"""The shipped residual baseline (models/ppo_residual_hard): loads as data, runs with the expert, matches its config."""
+"""The shipped models (models/ppo_residual_hard, models/ppo_scratch): load as data, run, match their configs."""
 
 from __future__ import annotations
 
@@ -49,3 +49,25 @@ def test_the_shipped_model_drives_the_expert_in_a_randomized_world():
     actions = np.array(actions)
     assert np.all(np.abs(actions) <= 1.0) and np.abs(actions).max() > 0  # a residual, not the zero policy
     assert env.unwrapped.data.qpos[0] - x0 > 0.1  # it walks (2 s)
+
+
+SCRATCH = ROOT / "models" / "ppo_scratch" / "model.zip"
+
+
+def test_the_shipped_from_scratch_model_runs_on_the_plain_env():
+    """models/ppo_scratch: recorded as a joint_pd policy without the expert; it moves forward fast."""
+    meta = read_metadata(SCRATCH)
+    assert meta["residual"] is False and meta["env_kwargs"] == {"action_mode": "joint_pd"}
+    recorded = load_train_config(SCRATCH.parent / "train_config.json")
+    assert recorded.residual is False and recorded.time_limit_min == 35
+    env = gym.make("QuadUneven-v0", terrain="rough", **policy_env_kwargs(str(SCRATCH)))
+    policy = make_policy(str(SCRATCH), env)
+    assert isinstance(policy, SB3Policy) and env.unwrapped.controller is None
+    obs, _ = env.reset(seed=0)
+    x0 = env.unwrapped.data.qpos[0]
+    for _ in range(50):
+        obs, _, terminated, truncated, _ = env.step(policy.predict(obs)[0])
+        if terminated or truncated:
+            break
+    assert env.unwrapped.data.qpos[0] - x0 > 0.5  # 1 s: far beyond the expert's 0.1 m
+    assert not list(SCRATCH.parent.glob("*.pkl"))
