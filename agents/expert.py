@@ -95,6 +95,11 @@ MAX_TURN = 1.2
 
 MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
+HEADING_DEADBAND = 1e-3
+"""rad: in heading mode, a heading error below this is not turned (the plans stay those of a straight walk)."""
+FOOTHOLD_FRICTION_USE = 0.95
+"""-: the steepest foothold uses this share of the assumed friction (``foothold_limits_for_friction``);
+the rest is left for the tangential forces of the body's accelerations."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,7 +111,8 @@ class ExpertConfig:
     in all, link COMs as in Table 1), never the simulator's; a payload, scaled links or a
     shifted COM are disturbances to it. Its friction cones assume ``friction`` (0.5, half the nominal
     floor's 1.0; the inscribed pyramid's ``friction / sqrt(2)`` = 0.35 per tangent axis is the margin that
-    covers floors down to about 0.35-0.5 depending on the force's direction). Motor strength, joint
+    covers floors down to about 0.35-0.5 depending on the force's direction; on slopes the pyramid turns
+    an edge, where it reaches ``friction``, uphill). Motor strength, joint
     damping and friction, latency and pushes are not modelled: the feedback and the replanning
     (``recovery``) absorb them.
     """
@@ -142,7 +148,8 @@ class ExpertConfig:
     module docstring) or "oracle" (the simulator's live model and state, and its friction in the cones)."""
     friction: float = param(0.5, "-", lo=0.0, hi=2.0, lo_open=True)
     """-, in (0, 2]: friction coefficient the nominal model assumes in its "qp" friction cones (the
-    4-sided pyramid inside the cone, mu / sqrt(2) per axis). The nominal floor's is 1.0; 0.5 keeps the
+    4-sided pyramid inside the cone, mu / sqrt(2) per axis, turned on slopes so that an edge points
+    uphill). The nominal floor's is 1.0; 0.5 keeps the
     planned forces inside the cones of floors down to 0.5 (and, with the pyramid's own margin, close to
     0.35 in the worst direction). Unused by "oracle", which takes the simulator's."""
     recovery: bool = True
@@ -453,8 +460,13 @@ class ExpertPolicy:
 
     def _turn(self) -> float:
         """rad: the body's yaw change over a whole cycle, the commanded yaw rate times the cycle's duration
-        (0 without a command), capped at :data:`MAX_TURN`."""
+        (0 without a command), capped at :data:`MAX_TURN`. In heading mode (``env.command_heading``) the turn
+        closes the whole heading error from the planned yaw within the cycle, capped the same way."""
         command = self.env.command
+        heading = getattr(self.env, "command_heading", None)
+        if heading is not None:
+            error = (heading - self._yaw + np.pi) % (2.0 * np.pi) - np.pi
+            return float(np.clip(error, -MAX_TURN, MAX_TURN)) if abs(error) > HEADING_DEADBAND else 0.0
         if command is None or command[2] == 0.0:
             return 0.0
         return float(np.clip(float(command[2]) * sum(self.config.durations), -MAX_TURN, MAX_TURN))
@@ -555,15 +567,17 @@ def _fmt(stride: tuple[float, float]) -> str:
 def foothold_limits_for_friction(mu: float) -> FootholdLimits:
     """Foothold limits whose slope limit keeps a foot inside the friction pyramid the controller assumes.
 
-    The cones are 4-sided pyramids of ``mu / sqrt(2)`` per tangent axis: a foot on a plane steeper than
-    ``atan(mu / sqrt(2))`` (19.5 deg for mu = 0.5) cannot hold its share of the weight inside them, and on
-    a slope where every foot is that steep the torque QP has no solution (it is relaxed, the feet slip).
-    Such a foothold is refused (the failure log says ``failed test: slope``) rather than walked on.
+    On a plane tilted by more than 12 deg the controller's 4-sided pyramid has an edge pointing uphill
+    (``inverse_dynamics_kernels.friction_pyramid_into``), where it reaches the cone's ``mu``; a foot
+    there holds its share of the weight inside it up to a tilt of ``atan(mu)`` (26.6 deg for mu = 0.5).
+    Footholds steeper than ``atan(FOOTHOLD_FRICTION_USE * mu)`` are refused (the failure log says
+    ``failed test: slope``) rather than walked on: on a slope where every foot is that steep the torque
+    QP would have no solution (it is relaxed, the feet slip).
 
     :param mu: friction coefficient of the controller's cones (-).
     """
     default = FootholdLimits()
-    return dataclasses.replace(default, max_slope=min(default.max_slope, float(np.arctan(mu / np.sqrt(2.0)))))
+    return dataclasses.replace(default, max_slope=min(default.max_slope, float(np.arctan(FOOTHOLD_FRICTION_USE * mu))))
 
 
 def _contact_friction(model: mujoco.MjModel) -> float:

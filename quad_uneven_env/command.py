@@ -5,6 +5,11 @@ trunk's heading projected on the horizontal plane, z up). Each axis is either fi
 ``yaw_rate``) or drawn uniformly from its ``ranges`` entry at every reset and again every
 ``resample_interval`` seconds of episode time (legged_gym's scheme). Draws come from a generator the env
 hands down (a child of ``env.np_random``), so the same seed gives the same commands.
+
+**Heading mode** (legged_gym's ``heading_command``): with ``heading`` (fixed) or ``ranges.heading`` (drawn),
+the command names a world heading instead of a yaw rate, and the yaw rate (the third component, in the
+observation and ``info`` as always) is computed at every control step from the measured trunk heading:
+``clip(heading_gain * wrap(heading - yaw), -heading_max_yaw_rate, heading_max_yaw_rate)``.
 """
 
 from __future__ import annotations
@@ -21,11 +26,25 @@ from quad_uneven_env.fields import check_fields, from_mapping, param, params_of
 COMMAND_AXES: tuple[str, ...] = ("vx", "vy", "yaw_rate")
 """The command's components, in the order of the observation field and ``info["command"]``."""
 
+_RANGED_AXES: tuple[str, ...] = (*COMMAND_AXES, "heading")
+
 MAX_LIN = 1.0
 """m/s: bound of a commanded linear velocity component (fixed value or range end)."""
 
 MAX_YAW_RATE = 2.0
 """rad/s: bound of a commanded yaw rate."""
+
+
+def wrap_angle(angle: float) -> float:
+    """``angle`` (rad) wrapped to [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def yaw_of_quat(quat_wxyz: np.ndarray) -> float:
+    """rad, in [-pi, pi]: heading of a body (its x axis projected on the world's horizontal plane) from its
+    world orientation quaternion (w, x, y, z)."""
+    w, x, y, z = (float(c) for c in quat_wxyz)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,6 +59,10 @@ class CommandRanges:
         None, "rad/s", "yaw rate", kind="range", lo=-MAX_YAW_RATE, hi=MAX_YAW_RATE
     )
     """rad/s, within [-2, 2]: turning rate about world z (+: counter-clockwise seen from above)."""
+    heading: tuple[float, float] | None = param(
+        None, "rad", "world heading (heading mode)", kind="range", lo=-math.pi, hi=math.pi
+    )
+    """rad, within [-pi, pi]: the heading to turn to and hold (world frame, 0 = +x); sets heading mode."""
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -60,6 +83,16 @@ class CommandConfig:
     """m/s, in [-1, 1]: velocity to the left (+) of the heading (yaw-aligned base y)."""
     yaw_rate: float = param(0.0, "rad/s", "fixed yaw rate", lo=-MAX_YAW_RATE, hi=MAX_YAW_RATE)
     """rad/s, in [-2, 2]: turning rate about world z."""
+    heading: float | None = param(None, "rad", "fixed world heading (heading mode)", lo=-math.pi, hi=math.pi,
+                                  none_ok=True)  # fmt: skip
+    """rad, in [-pi, pi], or None: the heading to turn to and hold (world frame, 0 = +x); sets heading mode,
+    where the yaw rate is computed from it (module docstring) and ``yaw_rate`` must stay 0."""
+    heading_gain: float = param(0.5, "1/s", "yaw rate per rad of heading error", lo=0.0, hi=10.0, lo_open=True)
+    """1/s, in (0, 10]: heading mode's yaw rate per rad of heading error (legged_gym's 0.5)."""
+    heading_max_yaw_rate: float = param(
+        1.0, "rad/s", "bound of heading mode's yaw rate", lo=0.0, hi=MAX_YAW_RATE, lo_open=True
+    )
+    """rad/s, in (0, 2]: heading mode's yaw rate is clipped to +- this (legged_gym's 1)."""
     ranges: CommandRanges = dataclasses.field(default_factory=CommandRanges)
     """the drawn axes (see :class:`CommandRanges`); default: none, the command is fixed."""
     resample_interval: float | None = param(
@@ -72,13 +105,27 @@ class CommandConfig:
         check_fields(self)
         if not isinstance(self.ranges, CommandRanges):
             raise ValueError(
-                f"command.ranges must be a mapping with keys from {list(COMMAND_AXES)}, got {self.ranges!r}"
+                f"command.ranges must be a mapping with keys from {list(_RANGED_AXES)}, got {self.ranges!r}"
             )
+        if self.heading is not None and self.ranges.heading is not None:
+            raise ValueError(
+                "CommandConfig.heading must not be given with command.ranges.heading: it is either fixed or drawn"
+            )
+        if self.heading_mode and (self.yaw_rate != 0.0 or self.ranges.yaw_rate is not None):
+            raise ValueError(
+                "CommandConfig.yaw_rate must be 0 and ranges.yaw_rate null in heading mode (heading given): the "
+                "yaw rate is computed from the heading"
+            )
+
+    @property
+    def heading_mode(self) -> bool:
+        """The command names a heading (fixed or drawn); the yaw rate follows from it."""
+        return self.heading is not None or self.ranges.heading is not None
 
     @property
     def drawn(self) -> bool:
         """Some axis is drawn from a range."""
-        return any(getattr(self.ranges, a) is not None for a in COMMAND_AXES)
+        return any(getattr(self.ranges, a) is not None for a in _RANGED_AXES)
 
     @property
     def fixed(self) -> np.ndarray:
@@ -100,9 +147,9 @@ def load_command(raw: Mapping[str, Any] | CommandConfig | None) -> CommandConfig
     values = dict(raw)
     ranges = values.pop("ranges", None)
     if ranges is not None and not isinstance(ranges, Mapping | CommandRanges):
-        raise ValueError(f"command.ranges must be a mapping with keys from {list(COMMAND_AXES)}, got {ranges!r}")
+        raise ValueError(f"command.ranges must be a mapping with keys from {list(_RANGED_AXES)}, got {ranges!r}")
     values["ranges"] = from_mapping(CommandRanges, ranges, "command.ranges")
-    both = [a for a in COMMAND_AXES if a in raw and getattr(values["ranges"], a) is not None]
+    both = [a for a in _RANGED_AXES if a in raw and raw[a] is not None and getattr(values["ranges"], a) is not None]
     if both:
         raise ValueError(
             f"command.{both[0]} must not be given with command.ranges.{both[0]}: an axis is either fixed or drawn"
@@ -123,6 +170,8 @@ class CommandSchedule:
         self._ranged = [
             (k, getattr(config.ranges, a)) for k, a in enumerate(COMMAND_AXES) if getattr(config.ranges, a) is not None
         ]
+        self.heading = math.nan if config.heading is None else config.heading
+        """rad, world frame: heading mode's target (drawn with the ranged axes); NaN outside heading mode."""
         self._rng: np.random.Generator | None = None
         self._next = math.inf
 
@@ -132,7 +181,14 @@ class CommandSchedule:
         self.value[:] = self.config.fixed
         self._draw()
         interval = self.config.resample_interval
-        self._next = interval if self._ranged and interval is not None else math.inf
+        self._next = interval if self.config.drawn and interval is not None else math.inf
+
+    def steer(self, yaw: float) -> None:
+        """Heading mode: set the yaw rate from the measured trunk heading ``yaw`` (rad); otherwise nothing."""
+        if self.config.heading_mode:
+            c = self.config
+            rate = c.heading_gain * wrap_angle(self.heading - yaw)
+            self.value[2] = min(max(rate, -c.heading_max_yaw_rate), c.heading_max_yaw_rate)
 
     def update(self, t: float) -> bool:
         """At episode time ``t`` (s): re-draw if a resample time has been reached; True if it did."""
@@ -160,6 +216,8 @@ class CommandSchedule:
     def _draw(self) -> None:
         for k, (low, high) in self._ranged:
             self.value[k] = self._rng.uniform(low, high)  # type: ignore[union-attr]
+        if self.config.ranges.heading is not None:  # drawn after the axes: their draws do not change with it
+            self.heading = float(self._rng.uniform(*self.config.ranges.heading))  # type: ignore[union-attr]
 
 
 def command_arguments_table() -> str:
@@ -171,4 +229,12 @@ def command_arguments_table() -> str:
     return "\n".join(rows)
 
 
-__all__ = ["COMMAND_AXES", "CommandConfig", "CommandRanges", "CommandSchedule", "load_command"]
+__all__ = [
+    "COMMAND_AXES",
+    "CommandConfig",
+    "CommandRanges",
+    "CommandSchedule",
+    "load_command",
+    "wrap_angle",
+    "yaw_of_quat",
+]

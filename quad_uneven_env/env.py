@@ -16,7 +16,13 @@ import numpy as np
 from gymnasium import spaces
 
 from quad_uneven_env import constants as C
-from quad_uneven_env.command import CommandConfig, CommandSchedule, command_arguments_table, load_command
+from quad_uneven_env.command import (
+    CommandConfig,
+    CommandSchedule,
+    command_arguments_table,
+    load_command,
+    yaw_of_quat,
+)
 from quad_uneven_env.config import (
     HeightScanConfig,
     RewardWeights,
@@ -177,8 +183,10 @@ class QuadUnevenEnv(gym.Env):
     (``np_random.spawn``; the terrain, the reset noise and a randomized world are those of the same seed
     without a command). It is appended to the observation as the field ``command`` and reported in
     ``info["command"]``: both show the command to follow from now on (a re-draw at the end of a step is
-    already in that step's observation). With ``command=None`` (the default) the observation, reward and
-    ``info`` are exactly those of an env without this feature. Fields:
+    already in that step's observation). In heading mode (``heading`` or ``ranges.heading``) the command names
+    a world heading and its yaw rate is computed at every step from the measured one (legged_gym's
+    ``heading_command``); the target is ``info["command_heading"]`` (rad). With ``command=None`` (the default)
+    the observation, reward and ``info`` are exactly those of an env without this feature. Fields:
 
     COMMAND_TABLE
 
@@ -405,12 +413,20 @@ class QuadUnevenEnv(gym.Env):
         without a command."""
         return None if self._command is None else self._command.value.copy()
 
+    @property
+    def command_heading(self) -> float | None:
+        """rad, world frame: heading mode's target heading (the yaw rate of :attr:`command` steers to it); None
+        outside heading mode (see :mod:`quad_uneven_env.command`)."""
+        c = self._command
+        return None if c is None or not c.config.heading_mode else float(c.heading)
+
     def set_command(self, value: np.ndarray) -> None:
         """Set the command to follow from now on (an outside source: a waypoint follower, a joystick).
 
         :param value: (3,) vx, vy (m/s, each in [-1, 1]) and yaw rate (rad/s, in [-2, 2]), yaw-aligned base frame.
             It shows in the next step's observation and ``info``; ranged axes are still re-drawn at the next
-            resample time, and a reset restores the configured command.
+            resample time, and a reset restores the configured command. In heading mode the yaw rate is
+            recomputed from the heading at the end of the next step.
         :raises ValueError: without a command (``command=None``), or on a value of the wrong shape or out of range.
         """
         if self._command is None:
@@ -481,6 +497,7 @@ class QuadUnevenEnv(gym.Env):
         self._draw_world(child)
         if self._command is not None:
             self._command.reset(child.spawn(1)[0])
+            self._command.steer(yaw_of_quat(self.data.qpos[3:7]))
         mujoco.mj_forward(self.model, self.data)
         self._warnings_at_reset = instability_warnings(self._warning_counts)
         if self._controller is not None and hasattr(self._controller, "reset"):
@@ -547,6 +564,7 @@ class QuadUnevenEnv(gym.Env):
             self._prev_action[:] = a
             if self._command is not None:
                 self._command.update(float(d.time))
+                self._command.steer(yaw_of_quat(d.qpos[3:7]))
             reason = self._measure_safely()
         diverged = reason is not None
 
@@ -822,6 +840,7 @@ class QuadUnevenEnv(gym.Env):
             "randomization": dict(self._draw_info),
             "push_force": self._push_force.copy(),
             **({} if self._command is None else {"command": self._command.value.copy()}),
+            **({} if self.command_heading is None else {"command_heading": self.command_heading}),
         }
 
     @staticmethod

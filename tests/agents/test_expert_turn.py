@@ -68,3 +68,15 @@ def test_expert_walks_an_arc_on_rough_terrain():
     heading = math.atan2(chord[1], chord[0])
     assert heading == pytest.approx(yaw0 + wz * PERIOD * 2, abs=0.1)  # the chord points along the middle heading
     assert np.mean(index >= 0.0) > 0.99
+
+
+def test_expert_turns_to_a_commanded_heading_and_holds_it():
+    """Heading mode, 0.5 rad (left) then hold: the first cycle turns the whole error (deadbeat, within the
+    cycle's cap), the second walks straight on; after two cycles the heading is within 0.03 rad of it, the
+    index >= 0 at every step and no plan fails."""
+    turned, yaw0, _, index, expert = walk({"vx": 0.05, "heading": 0.5}, cycles=2)
+    assert yaw0 + turned == pytest.approx(0.5, abs=0.03)
+    assert index.min() >= 0.0
+    assert expert.failure_log == []
+    turns = [plan.pitch.yaw_end - plan.pitch.yaw_start for _, plan in expert.plans[:2]]
+    assert turns[0] == pytest.approx(0.5 - yaw0, abs=1e-9) and abs(turns[1]) < 0.05

@@ -54,14 +54,21 @@ def test_fixed_and_ranged_configs():
         ({"vx": 3.0}, r"command\.vx must be a number in \[-1, 1\] \(m/s\), got 3\.0"),
         ({"vx": True}, r"command\.vx must be a number"),
         ({"yaw_rate": float("nan")}, r"command\.yaw_rate must be a number in \[-2, 2\]"),
-        ({"speed": 0.1}, r"command: unknown field\(s\) \['speed'\]; allowed: \['ranges', 'resample_interval'"),
+        (
+            {"speed": 0.1},
+            r"command: unknown field\(s\) \['speed'\]; allowed: \['heading', 'heading_gain', 'heading_max_yaw_rate', "
+            r"'ranges', 'resample_interval'",
+        ),
         (
             {"ranges": {"vz": [0, 1]}},
-            r"command\.ranges: unknown field\(s\) \['vz'\]; allowed: \['vx', 'vy', 'yaw_rate'\]",
+            r"command\.ranges: unknown field\(s\) \['vz'\]; allowed: \['heading', 'vx', 'vy', 'yaw_rate'\]",
         ),
         ({"ranges": {"vx": [0.2, -0.2]}}, r"command\.ranges\.vx must be null or a \[low, high\] pair with low <= high"),
         ({"ranges": {"vy": [0.0, 2.0]}}, r"command\.ranges\.vy must be .* in \[-1, 1\]"),
-        ({"ranges": [0.1, 0.2]}, r"command\.ranges must be a mapping with keys from \['vx', 'vy', 'yaw_rate'\]"),
+        (
+            {"ranges": [0.1, 0.2]},
+            r"command\.ranges must be a mapping with keys from \['vx', 'vy', 'yaw_rate', 'heading'\]",
+        ),
         (
             {"resample_interval": 0.0},
             r"command\.resample_interval must be a number in \(0, inf\) or null \(s\), got 0\.0",
@@ -246,3 +253,74 @@ def test_env_tracking_terms_use_the_trunk_velocity_in_the_yaw_aligned_frame():
         assert reward == pytest.approx(sum(terms.values()), rel=1e-12)
         if term:
             break
+
+
+# ---------------------------------------------------------------------------- heading mode
+@pytest.mark.parametrize(
+    ("raw", "match"),
+    [
+        ({"heading": 0.5, "yaw_rate": 0.1}, r"command\.yaw_rate must be 0 and ranges\.yaw_rate null in heading mode"),
+        ({"ranges": {"heading": [-1, 1], "yaw_rate": [-0.3, 0.3]}}, r"command\.yaw_rate must be 0 .* heading mode"),
+        ({"heading": 0.5, "ranges": {"heading": [-1, 1]}}, r"command\.heading must not be given with command\.ranges"),
+        ({"heading": 4.0}, r"command\.heading must be a number in \[-3\.14159, 3\.14159\] or null \(rad\), got 4\.0"),
+        ({"heading": 0.5, "heading_gain": 0.0}, r"command\.heading_gain must be a number in \(0, 10\]"),
+        ({"ranges": {"heading": [-4, 0]}}, r"command\.ranges\.heading must be null or a \[low, high\] pair"),
+    ],
+)
+def test_bad_heading_commands_name_the_field(raw, match):
+    with pytest.raises(ValueError, match=match):
+        make(command=raw)
+
+
+def _yaw(qpos) -> float:
+    w, x, y, z = qpos[3:7]
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def test_heading_mode_yaw_rate_is_the_clipped_p_law_of_the_measured_heading():
+    """Random torques spin the trunk; after every step the commanded yaw rate is legged_gym's
+    clip(gain * wrap(heading - yaw), -max, max) of that step's measured heading (by hand from qpos), wrapping
+    included (a heading of 3 rad against yaws near -3 rad turns the short way), and it is in the observation."""
+    env = make(terrain="rough", command={"vx": 0.1, "heading": 3.0, "heading_gain": 2.0, "heading_max_yaw_rate": 1.5})
+    u = env.unwrapped
+    sl = u.observation_structure["command"]
+    obs, info = env.reset(seed=1)
+    rng = np.random.default_rng(0)
+    clipped = seen = 0
+    for _ in range(150):
+        yaw = _yaw(u.data.qpos)
+        err = (3.0 - yaw + math.pi) % (2 * math.pi) - math.pi
+        expected = float(np.clip(2.0 * err, -1.5, 1.5))
+        assert info["command"][2] == pytest.approx(expected, abs=1e-12)
+        assert info["command"][0] == 0.1 and info["command_heading"] == 3.0
+        np.testing.assert_allclose(obs[sl], info["command"], atol=1e-6)
+        clipped += abs(expected) == 1.5
+        seen += 1
+        obs, _, term, trunc, info = env.step(rng.uniform(-1, 1, 12).astype(np.float32))
+        if term or trunc:
+            obs, info = env.reset()
+    assert clipped > 0 and clipped < seen  # both regimes visited
+
+
+def test_drawn_heading_is_seeded_and_stacked_by_make_vec():
+    cfg = {"ranges": {"heading": [-1.0, 1.0], "vx": [0.0, 0.1]}, "resample_interval": 0.1}
+    a, b = make(command=cfg), make(command=cfg)
+    heads = []
+    for seed in (3, 3, 4):
+        _, info = a.reset(seed=seed)
+        heads.append(info["command_heading"])
+        _, info_b = b.reset(seed=seed)
+        assert info_b["command_heading"] == info["command_heading"]
+    assert heads[0] == heads[1] != heads[2] and all(-1.0 <= h <= 1.0 for h in heads)
+    # the axes' draws are those of the same ranges without a heading
+    c = make(command={"ranges": {"vx": [0.0, 0.1]}, "resample_interval": 0.1})
+    assert c.reset(seed=3)[1]["command"][0] == a.reset(seed=3)[1]["command"][0]
+    envs = gym.make_vec("QuadUneven-v0", num_envs=2, vectorization_mode="sync", terrain="flat", command=cfg)
+    try:
+        _, infos = envs.reset(seed=0)
+        for _ in range(8):
+            assert infos["command_heading"].shape == (2,) and np.all(np.abs(infos["command_heading"]) <= 1.0)
+            _, _, _, _, infos = envs.step(np.zeros((2, 12), np.float32))
+    finally:
+        envs.close()
+    assert "command_heading" not in make(command={"vx": 0.1}).reset(seed=0)[1]
