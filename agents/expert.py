@@ -95,6 +95,19 @@ MAX_TURN = 1.2
 
 MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
+AIRBORNE_FOOTHOLD_RADIUS = 0.1
+"""m: a foot in the air at a replan lands at the terrain point nearest to it within this horizontal radius."""
+
+
+def _disc_offsets(radius: float, step: float) -> np.ndarray:
+    """(n, 2) m: the points of a square grid of spacing ``step`` (m) within ``radius`` (m) of the origin."""
+    k = np.arange(-int(radius / step), int(radius / step) + 1) * step
+    grid = np.stack(np.meshgrid(k, k), axis=-1).reshape(-1, 2)
+    return grid[np.hypot(grid[:, 0], grid[:, 1]) <= radius + 1e-9]
+
+
+_AIRBORNE_DISC = _disc_offsets(AIRBORNE_FOOTHOLD_RADIUS, 0.01)
+"""(n, 2) m: horizontal offsets on a 1 cm grid within ``AIRBORNE_FOOTHOLD_RADIUS`` (the origin included)."""
 HEADING_DEADBAND = 1e-3
 """rad: in heading mode, a heading error below this is not turned (the plans stay those of a straight walk)."""
 FOOTHOLD_FRICTION_USE = 0.95
@@ -432,11 +445,25 @@ class ExpertPolicy:
             return ref
         return aim_feet_below_footholds(ref, self._current, tc, np.array(late), self.config.touchdown_depth, self.cfg)
 
-    def _measured_footholds(self) -> np.ndarray:
-        """(4, 3) points on the terrain below the foot sites (m, world)."""
+    def _measured_footholds(self, mid_swing: bool = False) -> np.ndarray:
+        """(4, 3) m, world: the terrain point below each foot site. With ``mid_swing`` (a replan from the
+        measured state, which can come in the middle of a swing), a foot in the air gets the terrain point
+        nearest to its site within :data:`AIRBORNE_FOOTHOLD_RADIUS` instead, where it lands soonest: straight
+        below it, on a downhill slope or past an edge, can lie beyond the leg's reach, and the cycle would
+        start with that leg stretched straight (a singular stance)."""
         sites = physics.feet_pos(self._data, self.env.idx)
-        ground = self._terrain.heightfield.height(sites[:, 0], sites[:, 1])
-        return np.column_stack([sites[:, :2], ground])
+        hf = self._terrain.heightfield
+        ground = hf.height(sites[:, 0], sites[:, 1])
+        out = np.column_stack([sites[:, :2], ground])
+        if not mid_swing or self._sim is None:
+            return out
+        touch = self._sim.sensordata[self._foot_sensor_adr]
+        for leg in np.flatnonzero(touch <= 0):
+            xy = sites[leg, :2] + _AIRBORNE_DISC
+            z = hf.height(xy[:, 0], xy[:, 1])
+            k = int(np.argmin(np.sum((xy - sites[leg, :2]) ** 2, axis=1) + (z - sites[leg, 2]) ** 2))
+            out[leg] = (xy[k, 0], xy[k, 1], z[k])
+        return out
 
     def _stride_xy(self, d: mujoco.MjData, turn: float = 0.0) -> tuple[float, float]:
         """(dx, dy) m, world: the body's advance this cycle, which turns the body by ``turn`` (rad).
@@ -475,7 +502,7 @@ class ExpertPolicy:
         """Plan the cycle starting at ``t0`` (s) from ``cog_start`` (the previous plan's end; None: the
         measured COG at rest); ``measured``: ``cog_start`` is the measured COG state (pitch measured too)."""
         d, cfgx = self._data, self.config
-        feet = self._measured_footholds()
+        feet = self._measured_footholds(mid_swing=measured)
         previous = getattr(self._current, "pitch", None)
         full_turn = self._turn()
         # A turning body plans in its yawed frame (pitch about the yawed y axis); otherwise exactly as without yaw.

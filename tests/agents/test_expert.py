@@ -117,3 +117,52 @@ def test_expert_crosses_hard_terrain(terrain):
     _, distance, index, _ = walk(terrain, 31.0)
     assert distance > 2.5
     assert np.mean(index > 0) > 0.99
+
+
+def test_a_foot_in_the_air_at_a_measured_replan_lands_at_the_nearest_terrain_point():
+    """On a 20 deg slope, with the RF foot lifted (its knee folded): the feet in contact keep the point below
+    them; the lifted one gets the terrain point nearest to its site within 0.1 m, found again here by brute
+    force on a 2 mm grid (to the 1 cm grid's resolution): along the ramp's normal, not straight below."""
+    import mujoco
+
+    from quad_uneven_env import physics
+
+    env = gym.make(
+        "QuadUneven-v0",
+        terrain={"kind": "slope", "params": {"angle_deg": 20, "ramp_length": 1.5, "plateau_length": 0.3}},
+    )
+    expert = attach_expert(env)
+    env.reset(seed=0)
+    u = env.unwrapped
+    hf = u.terrain.heightfield
+    x0, y0 = u.data.qpos[:2]
+    ramp = x0 + np.linspace(0.0, 3.0, 301)
+    x1 = ramp[np.argmax(np.gradient(hf.height(ramp, np.full_like(ramp, y0))) > 0) + 80]  # 0.8 m up the ramp
+    u.data.qpos[0] = x1
+    u.data.qpos[2] += float(hf.height(x1, y0) - hf.height(x0, y0)) + 0.06  # 6 cm higher: no foot touches
+    u.data.qpos[3:7] = (np.cos(np.radians(-10.0)), 0.0, np.sin(np.radians(-10.0)), 0.0)  # pitched with the ramp
+    u.data.qpos[7 + 3 * 1 + 2] -= 0.3  # RF's knee folds further
+    mujoco.mj_forward(u.model, u.data)
+    touch = u.data.sensordata[expert._foot_sensor_adr]
+    assert (touch <= 0).all()
+    lifted = expert._measured_footholds(mid_swing=True)
+    plain = expert._measured_footholds()
+    sites = physics.feet_pos(u.data, u.idx)
+    for leg in range(4):
+        g = np.arange(-0.1, 0.1001, 0.002)
+        gx, gy = np.meshgrid(g, g)
+        inside = np.hypot(gx, gy) <= 0.1 + 1e-9
+        x, y = sites[leg, 0] + gx[inside], sites[leg, 1] + gy[inside]
+        dist = np.sqrt((x - sites[leg, 0]) ** 2 + (y - sites[leg, 1]) ** 2 + (hf.height(x, y) - sites[leg, 2]) ** 2)
+        got = np.linalg.norm(lifted[leg] - sites[leg])
+        assert lifted[leg, 2] == pytest.approx(float(hf.height(lifted[leg, 0], lifted[leg, 1])), abs=1e-12)
+        assert dist.min() - 1e-9 <= got <= dist.min() + 0.01 * np.sin(np.radians(20.0)) + 1e-9
+        # on the uniform ramp the nearest point is along its normal: the vertical gap times cos(20 deg)
+        assert got == pytest.approx(np.linalg.norm(plain[leg] - sites[leg]) * np.cos(np.radians(20.0)), abs=2e-3)
+        assert got < 0.15  # the foot is a few cm above the ramp
+    # a foot in contact keeps the point below it
+    u.data.qpos[2] -= 0.06
+    u.data.qpos[7 + 3 * 1 + 2] += 0.3
+    mujoco.mj_forward(u.model, u.data)
+    down = u.data.sensordata[expert._foot_sensor_adr] > 0
+    np.testing.assert_array_equal(expert._measured_footholds(mid_swing=True)[down], expert._measured_footholds()[down])
