@@ -95,6 +95,11 @@ MAX_TURN = 1.2
 
 MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
+MAX_CYCLE_STRIDE = 0.45
+"""m: the longest body advance per cycle the expert plans at its configured phases (0.145 m/s with the
+default 3.1 s cycle); a faster command shortens the phases instead (``ExpertPolicy._cycle_durations``)."""
+MIN_PHASE = 0.3
+"""s: phases are never shortened below this (nor are phases this short or shorter shortened)."""
 AIRBORNE_FOOTHOLD_RADIUS = 0.1
 """m: a foot in the air at a replan lands at the terrain point nearest to it within this horizontal radius."""
 
@@ -110,9 +115,11 @@ _AIRBORNE_DISC = _disc_offsets(AIRBORNE_FOOTHOLD_RADIUS, 0.01)
 """(n, 2) m: horizontal offsets on a 1 cm grid within ``AIRBORNE_FOOTHOLD_RADIUS`` (the origin included)."""
 HEADING_DEADBAND = 1e-3
 """rad: in heading mode, a heading error below this is not turned (the plans stay those of a straight walk)."""
-FOOTHOLD_FRICTION_USE = 0.95
+FOOTHOLD_FRICTION_USE = 0.9
 """-: the steepest foothold uses this share of the assumed friction (``foothold_limits_for_friction``);
-the rest is left for the tangential forces of the body's accelerations."""
+the rest is left for the tangential forces of the body's accelerations and the feedback. Measured on a
+25 deg ramp with mu = 0.5 (a share of 0.93): the 3-leg phases need mu 0.50-0.55 in the cones, the QP is
+relaxed, the base falls behind its plan, the feedback asks for more, and the robot tips backwards."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -276,6 +283,7 @@ class ExpertPolicy:
         self._last_controller_error = ""
         self._foothold_limits = FootholdLimits()
         self._yaw = 0.0  # rad: the planned base yaw at the end of the current plan (0 until a command turns it)
+        self._durations: tuple[float, ...] = self.config.durations  # s: the phases of the current cycle
 
     # -------------------------------------------------------------- SB3 protocol
     def predict(
@@ -369,7 +377,7 @@ class ExpertPolicy:
         cog = physics.cog(d, self.env.idx).copy()
         vel = np.array([v[0], v[1], 0.0])
         self._start_cycle(t, cog_start={"pos": cog, "vel": vel, "acc": np.zeros(3)}, measured=True)
-        self._calm_after = t + cfgx.durations[0]
+        self._calm_after = t + self._durations[0]
 
     def _log(self, message: str) -> None:
         """Append to :attr:`failure_log` (at most ``MAX_FAILURE_LOG`` entries; the rest are counted)."""
@@ -476,7 +484,7 @@ class ExpertPolicy:
         command = self.env.command
         if command is None:
             return (self.config.stride, 0.0)
-        period = float(sum(self.config.durations))
+        period = float(sum(self._durations))
         w, x, y, z = physics.base_quat(d)
         yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
         if turn != 0.0:
@@ -496,7 +504,26 @@ class ExpertPolicy:
             return float(np.clip(error, -MAX_TURN, MAX_TURN)) if abs(error) > HEADING_DEADBAND else 0.0
         if command is None or command[2] == 0.0:
             return 0.0
-        return float(np.clip(float(command[2]) * sum(self.config.durations), -MAX_TURN, MAX_TURN))
+        return float(np.clip(float(command[2]) * sum(self._durations), -MAX_TURN, MAX_TURN))
+
+    def _cycle_durations(self) -> tuple[float, ...]:
+        """s: the phases of the next cycle. ``ExpertConfig.durations``, or, when the commanded speed times their
+        cycle would stride further than :data:`MAX_CYCLE_STRIDE`, the same gait faster: its phases longer
+        than :data:`MIN_PHASE` (all but the short four-leg one in the middle) scaled down together so that
+        the stride is ``MAX_CYCLE_STRIDE``, but none below ``MIN_PHASE``."""
+        durations = self.config.durations
+        command = self.env.command
+        if command is None:
+            return durations
+        stride = float(np.hypot(command[0], command[1])) * sum(durations)
+        if stride <= MAX_CYCLE_STRIDE:
+            return durations
+        long = [k for k, t in enumerate(durations) if t > MIN_PHASE]
+        fixed = sum(t for k, t in enumerate(durations) if k not in long)
+        moving = sum(durations[k] for k in long)
+        scale = (MAX_CYCLE_STRIDE / stride * sum(durations) - fixed) / moving
+        scale = max(scale, MIN_PHASE / min(durations[k] for k in long))
+        return tuple(t * scale if k in long else t for k, t in enumerate(durations))
 
     def _start_cycle(self, t0: float, cog_start: dict | None, measured: bool = False) -> None:
         """Plan the cycle starting at ``t0`` (s) from ``cog_start`` (the previous plan's end; None: the
@@ -504,6 +531,7 @@ class ExpertPolicy:
         d, cfgx = self._data, self.config
         feet = self._measured_footholds(mid_swing=measured)
         previous = getattr(self._current, "pitch", None)
+        self._durations = self._cycle_durations()
         full_turn = self._turn()
         # A turning body plans in its yawed frame (pitch about the yawed y axis); otherwise exactly as without yaw.
         turning = full_turn != 0.0 or self._yaw != 0.0
@@ -543,7 +571,7 @@ class ExpertPolicy:
                 terrain=self._terrain.heightfield,
                 feet_start=feet,
                 cog_start=cog_start,
-                durations=cfgx.durations,
+                durations=self._durations,
                 epsilon=cfgx.epsilon,
                 clearance=cfgx.clearance,
                 cog_height=cfgx.cog_height,
@@ -573,7 +601,7 @@ class ExpertPolicy:
             break
         if plan is None:
             qpos = d.qpos.copy()
-            hold = _HoldReference(qpos, float(sum(cfgx.durations)))
+            hold = _HoldReference(qpos, float(sum(self._durations)))
             self._log(f"t={t0:.2f} s: no feasible plan, standing still for {hold.duration:.2f} s")
             self._current, self._current_ref = hold, hold
             duration = hold.duration
@@ -597,9 +625,10 @@ def foothold_limits_for_friction(mu: float) -> FootholdLimits:
     On a plane tilted by more than 12 deg the controller's 4-sided pyramid has an edge pointing uphill
     (``inverse_dynamics_kernels.friction_pyramid_into``), where it reaches the cone's ``mu``; a foot
     there holds its share of the weight inside it up to a tilt of ``atan(mu)`` (26.6 deg for mu = 0.5).
-    Footholds steeper than ``atan(FOOTHOLD_FRICTION_USE * mu)`` are refused (the failure log says
-    ``failed test: slope``) rather than walked on: on a slope where every foot is that steep the torque
-    QP would have no solution (it is relaxed, the feet slip).
+    Footholds steeper than ``atan(FOOTHOLD_FRICTION_USE * mu)`` (24.2 deg for mu = 0.5, 28.4 for 0.6) are
+    refused (the failure log says ``failed test: slope``) rather than walked on: on a slope where every
+    foot is that steep the torque QP would have no solution (it is relaxed, and the robot falls behind
+    its plan until it tips).
 
     :param mu: friction coefficient of the controller's cones (-).
     """

@@ -50,26 +50,48 @@ def test_the_legs_on_the_side_moved_to_swing_first(vy, first):
     assert plan.phases[1].swing_leg == first
 
 
-@pytest.mark.parametrize(("vx", "vy"), [(-0.1, 0.0), (0.0, 0.1), (0.0, -0.1)])
+@pytest.mark.parametrize(
+    ("command", "expected"),
+    [
+        ({"vx": 0.1}, ExpertConfig().durations),  # 0.31 m a cycle: the configured phases
+        ({"vx": 0.145}, ExpertConfig().durations),  # 0.4495 m
+        # 0.2 m/s: 0.45 m in a cycle of 2.25 s; the 0.1 s phase kept, the six others (2.25 - 0.1) / 6 s
+        ({"vx": -0.2}, (2.15 / 6,) * 3 + (0.1,) + (2.15 / 6,) * 3),
+        ({"vx": 0.12, "vy": 0.16}, (2.15 / 6,) * 3 + (0.1,) + (2.15 / 6,) * 3),  # |v| = 0.2 m/s
+        ({"vx": 0.8}, (0.3,) * 3 + (0.1,) + (0.3,) * 3),  # never below 0.3 s
+    ],
+)
+def test_a_faster_command_shortens_the_phases_not_the_stride(command, expected):
+    env = gym.make("QuadUneven-v0", terrain="flat", command=command)
+    expert = attach_expert(env)
+    env.reset(seed=0)
+    np.testing.assert_allclose(expert._cycle_durations(), expected, rtol=0, atol=1e-12)
+    plan = expert.plans[0][1]
+    assert plan.duration == pytest.approx(sum(expected), abs=1e-12)
+
+
+@pytest.mark.parametrize(("vx", "vy"), [(-0.1, 0.0), (0.0, 0.1), (0.0, -0.1), (0.2, 0.0), (-0.2, 0.0)])
 def test_expert_walks_backwards_and_sideways_on_rough_terrain(vx, vy):
     """Three cycles on rough 5 cm terrain: no fall, the index >= 0 almost always, the whole-cycle velocity
-    within 0.02 m/s of the command."""
+    within 0.02 m/s of the command (at 0.2 m/s with the phases the command shortens)."""
+    centred = {"kind": "rough", "amplitude": 0.05, "x_start": -5.0, "length": 10.0, "width": 5.0, "spawn_radius": 0.4}
     env = gym.make(
         "QuadUneven-v0",
-        terrain={"kind": "rough", "amplitude": 0.05},
+        terrain=centred,  # room to walk backwards
         command={"vx": vx, "vy": vy},
         max_episode_steps=10**6,
     )
     expert = attach_expert(env)
     _, info = env.reset(seed=1)
     dt = env.unwrapped.dt
-    per_cycle = round(PERIOD / dt)
+    period = float(sum(expert._cycle_durations()))
+    per_cycle = round(period / dt)
     cogs, index = [info["cog"][:2].copy()], []
     for _ in range(3 * per_cycle):
         _, _, terminated, _, info = env.step(expert.predict(None)[0])
         assert not terminated, info["termination_reason"]
         cogs.append(info["cog"][:2].copy())
         index.append(info["stability_index"])
-    v = (cogs[3 * per_cycle] - cogs[per_cycle]) / (2 * PERIOD)  # the two cycles after the first (from rest)
+    v = (cogs[3 * per_cycle] - cogs[per_cycle]) / (2 * per_cycle * dt)  # the two cycles after the first (from rest)
     np.testing.assert_allclose(v, [vx, vy], atol=0.02)
     assert np.mean(np.array(index) >= 0.0) > 0.99
