@@ -95,6 +95,10 @@ MAX_TURN = 1.2
 
 MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
+SLIP_CHECK_EVERY = 5
+"""physics steps between two slip checks (``ExpertConfig.friction_adapt``): 10 ms."""
+SLIP_COOLDOWN = 0.1
+"""s: at most one decrease of the assumed friction in this time (a slip is seen at several checks)."""
 MAX_CYCLE_STRIDE = 0.45
 """m: the longest body advance per cycle the expert plans at its configured phases (0.145 m/s with the
 default 3.1 s cycle); a faster command shortens the phases instead (``ExpertPolicy._cycle_durations``)."""
@@ -166,12 +170,25 @@ class ExpertConfig:
     """what the expert plans and controls with: "nominal" (its own model of the nominal robot: the robot
     configuration's masses, inertias and centres of mass, fed with the measured state only, see the
     module docstring) or "oracle" (the simulator's live model and state, and its friction in the cones)."""
-    friction: float = param(0.5, "-", lo=0.0, hi=2.0, lo_open=True)
-    """-, in (0, 2]: friction coefficient the nominal model assumes in its "qp" friction cones (the
-    4-sided pyramid inside the cone, mu / sqrt(2) per axis, turned on slopes so that an edge points
-    uphill). The nominal floor's is 1.0; 0.5 keeps the
-    planned forces inside the cones of floors down to 0.5 (and, with the pyramid's own margin, close to
-    0.35 in the worst direction). Unused by "oracle", which takes the simulator's."""
+    friction: float = param(0.6, "-", lo=0.0, hi=2.0, lo_open=True)
+    """-, in (0, 2]: friction coefficient the nominal model assumes in its "qp" friction cones at the start
+    of an episode (the 4-sided pyramid inside the cone, mu / sqrt(2) per axis, turned on slopes so that an
+    edge points uphill), and the slope limit of its footholds (``foothold_limits_for_friction``). The
+    nominal floor's is 1.0. With ``friction_adapt`` it is lowered when a stance foot slips. Unused by
+    "oracle", which takes the simulator's."""
+    friction_adapt: bool = True
+    """lower the assumed friction when a stance foot slips: a planned-stance foot in contact whose site moves
+    faster than ``slip_speed`` horizontally (measured state, the expert's own kinematics; every
+    :data:`SLIP_CHECK_EVERY` physics steps) multiplies it by ``friction_decrease``, at most once per
+    :data:`SLIP_COOLDOWN` s and never below ``friction_min``; the cones and the foothold slope limit follow
+    at once, and every change is logged. It is never raised again within the episode."""
+    slip_speed: float = param(0.05, "m/s", lo=0.0, lo_open=True)
+    """m/s, > 0: a stance foot moving faster is slipping (a foot that holds moves < 0.025 m/s on rough
+    terrain: the sphere rolls with its shank)."""
+    friction_decrease: float = param(0.8, "-", lo=0.0, hi=1.0, lo_open=True, hi_open=True)
+    """-, in (0, 1): the factor of one decrease of the assumed friction."""
+    friction_min: float = param(0.25, "-", lo=0.0, hi=2.0, lo_open=True)
+    """-, in (0, 2]: the assumed friction is never lowered below this."""
     recovery: bool = True
     """replan within the cycle, from the measured state, when the base is pushed off its plan (see
     ``recovery_velocity``, ``recovery_position``): the new cycle starts with four-leg support, so a foot
@@ -190,8 +207,9 @@ class ExpertConfig:
         validate_durations(self.durations)
         if not isinstance(self.gains, Gains):
             raise ValueError(f"ExpertConfig.gains must be a Gains, got {self.gains!r}")
-        if not isinstance(self.recovery, bool):
-            raise ValueError(f"ExpertConfig.recovery must be True or False, got {self.recovery!r}")
+        for name in ("recovery", "friction_adapt"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"ExpertConfig.{name} must be True or False, got {getattr(self, name)!r}")
         if not isinstance(self.share_nominal_world, bool):
             raise ValueError(
                 f"ExpertConfig.share_nominal_world must be True or False, got {self.share_nominal_world!r}"
@@ -245,6 +263,10 @@ class ExpertPolicy:
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
         self._foot_sensor_adr = np.array([int(a) for a in self.env.idx.foot_sensor_adr])
+        self._foot_site_ids: list[int] = []  # in the model the controller runs on (set at reset)
+        self._site_velocity = np.zeros(6)
+        self._adapt_friction = False
+        self._slip_cooldown = 0.0
         self.nominal: NominalModel | None = None
         """the expert's own model (None with ``model="oracle"``)."""
         if self.config.model == "nominal":
@@ -311,18 +333,22 @@ class ExpertPolicy:
         self._calm_after = 0.0
         self.recoveries = 0
         self._yaw = 0.0
+        self._slip_cooldown = 0.0
         nominal = self.nominal
+        self._adapt_friction = self.config.friction_adapt and nominal is not None
         if nominal is None:  # oracle: the simulator's model, and the friction of its foot-terrain contacts
             self.shares_simulator_data = True
             self.controller.mu = _contact_friction(model)
             self._model, self._data = model, data
         else:
+            self.controller.mu = self.config.friction  # the episode starts from the configured assumption
             self.shares_simulator_data = self.config.share_nominal_world and nominal.matches(model)
             if self.shares_simulator_data:
                 self._model, self._data = model, data
             else:
                 self._model, self._data = nominal.model, nominal.measure(data.qpos, data.qvel, data.time)
         self.controller.reset(self._model, self._data, terrain)
+        self._foot_site_ids = [int(self._model.site(s).id) for s in C.FOOT_SITES]
         self._foothold_limits = foothold_limits_for_friction(self.controller.mu)
         self._start_cycle(0.0, cog_start=None)
 
@@ -336,6 +362,8 @@ class ExpertPolicy:
             self._steps += 1
             if self.config.recovery and self._steps % DISTURBANCE_CHECK_EVERY == 0:
                 self._check_disturbance(own)
+            if self._adapt_friction and self._steps % SLIP_CHECK_EVERY == 0:
+                self._check_slip(own)
             if self.shares_simulator_data:
                 tau = self.controller(model, data, action)
             else:
@@ -378,6 +406,41 @@ class ExpertPolicy:
         vel = np.array([v[0], v[1], 0.0])
         self._start_cycle(t, cog_start={"pos": cog, "vel": vel, "acc": np.zeros(3)}, measured=True)
         self._calm_after = t + self._durations[0]
+
+    def _check_slip(self, d: mujoco.MjData) -> None:
+        """Lower the assumed friction if a stance foot slips (``ExpertConfig.friction_adapt``)."""
+        t = float(d.time)
+        if t < self._slip_cooldown:
+            return
+        packed = None if self._row_of is None else self._row_of(t - self.controller.t0 - self._t_start)
+        planned = 15 if packed is None else packed[1]  # a hold stands on all four feet
+        touch = self._sim.sensordata[self._foot_sensor_adr]
+        v = self._site_velocity
+        for leg in range(C.N_LEGS):
+            if planned >> leg & 1 and touch[leg] > 0:
+                mujoco.mj_objectVelocity(self._model, d, mujoco.mjtObj.mjOBJ_SITE, self._foot_site_ids[leg], v, 0)
+                speed = float(np.hypot(v[3], v[4]))
+                if speed > self.config.slip_speed:
+                    break
+        else:
+            return
+        cfg, old = self.config, float(self.controller.mu)
+        mu = max(cfg.friction_min, old * cfg.friction_decrease)
+        if mu >= old:
+            return
+        self.controller.set_friction(mu)
+        self._foothold_limits = foothold_limits_for_friction(mu)
+        self._slip_cooldown = t + SLIP_COOLDOWN
+        self._log(
+            f"t={t - self.controller.t0:.2f} s: stance foot {C.LEG_NAMES[leg]} slips at {speed:.2f} m/s: assumed "
+            f"friction {old:.3f} -> {mu:.3f}"
+        )
+
+    @property
+    def assumed_friction(self) -> float:
+        """-: the friction coefficient the controller's cones assume now (``ExpertConfig.friction``, lowered
+        by slips with ``friction_adapt``; the simulator's with ``model="oracle"``)."""
+        return float(self.controller.mu)
 
     def _log(self, message: str) -> None:
         """Append to :attr:`failure_log` (at most ``MAX_FAILURE_LOG`` entries; the rest are counted)."""

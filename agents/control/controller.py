@@ -222,6 +222,14 @@ class ComputedTorqueController:
         self.terrain = terrain
         self._last = None
 
+    def set_friction(self, mu: float) -> None:
+        """Change the friction coefficient of the "qp" cones (-, > 0) from the next step on, until the next
+        :meth:`reset` rebuilds them from :attr:`mu` (which this sets too)."""
+        self.mu = float(mu)
+        self.id.set_mu(mu)
+        if self._fast is not None:
+            self._fast.forget_arguments()
+
     # ------------------------------------------------------------------ control law
     def __call__(
         self,

@@ -120,6 +120,10 @@ class FastControlStep:
         K.clip_into(ws.tau, self.torque_limit, tau)
         return tau, WorkspaceResult(status, lay, self.id.workspace_version)
 
+    def forget_arguments(self) -> None:
+        """Rebuild the kernel's arguments at the next step (after the solver's ``mu`` changed)."""
+        self._cache = None
+
     def _arguments(self, data: mujoco.MjData, terrain: Any, gains: np.ndarray) -> tuple[tuple, np.ndarray | None]:
         """The arguments of ``control_step`` after the contacts (views and buffers that outlive a step),
         and the normals buffer (None without "qp" or a height field); rebuilt when an input object changes."""

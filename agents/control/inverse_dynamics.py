@@ -170,13 +170,8 @@ class InverseDynamics:
                 if isinstance(model, mujoco.MjModel)
                 else 1.0
             )
-        if not mu > 0:
-            raise ValueError(f"mu must be > 0, got {mu}")
-        self.mu = float(mu)
+        self.set_mu(mu)
         self.min_normal_force = float(min_normal_force)
-        self._cone_up = np.ascontiguousarray(
-            np.broadcast_to(friction_pyramid(np.array([0.0, 0.0, 1.0]), self.mu), (C.N_LEGS, 5, 3))
-        )
         self._qp: dict[int, _StanceQP] = {}
         self.cone_lower = np.array([0.0, 0.0, 0.0, 0.0, self.min_normal_force])
         """(5,) lower bounds of the friction-pyramid rows (the last one: the minimum normal force, N)."""
@@ -191,6 +186,15 @@ class InverseDynamics:
         """incremented whenever :attr:`workspace` is rewritten (:class:`WorkspaceResult` checks it)."""
 
     # ---------------------------------------------------------------- public API
+    def set_mu(self, mu: float) -> None:
+        """Change the friction coefficient of the "qp" cones (-, > 0) from the next solve on."""
+        if not mu > 0:
+            raise ValueError(f"mu must be > 0, got {mu}")
+        self.mu = float(mu)
+        self._cone_up = np.ascontiguousarray(
+            np.broadcast_to(friction_pyramid(np.array([0.0, 0.0, 1.0]), self.mu), (C.N_LEGS, 5, 3))
+        )
+
     def solve(
         self,
         qpos: np.ndarray,

@@ -1,0 +1,97 @@
+"""The expert lowers its assumed friction when a stance foot slips, and walks floors its start assumption
+would have slipped on."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import quad_uneven_env  # noqa: F401
+from agents.control.inverse_dynamics import InverseDynamics
+from agents.expert import ExpertConfig, attach_expert
+from quad_uneven_env.robot.dynamics.base import make_dynamics
+
+ROUGH = {"kind": "rough", "amplitude": 0.05, "wavelength": 0.6}
+
+
+def walk(floor: float | None, seconds: float, **config):
+    """The expert on rough 5 cm for ``seconds``: distance (m), fell, the expert (floor None: nominal, 1.0)."""
+    kwargs = {"terrain": ROUGH, "max_episode_steps": 10**6}
+    if floor is not None:
+        kwargs["randomization"] = {"friction": [floor, floor]}
+    env = gym.make("QuadUneven-v0", **kwargs)
+    expert = attach_expert(env, ExpertConfig(**config))
+    _, info = env.reset(seed=1)
+    fell = False
+    for _ in range(round(seconds / env.unwrapped.dt)):
+        _, _, terminated, _, info = env.step(expert.predict(None)[0])
+        if terminated:
+            fell = True
+            break
+    env.close()
+    return info["distance"], fell, expert
+
+
+def test_no_slip_and_no_change_on_the_nominal_floor():
+    distance, fell, expert = walk(None, 10.0)
+    assert not fell and distance > 0.9
+    assert expert.assumed_friction == ExpertConfig().friction
+    assert not [m for m in expert.failure_log if "slips" in m]
+
+
+@pytest.mark.parametrize("floor", [0.45, 0.35])
+def test_a_slipping_floor_lowers_the_assumption_and_the_walk_goes_on(floor):
+    """Without the adaptation the start assumption (0.6) lets the feet slip and the walk ends (fall or stall
+    short of 1 m in 12 s); with it the assumption comes down below the floor's friction and the expert walks on."""
+    distance, fell, expert = walk(floor, 12.0)
+    assert not fell and distance > 1.1
+    assert expert.assumed_friction < floor
+    slips = [m for m in expert.failure_log if "slips" in m]
+    assert slips and all("assumed friction" in m for m in slips)
+    fixed_distance, fixed_fell, fixed = walk(floor, 12.0, friction_adapt=False)
+    assert fixed.assumed_friction == ExpertConfig().friction
+    assert fixed_fell or fixed_distance < 1.0
+
+
+def test_reset_restores_the_configured_assumption():
+    env = gym.make("QuadUneven-v0", terrain=ROUGH, randomization={"friction": [0.35, 0.35]})
+    expert = attach_expert(env, ExpertConfig(friction=0.55))
+    env.reset(seed=1)
+    for _ in range(100):
+        env.step(expert.predict(None)[0])
+    assert expert.assumed_friction < 0.55
+    env.reset(seed=1)
+    assert expert.assumed_friction == 0.55 and expert.controller.id.mu == 0.55
+
+
+def test_set_mu_is_a_solver_built_with_that_mu(rng):
+    """InverseDynamics.set_mu gives the cones and the "qp" solution of a solver constructed with the new mu."""
+    import mujoco
+
+    env = gym.make("QuadUneven-v0", terrain="flat")
+    env.reset(seed=0)
+    u = env.unwrapped
+    dyn = make_dynamics("mujoco", u.model)
+    changed = InverseDynamics(dyn, "qp", mu=0.9)
+    changed.set_mu(0.3)
+    fresh = InverseDynamics(dyn, "qp", mu=0.3)
+    np.testing.assert_array_equal(changed._cone_up, fresh._cone_up)
+    d = mujoco.MjData(u.model)
+    d.qpos[:] = u.data.qpos
+    mujoco.mj_forward(u.model, d)
+    bdd = np.zeros(u.model.nv - 12)
+    bdd[:6] = rng.normal(0.0, 3.0, 6)  # hard accelerations: the cones of 0.3 bind
+    a = changed.solve(d.qpos, d.qvel, bdd, (True, True, True, True))
+    b = fresh.solve(d.qpos, d.qvel, bdd, (True, True, True, True))
+    np.testing.assert_array_equal(a.tau, b.tau)
+    assert a.distribution == "qp"
+    wide = InverseDynamics(dyn, "qp", mu=0.9).solve(d.qpos, d.qvel, bdd, (True, True, True, True))
+    assert np.abs(wide.tau - b.tau).max() > 1.0  # the cones of 0.3 did bind
+
+
+def test_bad_adaptation_config_names_the_field():
+    with pytest.raises(ValueError, match=r"ExpertConfig\.friction_adapt must be True or False"):
+        ExpertConfig(friction_adapt=1)
+    with pytest.raises(ValueError, match=r"friction_decrease must be a number in \(0, 1\)"):
+        ExpertConfig(friction_decrease=1.0)
