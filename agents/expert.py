@@ -95,8 +95,17 @@ MAX_TURN = 1.2
 
 MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
-SLIP_CHECK_EVERY = 5
-"""physics steps between two slip checks (``ExpertConfig.friction_adapt``): 10 ms."""
+SLIP_CHECK_EVERY = 2
+"""physics steps between two slip checks (``ExpertConfig.friction_adapt``): 4 ms."""
+SLIP_MIN_LOAD = 50.0
+"""N: a moving stance foot counts as slipping only if the controller commanded it at least this normal force
+(world z; a tenth of the robot's weight)."""
+SLIP_MIN_TILT_COS = float(np.cos(np.radians(15.0)))
+"""cos of the steepest stance foothold tilt at which a slip still lowers the assumed friction: on steeper
+ground a slipping foot is not read as a slippery floor (measured on ramps of friction 1: stance feet
+that land or are dragged on 20-25 deg slide for 5-12 ms)."""
+SLIP_DURATION = 0.008
+"""s: a stance foot slips when it is faster than ``ExpertConfig.slip_speed`` for this long (at every check)."""
 SLIP_COOLDOWN = 0.1
 """s: at most one decrease of the assumed friction in this time (a slip is seen at several checks)."""
 MAX_CYCLE_STRIDE = 0.45
@@ -177,14 +186,15 @@ class ExpertConfig:
     nominal floor's is 1.0. With ``friction_adapt`` it is lowered when a stance foot slips. Unused by
     "oracle", which takes the simulator's."""
     friction_adapt: bool = True
-    """lower the assumed friction when a stance foot slips: a planned-stance foot in contact whose site moves
-    faster than ``slip_speed`` horizontally (measured state, the expert's own kinematics; every
-    :data:`SLIP_CHECK_EVERY` physics steps) multiplies it by ``friction_decrease``, at most once per
-    :data:`SLIP_COOLDOWN` s and never below ``friction_min``; the cones and the foothold slope limit follow
-    at once, and every change is logged. It is never raised again within the episode."""
+    """lower the assumed friction when a stance foot slips: a planned-stance foot in contact whose contact
+    point moves faster than ``slip_speed`` horizontally for :data:`SLIP_DURATION` s (measured state, the
+    expert's own kinematics, checked every :data:`SLIP_CHECK_EVERY` physics steps) multiplies it by
+    ``friction_decrease``, at most once per :data:`SLIP_COOLDOWN` s and never below ``friction_min``; the
+    cones and the foothold slope limit follow at once, and every change is logged. It is never raised
+    again within the episode."""
     slip_speed: float = param(0.05, "m/s", lo=0.0, lo_open=True)
-    """m/s, > 0: a stance foot moving faster is slipping (a foot that holds moves < 0.025 m/s on rough
-    terrain: the sphere rolls with its shank)."""
+    """m/s, > 0: a stance foot's contact point moving faster than this (for ``SLIP_DURATION``) slips; one
+    that holds moves < 0.025 m/s on rough terrain."""
     friction_decrease: float = param(0.8, "-", lo=0.0, hi=1.0, lo_open=True, hi_open=True)
     """-, in (0, 1): the factor of one decrease of the assumed friction."""
     friction_min: float = param(0.25, "-", lo=0.0, hi=2.0, lo_open=True)
@@ -265,6 +275,7 @@ class ExpertPolicy:
         self._foot_sensor_adr = np.array([int(a) for a in self.env.idx.foot_sensor_adr])
         self._foot_site_ids: list[int] = []  # in the model the controller runs on (set at reset)
         self._site_velocity = np.zeros(6)
+        self._slip_time = np.zeros(C.N_LEGS)  # s: how long each stance foot has been slipping
         self._adapt_friction = False
         self._slip_cooldown = 0.0
         self.nominal: NominalModel | None = None
@@ -334,6 +345,7 @@ class ExpertPolicy:
         self.recoveries = 0
         self._yaw = 0.0
         self._slip_cooldown = 0.0
+        self._slip_time[:] = 0.0
         nominal = self.nominal
         self._adapt_friction = self.config.friction_adapt and nominal is not None
         if nominal is None:  # oracle: the simulator's model, and the friction of its foot-terrain contacts
@@ -408,21 +420,37 @@ class ExpertPolicy:
         self._calm_after = t + self._durations[0]
 
     def _check_slip(self, d: mujoco.MjData) -> None:
-        """Lower the assumed friction if a stance foot slips (``ExpertConfig.friction_adapt``)."""
+        """Lower the assumed friction if a stance foot slips (``ExpertConfig.friction_adapt``).
+
+        A foot slips when the point of its sphere below its centre (the contact point on level ground:
+        without the rolling of the sphere with its shank) moves faster than ``slip_speed`` horizontally at
+        every check for :data:`SLIP_DURATION` s while the controller asks it for at least
+        :data:`SLIP_MIN_LOAD` of normal force (a foot that carries little moves without telling anything
+        about the floor). A slip counts only while every planned stance foot stands on terrain tilted less
+        than 15 deg (:data:`SLIP_MIN_TILT_COS`). The settling at the spawn and at touch-downs lasts a few
+        milliseconds."""
         t = float(d.time)
-        if t < self._slip_cooldown:
-            return
         packed = None if self._row_of is None else self._row_of(t - self.controller.t0 - self._t_start)
         planned = 15 if packed is None else packed[1]  # a hold stands on all four feet
         touch = self._sim.sensordata[self._foot_sensor_adr]
-        v = self._site_velocity
+        v, r = self._site_velocity, self.cfg.foot_radius
+        dt = SLIP_CHECK_EVERY * self.env.physics_dt
+        slipping, loads = -1, None
         for leg in range(C.N_LEGS):
             if planned >> leg & 1 and touch[leg] > 0:
                 mujoco.mj_objectVelocity(self._model, d, mujoco.mjtObj.mjOBJ_SITE, self._foot_site_ids[leg], v, 0)
-                speed = float(np.hypot(v[3], v[4]))
-                if speed > self.config.slip_speed:
-                    break
-        else:
+                # v_contact = v_site + omega x (-r z): the horizontal part is v_xy + r (-omega_y, omega_x)
+                speed = float(np.hypot(v[3] - r * v[1], v[4] + r * v[0]))
+                if speed > self.config.slip_speed and loads is None:
+                    last = self.controller.last  # the forces it commanded at the last step (N, world)
+                    loads = np.zeros(C.N_LEGS) if last is None else last.contact_forces[:, 2]
+                loaded = speed > self.config.slip_speed and loads[leg] >= SLIP_MIN_LOAD  # type: ignore[index]
+                self._slip_time[leg] = self._slip_time[leg] + dt if loaded else 0.0
+                if self._slip_time[leg] >= SLIP_DURATION - 1e-9:
+                    slipping = leg
+            else:
+                self._slip_time[leg] = 0.0
+        if slipping < 0 or t < self._slip_cooldown or self._stance_tilt_cos(planned) < SLIP_MIN_TILT_COS:
             return
         cfg, old = self.config, float(self.controller.mu)
         mu = max(cfg.friction_min, old * cfg.friction_decrease)
@@ -431,10 +459,19 @@ class ExpertPolicy:
         self.controller.set_friction(mu)
         self._foothold_limits = foothold_limits_for_friction(mu)
         self._slip_cooldown = t + SLIP_COOLDOWN
+        self._slip_time[:] = 0.0
         self._log(
-            f"t={t - self.controller.t0:.2f} s: stance foot {C.LEG_NAMES[leg]} slips at {speed:.2f} m/s: assumed "
-            f"friction {old:.3f} -> {mu:.3f}"
+            f"t={t - self.controller.t0:.2f} s: stance foot {C.LEG_NAMES[slipping]} slips (> "
+            f"{cfg.slip_speed:g} m/s for {SLIP_DURATION * 1e3:.0f} ms): assumed friction {old:.3f} -> {mu:.3f}"
         )
+
+    def _stance_tilt_cos(self, planned: int) -> float:
+        """cos of the steepest terrain tilt under the planned stance feet (1: none)."""
+        legs = [leg for leg in range(C.N_LEGS) if planned >> leg & 1]
+        if not legs:
+            return 1.0
+        feet = physics.feet_pos(self._data, self.env.idx)
+        return float(np.min(self._terrain.heightfield.normal(feet[legs, 0], feet[legs, 1])[:, 2]))
 
     @property
     def assumed_friction(self) -> float:

@@ -95,3 +95,20 @@ def test_bad_adaptation_config_names_the_field():
         ExpertConfig(friction_adapt=1)
     with pytest.raises(ValueError, match=r"friction_decrease must be a number in \(0, 1\)"):
         ExpertConfig(friction_decrease=1.0)
+
+
+def test_no_false_slip_up_a_ramp_of_friction_one():
+    """Up a 25 deg ramp of friction 1: stance feet that land or are dragged there slide for a few ms; none
+    of that lowers the assumption (which would make the expert refuse the ramp and stand on it)."""
+    env = gym.make(
+        "QuadUneven-v0",
+        terrain={"kind": "slope", "params": {"angle_deg": 25, "ramp_length": 1.2, "plateau_length": 0.5}},
+        max_episode_steps=10**6,
+    )
+    expert = attach_expert(env)
+    _, info = env.reset(seed=0)
+    for _ in range(round(20.0 / env.unwrapped.dt)):
+        _, _, terminated, _, info = env.step(expert.predict(None)[0])
+        assert not terminated, info["termination_reason"]
+    assert info["distance"] > 1.6  # past the ramp's top
+    assert expert.assumed_friction == ExpertConfig().friction
