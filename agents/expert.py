@@ -61,6 +61,7 @@ from agents.control import inverse_dynamics_kernels as IK
 from agents.control.controller import ComputedTorqueController, Gains
 from agents.control.inverse_dynamics import DISTRIBUTIONS
 from agents.control.nominal import NominalModel
+from agents.control.slip import SLIP_DURATION, SlipDetector
 from planners import FootholdLimits, PlanningError, Scenario, plan_gait_cycle
 from planners.gait import validate_durations
 from planners.pitch import pitch_of_quaternion, yaw_pitch_of_quaternion
@@ -97,9 +98,6 @@ MAX_FAILURE_LOG = 1000
 """At most this many entries are kept in :attr:`ExpertPolicy.failure_log` per episode (then a count)."""
 SLIP_CHECK_EVERY = 2
 """physics steps between two slip checks (``ExpertConfig.friction_adapt``): 4 ms."""
-SLIP_MIN_LOAD = 50.0
-"""N: a moving stance foot counts as slipping only if the controller commanded it at least this normal force
-(world z; a tenth of the robot's weight)."""
 SLIP_MIN_TILT_COS = float(np.cos(np.radians(15.0)))
 """cos of the steepest stance foothold tilt at which a slip still lowers the assumed friction: on steeper
 ground a slipping foot is not read as a slippery floor (measured on ramps of friction 1: stance feet
@@ -107,8 +105,6 @@ that land or are dragged on 20-25 deg slide for 5-12 ms)."""
 SLIP_SPAWN_SETTLE = 0.1
 """s: no slip is read in the first this-long of an episode, while the robot settles on its spawn pose (its
 joints carry the reset noise; 6 of the 60 `targets` episodes read a slip at 0.01 s on floors of friction 1)."""
-SLIP_DURATION = 0.008
-"""s: a stance foot slips when it is faster than ``ExpertConfig.slip_speed`` for this long (at every check)."""
 SLIP_COOLDOWN = 0.1
 """s: at most one decrease of the assumed friction in this time (a slip is seen at several checks)."""
 MAX_CYCLE_STRIDE = 0.45
@@ -190,7 +186,7 @@ class ExpertConfig:
     "oracle", which takes the simulator's."""
     friction_adapt: bool = True
     """lower the assumed friction when a stance foot slips: a planned-stance foot in contact whose contact
-    point moves faster than ``slip_speed`` horizontally for :data:`SLIP_DURATION` s (measured state, the
+    point moves faster than ``slip_speed`` horizontally for 8 ms (:mod:`agents.control.slip`: measured state, the
     expert's own kinematics, checked every :data:`SLIP_CHECK_EVERY` physics steps) multiplies it by
     ``friction_decrease``, at most once per :data:`SLIP_COOLDOWN` s and never below ``friction_min``; the
     cones and the foothold slope limit follow at once, and every change is logged. It is never raised
@@ -276,9 +272,9 @@ class ExpertPolicy:
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
         self._foot_sensor_adr = np.array([int(a) for a in self.env.idx.foot_sensor_adr])
-        self._foot_site_ids: list[int] = []  # in the model the controller runs on (set at reset)
-        self._site_velocity = np.zeros(6)
-        self._slip_time = np.zeros(C.N_LEGS)  # s: how long each stance foot has been slipping
+        self._slip = SlipDetector(
+            self.config.slip_speed, self.cfg.foot_radius, SLIP_CHECK_EVERY * env.unwrapped.physics_dt
+        )
         self._adapt_friction = False
         self._slip_cooldown = 0.0
         self.nominal: NominalModel | None = None
@@ -348,7 +344,6 @@ class ExpertPolicy:
         self.recoveries = 0
         self._yaw = 0.0
         self._slip_cooldown = 0.0
-        self._slip_time[:] = 0.0
         nominal = self.nominal
         self._adapt_friction = self.config.friction_adapt and nominal is not None
         if nominal is None:  # oracle: the simulator's model, and the friction of its foot-terrain contacts
@@ -363,7 +358,7 @@ class ExpertPolicy:
             else:
                 self._model, self._data = nominal.model, nominal.measure(data.qpos, data.qvel, data.time)
         self.controller.reset(self._model, self._data, terrain)
-        self._foot_site_ids = [int(self._model.site(s).id) for s in C.FOOT_SITES]
+        self._slip.reset(self._model)
         self._foothold_limits = foothold_limits_for_friction(self.controller.mu)
         self._start_cycle(0.0, cog_start=None)
 
@@ -423,38 +418,17 @@ class ExpertPolicy:
         self._calm_after = t + self._durations[0]
 
     def _check_slip(self, d: mujoco.MjData) -> None:
-        """Lower the assumed friction if a stance foot slips (``ExpertConfig.friction_adapt``).
-
-        A foot slips when the point of its sphere below its centre (the contact point on level ground:
-        without the rolling of the sphere with its shank) moves faster than ``slip_speed`` horizontally at
-        every check for :data:`SLIP_DURATION` s while the controller asks it for at least
-        :data:`SLIP_MIN_LOAD` of normal force (a foot that carries little moves without telling anything
-        about the floor). A slip counts only while every planned stance foot stands on terrain tilted less
-        than 15 deg (:data:`SLIP_MIN_TILT_COS`). The settling at the spawn and at touch-downs lasts a few
-        milliseconds."""
+        """Lower the assumed friction if a stance foot slips (``ExpertConfig.friction_adapt``; the reading of
+        a slip: :mod:`agents.control.slip`). A slip counts only while every planned stance foot stands on
+        terrain tilted less than 15 deg (:data:`SLIP_MIN_TILT_COS`), and not while the robot settles on its
+        spawn pose."""
         t = float(d.time)
         if t - self.controller.t0 < SLIP_SPAWN_SETTLE:
             return
         packed = None if self._row_of is None else self._row_of(t - self.controller.t0 - self._t_start)
         planned = 15 if packed is None else packed[1]  # a hold stands on all four feet
         touch = self._sim.sensordata[self._foot_sensor_adr]
-        v, r = self._site_velocity, self.cfg.foot_radius
-        dt = SLIP_CHECK_EVERY * self.env.physics_dt
-        slipping, loads = -1, None
-        for leg in range(C.N_LEGS):
-            if planned >> leg & 1 and touch[leg] > 0:
-                mujoco.mj_objectVelocity(self._model, d, mujoco.mjtObj.mjOBJ_SITE, self._foot_site_ids[leg], v, 0)
-                # v_contact = v_site + omega x (-r z): the horizontal part is v_xy + r (-omega_y, omega_x)
-                speed = float(np.hypot(v[3] - r * v[1], v[4] + r * v[0]))
-                if speed > self.config.slip_speed and loads is None:
-                    last = self.controller.last  # the forces it commanded at the last step (N, world)
-                    loads = np.zeros(C.N_LEGS) if last is None else last.contact_forces[:, 2]
-                loaded = speed > self.config.slip_speed and loads[leg] >= SLIP_MIN_LOAD  # type: ignore[index]
-                self._slip_time[leg] = self._slip_time[leg] + dt if loaded else 0.0
-                if self._slip_time[leg] >= SLIP_DURATION - 1e-9:
-                    slipping = leg
-            else:
-                self._slip_time[leg] = 0.0
+        slipping = self._slip.update(self._model, d, planned, touch, self._commanded_loads)
         if slipping < 0 or t < self._slip_cooldown or self._stance_tilt_cos(planned) < SLIP_MIN_TILT_COS:
             return
         cfg, old = self.config, float(self.controller.mu)
@@ -464,11 +438,17 @@ class ExpertPolicy:
         self.controller.set_friction(mu)
         self._foothold_limits = foothold_limits_for_friction(mu)
         self._slip_cooldown = t + SLIP_COOLDOWN
-        self._slip_time[:] = 0.0
+        self._slip.slip_time[:] = 0.0
         self._log(
-            f"t={t - self.controller.t0:.2f} s: stance foot {C.LEG_NAMES[slipping]} slips (> "
-            f"{cfg.slip_speed:g} m/s for {SLIP_DURATION * 1e3:.0f} ms): assumed friction {old:.3f} -> {mu:.3f}"
+            f"t={t - self.controller.t0:.2f} s: stance foot {C.LEG_NAMES[slipping]} slips "
+            f"({self._slip.last_speed[slipping]:.2f} m/s, > {cfg.slip_speed:g} m/s for {SLIP_DURATION * 1e3:.0f} "
+            f"ms): assumed friction {old:.3f} -> {mu:.3f}"
         )
+
+    def _commanded_loads(self) -> np.ndarray:
+        """(4,) N: the normal forces (world z) the controller commanded at its last step (0 before any)."""
+        last = self.controller.last
+        return np.zeros(C.N_LEGS) if last is None else last.contact_forces[:, 2]
 
     def _stance_tilt_cos(self, planned: int) -> float:
         """cos of the steepest terrain tilt under the planned stance feet (1: none)."""

@@ -112,3 +112,42 @@ def test_no_false_slip_up_a_ramp_of_friction_one():
         assert not terminated, info["termination_reason"]
     assert info["distance"] > 1.6  # past the ramp's top
     assert expert.assumed_friction == ExpertConfig().friction
+
+
+def test_contact_point_speed_against_finite_differences(rng):
+    """SlipDetector's speed of each foot's lowest sphere point (site velocity without the sphere's rolling)
+    equals the finite difference of the material point at site - r z (moved with the shank) between two
+    poses dt apart, in a random state with every joint and the base moving."""
+    import mujoco
+
+    from agents.control.slip import SlipDetector
+    from quad_uneven_env import constants as C
+
+    env = gym.make("QuadUneven-v0", terrain="flat")
+    env.reset(seed=0)
+    u = env.unwrapped
+    m = u.model
+    d = mujoco.MjData(m)
+    d.qpos[:] = u.data.qpos
+    d.qvel[:] = rng.normal(0.0, 1.0, m.nv)
+    mujoco.mj_forward(m, d)
+    r = u.robot_cfg.foot_radius
+    det = SlipDetector(speed=1e-9, foot_radius=r, check_dt=0.004)
+    det.reset(m)
+    det.update(m, d, stance=15, touch=np.ones(4), loads=lambda: np.full(4, 100.0))
+    sites = [m.site(s).id for s in C.FOOT_SITES]
+    # the material point of the shank at site - r z at the start, followed for +-h
+    offsets = [d.site_xmat[s].reshape(3, 3).T @ np.array([0.0, 0.0, -r]) for s in sites]
+
+    def points(h: float) -> np.ndarray:
+        e = mujoco.MjData(m)
+        e.qpos[:] = d.qpos
+        mujoco.mj_integratePos(m, e.qpos, d.qvel, h)
+        mujoco.mj_kinematics(m, e)
+        pairs = zip(sites, offsets, strict=True)
+        return np.array([e.site_xpos[s] + e.site_xmat[s].reshape(3, 3) @ o for s, o in pairs])
+
+    h = 1e-6
+    v = (points(h) - points(-h)) / (2 * h)
+    np.testing.assert_allclose(det.last_speed, np.hypot(v[:, 0], v[:, 1]), rtol=1e-6, atol=1e-7)
+    assert det.last_speed.min() > 0.05  # a state where the feet really move
