@@ -40,13 +40,15 @@ def test_no_slip_and_no_change_on_the_nominal_floor():
     assert not [m for m in expert.failure_log if "slips" in m]
 
 
-@pytest.mark.parametrize("floor", [0.45, 0.35])
-def test_a_slipping_floor_lowers_the_assumption_and_the_walk_goes_on(floor):
+@pytest.mark.parametrize(("floor", "friction_min"), [(0.45, None), (0.4, None), (0.35, 0.25)])
+def test_a_slipping_floor_lowers_the_assumption_and_the_walk_goes_on(floor, friction_min):
     """Without the adaptation the start assumption (0.6) lets the feet slip and the walk ends (fall or stall
-    short of 1 m in 12 s); with it the assumption comes down below the floor's friction and the expert walks on."""
-    distance, fell, expert = walk(floor, 12.0)
+    short of 1 m in 12 s); with it the assumption comes down (below the floor's friction, or to
+    ``friction_min``) and the expert walks on (0.35: only with a ``friction_min`` below the default 0.45)."""
+    extra = {} if friction_min is None else {"friction_min": friction_min}
+    distance, fell, expert = walk(floor, 12.0, **extra)
     assert not fell and distance > 1.1
-    assert expert.assumed_friction < floor
+    assert expert.assumed_friction < floor or expert.assumed_friction == ExpertConfig(**extra).friction_min
     slips = [m for m in expert.failure_log if "slips" in m]
     assert slips and all("assumed friction" in m for m in slips)
     fixed_distance, fixed_fell, fixed = walk(floor, 12.0, friction_adapt=False)
@@ -56,7 +58,7 @@ def test_a_slipping_floor_lowers_the_assumption_and_the_walk_goes_on(floor):
 
 def test_reset_restores_the_configured_assumption():
     env = gym.make("QuadUneven-v0", terrain=ROUGH, randomization={"friction": [0.35, 0.35]})
-    expert = attach_expert(env, ExpertConfig(friction=0.55))
+    expert = attach_expert(env, ExpertConfig(friction=0.55, friction_min=0.25))
     env.reset(seed=1)
     for _ in range(100):
         env.step(expert.predict(None)[0])
