@@ -178,29 +178,29 @@ class ExpertConfig:
     """what the expert plans and controls with: "nominal" (its own model of the nominal robot: the robot
     configuration's masses, inertias and centres of mass, fed with the measured state only, see the
     module docstring) or "oracle" (the simulator's live model and state, and its friction in the cones)."""
-    friction: float = param(0.6, "-", lo=0.0, hi=2.0, lo_open=True)
+    friction: float = param(0.5, "-", lo=0.0, hi=2.0, lo_open=True)
     """-, in (0, 2]: friction coefficient the nominal model assumes in its "qp" friction cones at the start
     of an episode (the 4-sided pyramid inside the cone, mu / sqrt(2) per axis, turned on slopes so that an
     edge points uphill), and the slope limit of its footholds (``foothold_limits_for_friction``). The
-    nominal floor's is 1.0. With ``friction_adapt`` it is lowered when a stance foot slips. Unused by
-    "oracle", which takes the simulator's."""
-    friction_adapt: bool = True
+    nominal floor's is 1.0; 0.5 keeps the planned forces inside the cones of floors down to about 0.4.
+    With ``friction_adapt`` it is lowered when a stance foot slips. Unused by "oracle", which takes the
+    simulator's."""
+    friction_adapt: bool = False
     """lower the assumed friction when a stance foot slips: a planned-stance foot in contact whose contact
-    point moves faster than ``slip_speed`` horizontally for 8 ms (:mod:`agents.control.slip`: measured state, the
-    expert's own kinematics, checked every :data:`SLIP_CHECK_EVERY` physics steps) multiplies it by
-    ``friction_decrease``, at most once per :data:`SLIP_COOLDOWN` s and never below ``friction_min``; the
+    point moves faster than ``slip_speed`` horizontally for 8 ms (:mod:`agents.control.slip`: measured
+    state, the expert's own kinematics, checked every :data:`SLIP_CHECK_EVERY` physics steps) multiplies it
+    by ``friction_decrease``, at most once per :data:`SLIP_COOLDOWN` s and never below ``friction_min``; the
     cones and the foothold slope limit follow at once, and every change is logged. It is never raised
-    again within the episode."""
+    again within the episode. Off by default: with ``friction=0.6`` it walks 25 deg ramps and floors of
+    0.3-0.45, but under hard randomization pushed feet read as slips and it loses ``robust_hard``
+    episodes (docs/robustness.md#friction-adaptation)."""
     slip_speed: float = param(0.05, "m/s", lo=0.0, lo_open=True)
     """m/s, > 0: a stance foot's contact point moving faster than this (for ``SLIP_DURATION``) slips; one
     that holds moves < 0.025 m/s on rough terrain."""
     friction_decrease: float = param(0.8, "-", lo=0.0, hi=1.0, lo_open=True, hi_open=True)
     """-, in (0, 1): the factor of one decrease of the assumed friction."""
-    friction_min: float = param(0.45, "-", lo=0.0, hi=2.0, lo_open=True)
-    """-, in (0, 2]: the assumed friction is never lowered below this. 0.45: under hard randomization
-    (pushes, latency, weak motors) feet also slide on floors of friction 1, and readings that took the
-    assumption down to 0.25 made the expert fall (3 of 30 `robust_hard` episodes); a floor of 0.45 keeps
-    what the fixed 0.5 had (floors down to 0.4)."""
+    friction_min: float = param(0.25, "-", lo=0.0, hi=2.0, lo_open=True)
+    """-, in (0, 2]: the assumed friction is never lowered below this."""
     recovery: bool = True
     """replan within the cycle, from the measured state, when the base is pushed off its plan (see
     ``recovery_velocity``, ``recovery_position``): the new cycle starts with four-leg support, so a foot

@@ -13,6 +13,8 @@ from agents.expert import ExpertConfig, attach_expert
 from quad_uneven_env.robot.dynamics.base import make_dynamics
 
 ROUGH = {"kind": "rough", "amplitude": 0.05, "wavelength": 0.6}
+ADAPT = {"friction": 0.6, "friction_adapt": True}
+"""the adapting expert (off by default): it starts from 0.6."""
 
 
 def walk(floor: float | None, seconds: float, **config):
@@ -21,7 +23,7 @@ def walk(floor: float | None, seconds: float, **config):
     if floor is not None:
         kwargs["randomization"] = {"friction": [floor, floor]}
     env = gym.make("QuadUneven-v0", **kwargs)
-    expert = attach_expert(env, ExpertConfig(**config))
+    expert = attach_expert(env, ExpertConfig(**{**ADAPT, **config}))
     _, info = env.reset(seed=1)
     fell = False
     for _ in range(round(seconds / env.unwrapped.dt)):
@@ -36,15 +38,15 @@ def walk(floor: float | None, seconds: float, **config):
 def test_no_slip_and_no_change_on_the_nominal_floor():
     distance, fell, expert = walk(None, 10.0)
     assert not fell and distance > 0.9
-    assert expert.assumed_friction == ExpertConfig().friction
+    assert expert.assumed_friction == 0.6
     assert not [m for m in expert.failure_log if "slips" in m]
 
 
-@pytest.mark.parametrize(("floor", "friction_min"), [(0.45, None), (0.4, None), (0.35, 0.25)])
+@pytest.mark.parametrize(("floor", "friction_min"), [(0.45, None), (0.4, None), (0.35, None)])
 def test_a_slipping_floor_lowers_the_assumption_and_the_walk_goes_on(floor, friction_min):
     """Without the adaptation the start assumption (0.6) lets the feet slip and the walk ends (fall or stall
     short of 1 m in 12 s); with it the assumption comes down (below the floor's friction, or to
-    ``friction_min``) and the expert walks on (0.35: only with a ``friction_min`` below the default 0.45)."""
+    ``friction_min``) and the expert walks on."""
     extra = {} if friction_min is None else {"friction_min": friction_min}
     distance, fell, expert = walk(floor, 12.0, **extra)
     assert not fell and distance > 1.1
@@ -52,13 +54,13 @@ def test_a_slipping_floor_lowers_the_assumption_and_the_walk_goes_on(floor, fric
     slips = [m for m in expert.failure_log if "slips" in m]
     assert slips and all("assumed friction" in m for m in slips)
     fixed_distance, fixed_fell, fixed = walk(floor, 12.0, friction_adapt=False)
-    assert fixed.assumed_friction == ExpertConfig().friction
+    assert fixed.assumed_friction == 0.6
     assert fixed_fell or fixed_distance < 1.0
 
 
 def test_reset_restores_the_configured_assumption():
     env = gym.make("QuadUneven-v0", terrain=ROUGH, randomization={"friction": [0.35, 0.35]})
-    expert = attach_expert(env, ExpertConfig(friction=0.55, friction_min=0.25))
+    expert = attach_expert(env, ExpertConfig(friction=0.55, friction_adapt=True))
     env.reset(seed=1)
     for _ in range(100):
         env.step(expert.predict(None)[0])
@@ -107,13 +109,13 @@ def test_no_false_slip_up_a_ramp_of_friction_one():
         terrain={"kind": "slope", "params": {"angle_deg": 25, "ramp_length": 1.2, "plateau_length": 0.5}},
         max_episode_steps=10**6,
     )
-    expert = attach_expert(env)
+    expert = attach_expert(env, ExpertConfig(**ADAPT))
     _, info = env.reset(seed=0)
     for _ in range(round(20.0 / env.unwrapped.dt)):
         _, _, terminated, _, info = env.step(expert.predict(None)[0])
         assert not terminated, info["termination_reason"]
     assert info["distance"] > 1.6  # past the ramp's top
-    assert expert.assumed_friction == ExpertConfig().friction
+    assert expert.assumed_friction == 0.6
 
 
 def test_contact_point_speed_against_finite_differences(rng):
