@@ -127,11 +127,6 @@ _AIRBORNE_DISC = _disc_offsets(AIRBORNE_FOOTHOLD_RADIUS, 0.01)
 """(n, 2) m: horizontal offsets on a 1 cm grid within ``AIRBORNE_FOOTHOLD_RADIUS`` (the origin included)."""
 HEADING_DEADBAND = 1e-3
 """rad: in heading mode, a heading error below this is not turned (the plans stay those of a straight walk)."""
-FOOTHOLD_FRICTION_USE = 0.9
-"""-: the steepest foothold uses this share of the assumed friction (``foothold_limits_for_friction``);
-the rest is left for the tangential forces of the body's accelerations and the feedback. Measured on a
-25 deg ramp with mu = 0.5 (a share of 0.93): the 3-leg phases need mu 0.50-0.55 in the cones, the QP is
-relaxed, the base falls behind its plan, the feedback asks for more, and the robot tips backwards."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,8 +138,7 @@ class ExpertConfig:
     in all, link COMs as in Table 1), never the simulator's; a payload, scaled links or a
     shifted COM are disturbances to it. Its friction cones assume ``friction`` (0.5, half the nominal
     floor's 1.0; the inscribed pyramid's ``friction / sqrt(2)`` = 0.35 per tangent axis is the margin that
-    covers floors down to about 0.35-0.5 depending on the force's direction; on slopes the pyramid turns
-    an edge, where it reaches ``friction``, uphill). Motor strength, joint
+    covers floors down to about 0.35-0.5 depending on the force's direction). Motor strength, joint
     damping and friction, latency and pushes are not modelled: the feedback and the replanning
     (``recovery``) absorb them.
     """
@@ -180,20 +174,18 @@ class ExpertConfig:
     module docstring) or "oracle" (the simulator's live model and state, and its friction in the cones)."""
     friction: float = param(0.5, "-", lo=0.0, hi=2.0, lo_open=True)
     """-, in (0, 2]: friction coefficient the nominal model assumes in its "qp" friction cones at the start
-    of an episode (the 4-sided pyramid inside the cone, mu / sqrt(2) per axis, turned on slopes so that an
-    edge points uphill), and the slope limit of its footholds (``foothold_limits_for_friction``). The
-    nominal floor's is 1.0; 0.5 keeps the planned forces inside the cones of floors down to about 0.4.
-    With ``friction_adapt`` it is lowered when a stance foot slips. Unused by "oracle", which takes the
-    simulator's."""
+    of an episode (the 4-sided pyramid inside the cone, mu / sqrt(2) per axis), and the slope limit of
+    its footholds (``foothold_limits_for_friction``). The nominal floor's is 1.0; 0.5 keeps the planned
+    forces inside the cones of floors down to about 0.4. With ``friction_adapt`` it is lowered when a
+    stance foot slips. Unused by "oracle", which takes the simulator's."""
     friction_adapt: bool = False
     """lower the assumed friction when a stance foot slips: a planned-stance foot in contact whose contact
     point moves faster than ``slip_speed`` horizontally for 8 ms (:mod:`agents.control.slip`: measured
     state, the expert's own kinematics, checked every :data:`SLIP_CHECK_EVERY` physics steps) multiplies it
     by ``friction_decrease``, at most once per :data:`SLIP_COOLDOWN` s and never below ``friction_min``; the
     cones and the foothold slope limit follow at once, and every change is logged. It is never raised
-    again within the episode. Off by default: with ``friction=0.6`` it walks 25 deg ramps and floors of
-    0.3-0.45, but under hard randomization pushed feet read as slips and it loses ``robust_hard``
-    episodes (docs/robustness.md#friction-adaptation)."""
+    again within the episode. Off by default: it walks floors of 0.3-0.45, but under hard randomization
+    pushed feet read as slips and it loses ``robust_hard`` episodes (docs/robustness.md#friction-adaptation)."""
     slip_speed: float = param(0.05, "m/s", lo=0.0, lo_open=True)
     """m/s, > 0: a stance foot's contact point moving faster than this (for ``SLIP_DURATION``) slips; one
     that holds moves < 0.025 m/s on rough terrain."""
@@ -710,18 +702,15 @@ def _fmt(stride: tuple[float, float]) -> str:
 def foothold_limits_for_friction(mu: float) -> FootholdLimits:
     """Foothold limits whose slope limit keeps a foot inside the friction pyramid the controller assumes.
 
-    On a plane tilted by more than 12 deg the controller's 4-sided pyramid has an edge pointing uphill
-    (``inverse_dynamics_kernels.friction_pyramid_into``), where it reaches the cone's ``mu``; a foot
-    there holds its share of the weight inside it up to a tilt of ``atan(mu)`` (26.6 deg for mu = 0.5).
-    Footholds steeper than ``atan(FOOTHOLD_FRICTION_USE * mu)`` (24.2 deg for mu = 0.5, 28.4 for 0.6) are
-    refused (the failure log says ``failed test: slope``) rather than walked on: on a slope where every
-    foot is that steep the torque QP would have no solution (it is relaxed, and the robot falls behind
-    its plan until it tips).
+    The cones are 4-sided pyramids of ``mu / sqrt(2)`` per tangent axis: a foot on a plane steeper than
+    ``atan(mu / sqrt(2))`` (19.5 deg for mu = 0.5) cannot hold its share of the weight inside them, and on
+    a slope where every foot is that steep the torque QP has no solution (it is relaxed, the feet slip).
+    Such a foothold is refused (the failure log says ``failed test: slope``) rather than walked on.
 
     :param mu: friction coefficient of the controller's cones (-).
     """
     default = FootholdLimits()
-    return dataclasses.replace(default, max_slope=min(default.max_slope, float(np.arctan(FOOTHOLD_FRICTION_USE * mu))))
+    return dataclasses.replace(default, max_slope=min(default.max_slope, float(np.arctan(mu / np.sqrt(2.0)))))
 
 
 def _contact_friction(model: mujoco.MjModel) -> float:

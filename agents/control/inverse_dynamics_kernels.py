@@ -29,10 +29,6 @@ import numpy as np
 from quad_uneven_env.spatial_kernels import inv3_into
 
 N_LEGS = 4
-PYRAMID_TURN_TILT = (math.sin(math.radians(8.0)), math.sin(math.radians(12.0)))
-"""sin of the plane tilts between which a friction pyramid turns its edge uphill (``friction_pyramid_into``):
-below 8 deg the pyramid keeps its axes (forces there sit deep inside it), from 12 deg on its edge, where
-the pyramid reaches the true cone's mu, points uphill, where a foot on a slope pushes."""
 NV = 18
 
 _f1 = nb.float64[:]
@@ -405,13 +401,8 @@ def qp_apply(x, C, l, A, b, J, mask, r, tau, F):  # pragma: no cover - compiled
 
 @nb.njit(nb.void(_f2, nb.float64, _f3), cache=False, nogil=True)
 def friction_pyramid_into(normals, mu, out):  # pragma: no cover - compiled
-    """out (p, 5, 3): ``mu' n - t1, mu' n + t1, mu' n - t2, mu' n + t2, n`` per normal (``inverse_dynamics``).
-
-    On a tilted plane the pyramid is turned about n, by a weight rising smoothly from 0 at
-    ``PYRAMID_TURN_TILT[0]`` to 1 at ``PYRAMID_TURN_TILT[1]``, until one of its edges points uphill.
-    """
+    """out (p, 5, 3): ``mu' n - t1, mu' n + t1, mu' n - t2, mu' n + t2, n`` per normal (``inverse_dynamics``)."""
     mus = mu / math.sqrt(2.0)
-    lo, hi = PYRAMID_TURN_TILT
     for i in range(normals.shape[0]):
         nn = math.sqrt(normals[i, 0] ** 2 + normals[i, 1] ** 2 + normals[i, 2] ** 2)
         n0, n1, n2 = normals[i, 0] / nn, normals[i, 1] / nn, normals[i, 2] / nn
@@ -420,17 +411,6 @@ def friction_pyramid_into(normals, mu, out):  # pragma: no cover - compiled
         tn = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
         a0, a1, a2 = a0 / tn, a1 / tn, a2 / tn
         b0, b1, b2 = n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0  # n x t1
-        # uphill direction in the tangent plane: (z . t1, z . t2) = (a2, b2); |.| = sin(tilt)
-        sin_tilt = math.sqrt(a2 * a2 + b2 * b2)
-        if sin_tilt > lo:
-            w = min((sin_tilt - lo) / (hi - lo), 1.0)
-            w = w * w * (3.0 - 2.0 * w)
-            # turn so that t1 + t2 (the pyramid's edge, mu in the true cone) points uphill
-            phi = w * ((math.atan2(b2, a2) + 4.0 * math.pi) % (0.5 * math.pi) - 0.25 * math.pi)
-            c, s = math.cos(phi), math.sin(phi)
-            a0, a1, a2, b0, b1, b2 = (
-                c * a0 + s * b0, c * a1 + s * b1, c * a2 + s * b2, c * b0 - s * a0, c * b1 - s * a1, c * b2 - s * a2
-            )  # fmt: skip
         m0, m1, m2 = mus * n0, mus * n1, mus * n2
         out[i, 0, 0], out[i, 0, 1], out[i, 0, 2] = m0 - a0, m1 - a1, m2 - a2
         out[i, 1, 0], out[i, 1, 1], out[i, 1, 2] = m0 + a0, m1 + a1, m2 + a2

@@ -102,11 +102,11 @@ def test_bad_adaptation_config_names_the_field():
 
 
 def test_no_false_slip_up_a_ramp_of_friction_one():
-    """Up a 25 deg ramp of friction 1: stance feet that land or are dragged there slide for a few ms; none
+    """Up a 20 deg ramp of friction 1: stance feet that land or are dragged there slide for a few ms; none
     of that lowers the assumption (which would make the expert refuse the ramp and stand on it)."""
     env = gym.make(
         "QuadUneven-v0",
-        terrain={"kind": "slope", "params": {"angle_deg": 25, "ramp_length": 1.2, "plateau_length": 0.5}},
+        terrain={"kind": "slope", "params": {"angle_deg": 20, "ramp_length": 1.5, "plateau_length": 0.3}},
         max_episode_steps=10**6,
     )
     expert = attach_expert(env, ExpertConfig(**ADAPT))
