@@ -63,6 +63,7 @@ from agents.control.inverse_dynamics import DISTRIBUTIONS
 from agents.control.nominal import NominalModel
 from agents.control.slip import SLIP_DURATION, SlipDetector
 from planners import FootholdLimits, PlanningError, Scenario, plan_gait_cycle
+from planners.cycle import STANCE_REACH
 from planners.gait import validate_durations
 from planners.pitch import pitch_of_quaternion, yaw_pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
@@ -72,6 +73,7 @@ from quad_uneven_env import constants as C
 from quad_uneven_env import physics
 from quad_uneven_env.fields import check_fields, param
 from quad_uneven_env.robot.dynamics import BACKENDS
+from quad_uneven_env.robot.kinematics import hip_positions_B
 
 EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
 """Allowed values of ``ExpertConfig.model``."""
@@ -267,6 +269,7 @@ class ExpertPolicy:
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
         self._foot_sensor_adr = np.array([int(a) for a in self.env.idx.foot_sensor_adr])
+        self._hips_B = hip_positions_B(self.cfg)
         self._slip = SlipDetector(
             self.config.slip_speed, self.cfg.foot_radius, SLIP_CHECK_EVERY * env.unwrapped.physics_dt
         )
@@ -535,10 +538,10 @@ class ExpertPolicy:
 
     def _measured_footholds(self, mid_swing: bool = False) -> np.ndarray:
         """(4, 3) m, world: the terrain point below each foot site. With ``mid_swing`` (a replan from the
-        measured state, which can come in the middle of a swing), a foot in the air gets the terrain point
-        nearest to its site within :data:`AIRBORNE_FOOTHOLD_RADIUS` instead, where it lands soonest: straight
-        below it, on a downhill slope or past an edge, can lie beyond the leg's reach, and the cycle would
-        start with that leg stretched straight (a singular stance)."""
+        measured state, which can come in the middle of a swing), a foot in the air whose point below is
+        beyond its leg's stance reach (on a downhill slope or past an edge) gets the terrain point nearest to
+        its site within :data:`AIRBORNE_FOOTHOLD_RADIUS` instead, where it lands soonest: otherwise the
+        cycle would start with that leg stretched straight (a singular stance)."""
         sites = physics.feet_pos(self._data, self.env.idx)
         hf = self._terrain.heightfield
         ground = hf.height(sites[:, 0], sites[:, 1])
@@ -546,7 +549,12 @@ class ExpertPolicy:
         if not mid_swing or self._sim is None:
             return out
         touch = self._sim.sensordata[self._foot_sensor_adr]
+        R = np.empty(9)
+        mujoco.mju_quat2Mat(R, physics.base_quat(self._data))
+        hips = self._data.qpos[:3] + self._hips_B @ R.reshape(3, 3).T
         for leg in np.flatnonzero(touch <= 0):
+            if np.linalg.norm(out[leg] - hips[leg]) <= STANCE_REACH * self.cfg.leg_length:
+                continue  # within reach: straight below (on stairs down the nearest point is the nosing above)
             xy = sites[leg, :2] + _AIRBORNE_DISC
             z = hf.height(xy[:, 0], xy[:, 1])
             k = int(np.argmin(np.sum((xy - sites[leg, :2]) ** 2, axis=1) + (z - sites[leg, 2]) ** 2))

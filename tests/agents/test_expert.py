@@ -120,9 +120,10 @@ def test_expert_crosses_hard_terrain(terrain):
 
 
 def test_a_foot_in_the_air_at_a_measured_replan_lands_at_the_nearest_terrain_point():
-    """On a 20 deg slope, with the RF foot lifted (its knee folded): the feet in contact keep the point below
-    them; the lifted one gets the terrain point nearest to its site within 0.1 m, found again here by brute
-    force on a 2 mm grid (to the 1 cm grid's resolution): along the ramp's normal, not straight below."""
+    """On a 20 deg slope, the robot lifted 15 cm (no foot touches; the points below are beyond the legs'
+    stance reach): each foot gets the terrain point nearest to its site within 0.1 m, found again here by
+    brute force on a 2 mm grid (to the 1 cm grid's resolution), along the ramp's normal, not straight
+    below. Lifted 4 cm (within reach) and with the feet down, they keep the point straight below."""
     import mujoco
 
     from quad_uneven_env import physics
@@ -139,9 +140,8 @@ def test_a_foot_in_the_air_at_a_measured_replan_lands_at_the_nearest_terrain_poi
     ramp = x0 + np.linspace(0.0, 3.0, 301)
     x1 = ramp[np.argmax(np.gradient(hf.height(ramp, np.full_like(ramp, y0))) > 0) + 80]  # 0.8 m up the ramp
     u.data.qpos[0] = x1
-    u.data.qpos[2] += float(hf.height(x1, y0) - hf.height(x0, y0)) + 0.06  # 6 cm higher: no foot touches
+    u.data.qpos[2] += float(hf.height(x1, y0) - hf.height(x0, y0)) + 0.15  # 15 cm higher: beyond reach
     u.data.qpos[3:7] = (np.cos(np.radians(-10.0)), 0.0, np.sin(np.radians(-10.0)), 0.0)  # pitched with the ramp
-    u.data.qpos[7 + 3 * 1 + 2] -= 0.3  # RF's knee folds further
     mujoco.mj_forward(u.model, u.data)
     touch = u.data.sensordata[expert._foot_sensor_adr]
     assert (touch <= 0).all()
@@ -159,10 +159,13 @@ def test_a_foot_in_the_air_at_a_measured_replan_lands_at_the_nearest_terrain_poi
         assert dist.min() - 1e-9 <= got <= dist.min() + 0.01 * np.sin(np.radians(20.0)) + 1e-9
         # on the uniform ramp the nearest point is along its normal: the vertical gap times cos(20 deg)
         assert got == pytest.approx(np.linalg.norm(plain[leg] - sites[leg]) * np.cos(np.radians(20.0)), abs=2e-3)
-        assert got < 0.15  # the foot is a few cm above the ramp
-    # a foot in contact keeps the point below it
-    u.data.qpos[2] -= 0.06
-    u.data.qpos[7 + 3 * 1 + 2] += 0.3
+        assert np.linalg.norm(plain[leg] - sites[leg]) - got > 0.005  # not straight below
+    u.data.qpos[2] -= 0.11  # 4 cm above the ramp: within reach
+    mujoco.mj_forward(u.model, u.data)
+    assert (u.data.sensordata[expert._foot_sensor_adr] <= 0).all()
+    np.testing.assert_array_equal(expert._measured_footholds(mid_swing=True), expert._measured_footholds())
+    u.data.qpos[2] -= 0.04  # down: the feet in contact keep the point below them
     mujoco.mj_forward(u.model, u.data)
     down = u.data.sensordata[expert._foot_sensor_adr] > 0
+    assert down.any()
     np.testing.assert_array_equal(expert._measured_footholds(mid_swing=True)[down], expert._measured_footholds()[down])
