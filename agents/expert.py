@@ -74,6 +74,7 @@ from quad_uneven_env import physics
 from quad_uneven_env.fields import check_fields, param
 from quad_uneven_env.robot.dynamics import BACKENDS
 from quad_uneven_env.robot.kinematics import hip_positions_B
+from quad_uneven_env.spatial import quat_to_matrix, wrap_angle, yaw_of_quat
 
 EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
 """Allowed values of ``ExpertConfig.model``."""
@@ -549,9 +550,7 @@ class ExpertPolicy:
         if not mid_swing or self._sim is None:
             return out
         touch = self._sim.sensordata[self._foot_sensor_adr]
-        R = np.empty(9)
-        mujoco.mju_quat2Mat(R, physics.base_quat(self._data))
-        hips = self._data.qpos[:3] + self._hips_B @ R.reshape(3, 3).T
+        hips = self._data.qpos[:3] + self._hips_B @ quat_to_matrix(physics.base_quat(self._data)).T
         for leg in np.flatnonzero(touch <= 0):
             if np.linalg.norm(out[leg] - hips[leg]) <= STANCE_REACH * self.cfg.leg_length:
                 continue  # within reach: straight below (on stairs down the nearest point is the nosing above)
@@ -573,8 +572,7 @@ class ExpertPolicy:
         if command is None:
             return (self.config.stride, 0.0)
         period = float(sum(self._durations))
-        w, x, y, z = physics.base_quat(d)
-        yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        yaw = yaw_of_quat(physics.base_quat(d))
         if turn != 0.0:
             yaw, period = yaw + 0.5 * turn, period * float(np.sin(0.5 * turn) / (0.5 * turn))
         c, s = float(np.cos(yaw)), float(np.sin(yaw))
@@ -588,7 +586,7 @@ class ExpertPolicy:
         command = self.env.command
         heading = getattr(self.env, "command_heading", None)
         if heading is not None:
-            error = (heading - self._yaw + np.pi) % (2.0 * np.pi) - np.pi
+            error = wrap_angle(heading - self._yaw)
             return float(np.clip(error, -MAX_TURN, MAX_TURN)) if abs(error) > HEADING_DEADBAND else 0.0
         if command is None or command[2] == 0.0:
             return 0.0
@@ -632,7 +630,7 @@ class ExpertPolicy:
             """A turning body starts from its measured yaw (unwrapped next to the planned one), not the plan's."""
             if turning:
                 y = yaw_pitch_of_quaternion(physics.base_quat(d))[0]
-                self._yaw += (y - self._yaw + np.pi) % (2.0 * np.pi) - np.pi
+                self._yaw += wrap_angle(y - self._yaw)
 
         pitch_start = previous.end if previous is not None and not measured else measured_pitch()
         if measured:

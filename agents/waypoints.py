@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from quad_uneven_env.fields import check_fields, from_mapping, param
+from quad_uneven_env.spatial import wrap_angle
 
 HEADING_MODES: tuple[str, ...] = ("face", "hold")
 """Allowed values of :attr:`WaypointConfig.heading`."""
@@ -81,11 +82,6 @@ def load_waypoints(raw: Mapping[str, Any] | WaypointConfig, where: str = "waypoi
         raise ValueError(msg if msg.startswith(where) else msg.replace("waypoints", where, 1)) from None
 
 
-def wrap_angle(a: float) -> float:
-    """``a`` (rad) wrapped to [-pi, pi)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
 class WaypointFollower:
     """The command that walks to the waypoints of ``config`` in turn (see the module docstring).
 
@@ -134,4 +130,4 @@ class WaypointFollower:
         return np.array([vx, vy, rate])
 
 
-__all__ = ["HEADING_MODES", "WaypointConfig", "WaypointFollower", "load_waypoints", "wrap_angle"]
+__all__ = ["HEADING_MODES", "WaypointConfig", "WaypointFollower", "load_waypoints"]

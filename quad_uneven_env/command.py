@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from quad_uneven_env.fields import check_fields, from_mapping, param, params_of
+from quad_uneven_env.spatial import wrap_angle
 
 COMMAND_AXES: tuple[str, ...] = ("vx", "vy", "yaw_rate")
 """The command's components, in the order of the observation field and ``info["command"]``."""
@@ -33,18 +34,6 @@ MAX_LIN = 1.0
 
 MAX_YAW_RATE = 2.0
 """rad/s: bound of a commanded yaw rate."""
-
-
-def wrap_angle(angle: float) -> float:
-    """``angle`` (rad) wrapped to [-pi, pi)."""
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
-
-
-def yaw_of_quat(quat_wxyz: np.ndarray) -> float:
-    """rad, in [-pi, pi]: heading of a body (its x axis projected on the world's horizontal plane) from its
-    world orientation quaternion (w, x, y, z)."""
-    w, x, y, z = (float(c) for c in quat_wxyz)
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -235,6 +224,4 @@ __all__ = [
     "CommandRanges",
     "CommandSchedule",
     "load_command",
-    "wrap_angle",
-    "yaw_of_quat",
 ]

@@ -16,13 +16,7 @@ import numpy as np
 from gymnasium import spaces
 
 from quad_uneven_env import constants as C
-from quad_uneven_env.command import (
-    CommandConfig,
-    CommandSchedule,
-    command_arguments_table,
-    load_command,
-    yaw_of_quat,
-)
+from quad_uneven_env.command import CommandConfig, CommandSchedule, command_arguments_table, load_command
 from quad_uneven_env.config import (
     HeightScanConfig,
     RewardWeights,
@@ -53,6 +47,7 @@ from quad_uneven_env.randomization import (
 from quad_uneven_env.rewards import COMMAND_REWARD_TERMS, REWARD_TERMS, command_reward_terms, reward_terms
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT, PhysicsOptions, scene_mjcf
+from quad_uneven_env.spatial import yaw_of_quat
 from quad_uneven_env.termination import FallCheck
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec
 

@@ -6,7 +6,21 @@ The compiled twins for physics-rate kernels are in :mod:`quad_uneven_env.spatial
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+
+def wrap_angle(angle: float) -> float:
+    """``angle`` (rad) wrapped to [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def yaw_of_quat(quat_wxyz: np.ndarray) -> float:
+    """rad, in [-pi, pi]: heading of a body (its x axis projected on the world's horizontal plane, about world
+    z) from its world orientation quaternion (w, x, y, z)."""
+    w, x, y, z = (float(c) for c in quat_wxyz)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -28,6 +28,7 @@ from agents.evaluation.suites import EpisodeTask
 from agents.waypoints import WaypointFollower, load_waypoints
 from quad_uneven_env.constants import LEG_NAMES
 from quad_uneven_env.randomization import factor_values
+from quad_uneven_env.spatial import wrap_angle, yaw_of_quat
 
 VIDEO_FPS = 25
 """Frames per second of the MP4s (one frame every 1 / VIDEO_FPS s of simulated time: real-time playback)."""
@@ -165,12 +166,6 @@ def _policy_phase(policy: Any) -> str | None:
     return None
 
 
-def _yaw(quat: np.ndarray) -> float:
-    """Heading (rad, about world z) of a trunk orientation (w, x, y, z)."""
-    w, x, y, z = (float(v) for v in quat)
-    return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
-
-
 def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     """Run one episode; never raises for a policy or env error inside the episode (recorded as ``error``).
 
@@ -207,7 +202,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     times, cogs, feet, index = [0.0], [info["cog"]], [info["feet_pos"]], []
     contact = [info["foot_contact"]]
     index0 = float(info["stability_index"])
-    yaws = [_yaw(u.data.qpos[3:7])]
+    yaws = [yaw_of_quat(u.data.qpos[3:7])]
     commands: list[np.ndarray] | None = [] if u.command is not None else None
     follower = None
     if task.waypoints is not None:
@@ -241,8 +236,8 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
             feet.append(info["feet_pos"])
             contact.append(info["foot_contact"])
             index.append(info["stability_index"])
-            y = _yaw(u.data.qpos[3:7])
-            yaws.append(yaws[-1] + (y - yaws[-1] + np.pi) % (2.0 * np.pi) - np.pi)  # unwrapped
+            y = yaw_of_quat(u.data.qpos[3:7])
+            yaws.append(yaws[-1] + wrap_angle(y - yaws[-1]))  # unwrapped
             if not info["diverged"]:
                 work += float(np.abs(u.data.actuator_force * u.data.qvel[6:]).sum()) * dt
             if writer is not None and step % frame_every == 0:

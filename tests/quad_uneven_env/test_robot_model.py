@@ -169,3 +169,22 @@ def test_bad_robot_config_names_field():
         robot_config_from_dict(raw)
     with pytest.raises(ValueError, match="unknown robot config"):
         load_robot_config("nonexistent")
+
+
+def test_yaw_of_quat_and_wrap_angle_against_scipy(rng):
+    """The heading of random orientations is scipy's z-y-x yaw; wrap_angle lands in [-pi, pi) and differs
+    from its input by a whole number of turns."""
+    from scipy.spatial.transform import Rotation
+
+    from quad_uneven_env.spatial import wrap_angle, yaw_of_quat
+
+    quats = rng.normal(size=(50, 4))
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+    for q in quats:
+        expected = Rotation.from_quat(q, scalar_first=True).as_euler("ZYX")[0]
+        assert yaw_of_quat(q) == pytest.approx(expected, abs=1e-12)
+    for a in np.concatenate([rng.uniform(-20.0, 20.0, 50), [np.pi, -np.pi, 0.0, 3 * np.pi]]):
+        w = wrap_angle(float(a))
+        assert -np.pi <= w < np.pi
+        turns = (a - w) / (2 * np.pi)
+        assert turns == pytest.approx(round(turns), abs=1e-9)
