@@ -27,10 +27,11 @@ from collections.abc import Callable, Sequence
 from functools import lru_cache
 
 import numpy as np
-import quadprog
 import scipy.linalg
 import scipy.optimize
 
+from planners import cog_kernels as CK
+from planners.cog_qp import WarmStartQP
 from planners.polynomial import N_COEF, PiecewisePolynomial, accel_gram, basis_rows
 from planners.types import PlanningError
 from quad_uneven_env.spatial import cross
@@ -189,7 +190,10 @@ class _Reduced:
                 (basis_rows(s, 0) @ Nk, basis_rows(s, 2) @ Nk / T**2, basis_rows(s, 0), basis_rows(s, 2) / T**2)
             )
         if self.reach:
-            self.offsets_W = [self._world_offsets(k, s) for k, s in enumerate(samples)]
+            self.offsets_W = [np.ascontiguousarray(self._world_offsets(k, s)) for k, s in enumerate(samples)]
+            self._reach_sites = [np.ascontiguousarray(r, dtype=float) for r in self.prob.reach_sites]
+        legs = [len(e[0]) + (len(self._reach_sites[k]) if self.reach else 0) for k, e in enumerate(self.edges)]
+        self.n_rows = sum(len(s) * n for s, n in zip(samples, legs, strict=True))
 
     def _world_offsets(self, k: int, s: np.ndarray) -> np.ndarray:
         """(S or 1, n_k, 3) hip-minus-COG offsets (m, world) of phase ``k`` at local times ``s``."""
@@ -201,7 +205,34 @@ class _Reduced:
         return np.einsum("sij,lj->sli", rot(t), off)
 
     def constraints(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Tumbling moments h (n_con,) at the samples and their Jacobian dh/dz (n_con x 3m), exact."""
+        """Tumbling moments h (n_con,) at the samples and their Jacobian dh/dz (n_con x 3m), exact
+        (compiled, :mod:`planners.cog_kernels`; the numpy form is :meth:`constraints_numpy`).
+
+        Rows per phase: its stability rows (sample-major, then edge), then its reach rows (sample, leg).
+        """
+        coef = np.ascontiguousarray(self.coef(z))
+        h = np.empty(self.n_rows)
+        J = np.empty((self.n_rows, N_AXES * self.m))
+        m, g = float(self.prob.mass), GRAVITY
+        i = 0
+        for k in range(self.K):
+            Bv, Ba, P0, A0 = self.rows[k]
+            p, kappa, _ = self.edges[k]
+            n = P0.shape[0] * p.shape[0]
+            CK.stability_rows_into(P0, A0, Bv, Ba, coef[k], p, kappa, m, g, h[i : i + n], J[i : i + n])
+            i += n
+            if self.reach:
+                sites = self._reach_sites[k]
+                n = P0.shape[0] * sites.shape[0]
+                CK.reach_rows_into(
+                    P0, Bv, coef[k], self.offsets_W[k], sites, float(self.prob.max_reach), float(self.bound),
+                    float(self.reach_scale), h[i : i + n], J[i : i + n],
+                )  # fmt: skip
+                i += n
+        return h, J
+
+    def constraints_numpy(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`constraints` in numpy (the reference of the compiled rows)."""
         coef = self.coef(z)
         m, g = self.prob.mass, GRAVITY
         hs, Js = [], []
@@ -261,27 +292,6 @@ def _dense_index(red: _Reduced, coef: np.ndarray, n: int = 241) -> list[tuple[np
     return out
 
 
-def _solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lo: np.ndarray) -> np.ndarray | None:
-    """min 1/2 z'Hz + g'z s.t. C z >= lo; None when infeasible. quadprog (Goldfarb-Idnani dual
-    active set): exact, and on these ~120-variable problems faster than ProxQP and DAQP
-    (docs/results_planning.md).
-
-    Every row is scaled to unit norm first: the rows' norms span 0 to ~3e4 (reach, stability and
-    friction rows in their own units), and on some such problems quadprog's active set cycles forever
-    inside its C loop, where no signal or time limit reaches it. Zero rows are dropped (infeasible if
-    their bound is positive).
-    """
-    norms = np.linalg.norm(C, axis=1)
-    live = norms > 0.0
-    if np.any(lo[~live] > 0.0):
-        return None
-    scale = 1.0 / norms[live]
-    try:
-        return quadprog.solve_qp(H, -g, (C[live] * scale[:, None]).T, lo[live] * scale, 0)[0]
-    except ValueError:  # "constraints are inconsistent, no solution"
-        return None
-
-
 def _infeasible(red: _Reduced, z: np.ndarray, bound: float, what: str, rows: np.ndarray | None = None) -> PlanningError:
     h, _ = red.constraints(z)
     i = int(np.argmin(np.where(rows, h, np.inf) if rows is not None else h))
@@ -320,9 +330,10 @@ def _sqp(red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, max_iter: 
     fixed = np.abs(J).max(axis=1) < 1e-12
     if np.any(fixed & (h < red.prob.epsilon)):
         raise _infeasible(red, z, red.prob.epsilon, "the given start or end state itself", fixed)
+    qp = WarmStartQP(red.H, red.g)
     for _ in range(max_iter):
         lo = np.where(fixed, -1e20, bound - h + J @ z)
-        z_new = _solve_qp(red.H, red.g, J, lo)
+        z_new = qp.solve(J, lo, z)
         stats.iterations += 1
         if z_new is None:
             raise _infeasible(red, _least_violating(J, lo, z), bound, "no stable path in the linearised problem")

@@ -25,12 +25,15 @@ _BERN_TO_MONO = np.array(
 """Row i: monomial coefficients (s^0 .. s^8) of the Bernstein polynomial b_{i,8}(s)."""
 
 
+_K = np.arange(N_COEF)
+_FALLING = [np.array([factorial(j) / factorial(j - d) if j >= d else 0.0 for j in _K]) for d in range(N_COEF)]
+"""Per derivative d: j! / (j - d)!, the factor of s^(j - d) in the d-th derivative of s^j (0 for j < d)."""
+
+
 def basis_rows(s: np.ndarray, derivative: int = 0) -> np.ndarray:
     """Bernstein basis (or its d-th derivative with respect to s) at local times ``s`` (S,) -> (S, 9)."""
     s = np.atleast_1d(np.asarray(s, dtype=float))
-    k = np.arange(N_COEF)
-    fall = np.array([factorial(j) / factorial(j - derivative) if j >= derivative else 0.0 for j in k])
-    powers = np.where(k >= derivative, s[:, None] ** np.maximum(k - derivative, 0), 0.0) * fall
+    powers = np.where(_K >= derivative, s[:, None] ** np.maximum(_K - derivative, 0), 0.0) * _FALLING[derivative]
     return powers @ _BERN_TO_MONO.T
 
 

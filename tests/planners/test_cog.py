@@ -121,3 +121,63 @@ def test_unstable_start_state_raises_naming_it():
     start[0, 1] = 0.12  # 6.5 cm inside: plannable
     path, _ = plan_cog(dataclasses.replace(prob, start=start))
     assert dense_index(dataclasses.replace(prob, start=start), path).min() >= 0.1 - 1e-6
+
+
+def _rot_z(t):
+    a = 0.3 * np.asarray(t, dtype=float)
+    c, s = np.cos(a), np.sin(a)
+    R = np.zeros((a.size, 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
+    return R
+
+
+@pytest.mark.parametrize("rotation", [None, _rot_z])
+def test_compiled_constraint_rows_equal_the_numpy_rows(rng, rotation):
+    """Stability and reach rows (with and without a yawing body) from the kernels equal the numpy form, at
+    random points far from any solution (edges crossed, legs over-stretched)."""
+    base = make_problem()
+    hips = np.array([[0.25, 0.12, 0.0], [0.25, -0.12, 0.0], [-0.25, 0.12, 0.0], [-0.25, -0.12, 0.0]])
+    offsets = [hips[[LEG_NAMES.index(n) for n in names]] for names in base.support_names]
+    sites = [s + np.array([0.0, 0.0, 0.02]) for s in base.supports]
+    prob = dataclasses.replace(base, reach_sites=sites, reach_offsets=offsets, max_reach=0.42, reach_rotation=rotation)
+    red = _Reduced(prob)
+    red.bound = 0.3
+    red.set_samples([np.sort(rng.uniform(0.0, 1.0, 4 + k)) for k in range(7)])
+    for scale in (0.01, 0.3):
+        z = rng.normal(scale=scale, size=3 * red.m)
+        h, J = red.constraints(z)
+        h_ref, J_ref = red.constraints_numpy(z)
+        assert h.shape == h_ref.shape and J.shape == J_ref.shape
+        np.testing.assert_allclose(h, h_ref, rtol=1e-12, atol=1e-10)
+        np.testing.assert_allclose(J, J_ref, rtol=1e-12, atol=1e-10)
+        assert (h < red.bound).any() and (h > red.bound).any()  # both sides of the constraint
+
+
+def test_warm_started_qps_equal_the_full_qp(rng):
+    """Each QP of an SQP solved from the previous one's active set (the KKT shortcut or quadprog on a
+    working set) has quadprog's optimum on all rows, and the same verdict on an infeasible one."""
+    from planners.cog_qp import WarmStartQP, solve_qp
+
+    red = _Reduced(make_problem(40.0))
+    red.bound = 40.0
+    red.set_samples([np.linspace(0, 1, 12)] * 7)
+    qp = WarmStartQP(red.H, red.g)
+    z = np.linalg.solve(red.H, -red.g)
+    for _ in range(6):
+        h, J = red.constraints(z)
+        lo = red.bound - h + J @ z
+        x_full = solve_qp(red.H, red.g, J, lo)
+        x = qp.solve(J, lo, z)
+        assert x_full is not None and x is not None
+        np.testing.assert_allclose(x, x_full, atol=1e-8 * max(1.0, np.abs(x_full).max()))
+        z = x
+    assert qp.shortcuts >= 2  # the converging SQP keeps its active set
+    assert 0 < qp.active.sum() < len(lo)
+    # a random linearisation point: the guess fails its checks, the working set finds the optimum
+    z_far = rng.normal(scale=0.05, size=z.shape)
+    h, J = red.constraints(z_far)
+    lo = red.bound - h + J @ z_far
+    np.testing.assert_allclose(qp.solve(J, lo, z_far), solve_qp(red.H, red.g, J, lo), atol=1e-8)
+    # an impossible margin: both infeasible
+    assert solve_qp(red.H, red.g, J, lo + 1e3) is None
+    assert qp.solve(J, lo + 1e3, z_far) is None

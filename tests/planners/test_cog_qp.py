@@ -17,8 +17,8 @@ def test_the_saved_qp_is_solved_and_matches_daqp(tmp_path):
     """Solved within a minute in a child process (a hang must fail the test, not block the suite);
     the solution is feasible and equals DAQP's (an independent active-set solver) to 1e-6."""
     code = (
-        "import numpy as np, sys; from planners.cog import _solve_qp; "
-        f"d = np.load({str(QP)!r}); z = _solve_qp(d['H'], d['g'], d['C'], d['lo']); "
+        "import numpy as np, sys; from planners.cog_qp import solve_qp; "
+        f"d = np.load({str(QP)!r}); z = solve_qp(d['H'], d['g'], d['C'], d['lo']); "
         "np.save(sys.argv[1], z)"
     )
     subprocess.run([sys.executable, "-c", code, str(tmp_path / "z.npy")], check=True, timeout=60)
@@ -37,10 +37,26 @@ def test_the_saved_qp_is_solved_and_matches_daqp(tmp_path):
 
 
 def test_a_zero_row_with_a_positive_bound_is_infeasible():
-    from planners.cog import _solve_qp
+    from planners.cog_qp import solve_qp
 
     H = np.eye(2)
     g = np.zeros(2)
     C = np.array([[1.0, 0.0], [0.0, 0.0]])
-    assert _solve_qp(H, g, C, np.array([1.0, 0.5])) is None
-    np.testing.assert_allclose(_solve_qp(H, g, C, np.array([1.0, -1.0])), [1.0, 0.0])
+    assert solve_qp(H, g, C, np.array([1.0, 0.5])) is None
+    np.testing.assert_allclose(solve_qp(H, g, C, np.array([1.0, -1.0])), [1.0, 0.0])
+
+
+def test_the_saved_qp_through_the_warm_start_equals_quadprog():
+    """The same problem through :class:`WarmStartQP`: cold (working set from the unconstrained optimum), then
+    warm (the KKT shortcut from its own active set); both equal quadprog on all rows."""
+    from planners.cog_qp import WarmStartQP, solve_qp
+
+    d = np.load(QP)
+    H, g, C, lo = d["H"], d["g"], d["C"], d["lo"]
+    ref = solve_qp(H, g, C, lo)
+    qp = WarmStartQP(H, g)
+    cold = qp.solve(C, lo, qp.x_free)
+    warm = qp.solve(C, lo, cold)
+    assert qp.shortcuts == 1
+    for x in (cold, warm):
+        np.testing.assert_allclose(x, ref, atol=1e-7 * max(1.0, np.abs(ref).max()))
