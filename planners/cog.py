@@ -134,6 +134,26 @@ def _cost_structure(durations: tuple[float, ...]) -> tuple[np.ndarray, np.ndarra
     return R, G
 
 
+@lru_cache(maxsize=64)
+def _hessian(
+    durations: tuple[float, ...], weights: tuple[float, float, float], smoothing: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The cost's Hessian H (3m x 3m) in the null-space variables and its inverse (shared: never write to
+    them; they depend on the phase durations and the weights only, not on the footholds or the targets)."""
+    _, N, _ = _equality_structure(durations)
+    R, G = _cost_structure(durations)
+    RN, GN = R @ N, G @ N
+    m = N.shape[1]
+    H = np.zeros((N_AXES * m, N_AXES * m))
+    for a in range(N_AXES):
+        sl = slice(a * m, (a + 1) * m)
+        H[sl, sl] = 2.0 * (weights[a] * RN.T @ RN + smoothing * N.T @ GN)
+    H += 1e-12 * np.eye(H.shape[0])
+    Hinv = np.linalg.inv(H)
+    Hinv.setflags(write=False)  # H stays writable: quadprog takes only writable buffers (and copies them)
+    return H, Hinv
+
+
 class _Reduced:
     """The problem in the null-space variables z (3 axes x m): x_axis = x0_axis + N z_axis."""
 
@@ -152,13 +172,12 @@ class _Reduced:
         w = np.asarray(prob.weights, dtype=float)
         lam = prob.smoothing
         RN, GN = R @ N, G @ N
-        H = np.zeros((N_AXES * self.m, N_AXES * self.m))
         g = np.zeros(N_AXES * self.m)
         for a in range(N_AXES):
             sl = slice(a * self.m, (a + 1) * self.m)
-            H[sl, sl] = 2.0 * (w[a] * RN.T @ RN + lam * N.T @ GN)
             g[sl] = 2.0 * (w[a] * RN.T @ (R @ self.x0[:, a] - prob.targets[:, a]) + lam * GN.T @ self.x0[:, a])
-        self.H, self.g = H + 1e-12 * np.eye(H.shape[0]), g
+        self.H, self.Hinv = _hessian(self.durations, tuple(float(v) for v in w), float(lam))
+        self.g = g
         self.const = float(sum(w[a] * np.sum((R @ self.x0[:, a] - prob.targets[:, a]) ** 2) for a in range(N_AXES)))
         # Support polygon edges per phase (clockwise seen from above).
         self.edges = []
@@ -186,9 +205,8 @@ class _Reduced:
         for k, s in enumerate(samples):
             Nk = self.N[k * N_COEF : (k + 1) * N_COEF]
             T = self.durations[k]
-            self.rows.append(
-                (basis_rows(s, 0) @ Nk, basis_rows(s, 2) @ Nk / T**2, basis_rows(s, 0), basis_rows(s, 2) / T**2)
-            )
+            B0, B2 = _sample_rows(s)
+            self.rows.append((B0 @ Nk, B2 @ Nk / T**2, B0, B2 / T**2))
         if self.reach:
             self.offsets_W = [np.ascontiguousarray(self._world_offsets(k, s)) for k, s in enumerate(samples)]
             self._reach_sites = [np.ascontiguousarray(r, dtype=float) for r in self.prob.reach_sites]
@@ -276,14 +294,30 @@ class _Reduced:
         raise IndexError(index)
 
 
+def _sample_rows(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bernstein rows (S, 9) of the position and the second derivative at local times ``s`` (S,) (read-only,
+    cached: every plan uses the same uniform sample grids)."""
+    return _sample_rows_of(np.asarray(s, dtype=float).tobytes())
+
+
+@lru_cache(maxsize=256)
+def _sample_rows_of(key: bytes) -> tuple[np.ndarray, np.ndarray]:
+    s = np.frombuffer(key)
+    rows = basis_rows(s, 0), basis_rows(s, 2)
+    for r in rows:
+        r.setflags(write=False)
+    return rows
+
+
 def _dense_index(red: _Reduced, coef: np.ndarray, n: int = 241) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per phase: dense local times and the tumbling moments (S, E) on them."""
     s = np.linspace(0.0, 1.0, n)
+    B0, B2 = _sample_rows(s)
     out = []
     for k in range(red.K):
         T = red.durations[k]
-        P = basis_rows(s, 0) @ coef[k]
-        acc = basis_rows(s, 2) @ coef[k] / T**2
+        P = B0 @ coef[k]
+        acc = B2 @ coef[k] / T**2
         F = -red.prob.mass * acc
         F[:, 2] -= red.prob.mass * GRAVITY
         p, kappa, _ = red.edges[k]
@@ -330,7 +364,7 @@ def _sqp(red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, max_iter: 
     fixed = np.abs(J).max(axis=1) < 1e-12
     if np.any(fixed & (h < red.prob.epsilon)):
         raise _infeasible(red, z, red.prob.epsilon, "the given start or end state itself", fixed)
-    qp = WarmStartQP(red.H, red.g)
+    qp = WarmStartQP(red.H, red.g, red.Hinv)
     for _ in range(max_iter):
         lo = np.where(fixed, -1e20, bound - h + J @ z)
         z_new = qp.solve(J, lo, z)

@@ -56,7 +56,9 @@ def solve_qp_active(
     scale = 1.0 / norms[live]
     try:
         res = quadprog.solve_qp(H, -g, (C[live] * scale[:, None]).T, lo[live] * scale, 0)
-    except ValueError:  # "constraints are inconsistent, no solution"
+    except ValueError as err:
+        if "inconsistent" not in str(err):  # e.g. a read-only buffer: a bug, not an infeasible problem
+            raise
         return None, rows
     rows[np.flatnonzero(live)[res[4] > 0.0]] = True
     return res[0], rows
@@ -69,9 +71,10 @@ class WarmStartQP:
     counts the solves the active-set guess settled without quadprog.
     """
 
-    def __init__(self, H: np.ndarray, g: np.ndarray) -> None:
+    def __init__(self, H: np.ndarray, g: np.ndarray, Hinv: np.ndarray | None = None) -> None:
+        """:param Hinv: H's inverse when the caller has it (computed otherwise)."""
         self.H, self.g = H, g
-        self.Hinv = np.linalg.inv(H)
+        self.Hinv = np.linalg.inv(H) if Hinv is None else Hinv
         self.x_free = -self.Hinv @ g
         self.active: np.ndarray | None = None
         self.shortcuts = 0

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 QP = Path(__file__).parent / "data" / "cog_qp_quadprog_cycles.npz"
 """A COG-planning QP saved from a commanded walk (vx -0.1, vy -0.05, yaw rate 0.3, default gait): row norms
@@ -60,3 +61,12 @@ def test_the_saved_qp_through_the_warm_start_equals_quadprog():
     assert qp.shortcuts == 1
     for x in (cold, warm):
         np.testing.assert_allclose(x, ref, atol=1e-7 * max(1.0, np.abs(ref).max()))
+
+
+def test_a_quadprog_error_other_than_infeasibility_is_raised_not_read_as_infeasible():
+    from planners.cog_qp import solve_qp
+
+    H = np.eye(2)
+    H.setflags(write=False)  # quadprog refuses read-only buffers with a ValueError
+    with pytest.raises(ValueError, match="read-only"):
+        solve_qp(H, np.zeros(2), np.eye(2), np.zeros(2))
