@@ -12,8 +12,9 @@ The small ``lambda`` term (not in the paper) makes the path unique between the j
 paper's cost only sees the six junction points. The equalities are eliminated exactly (null
 space of the 24 linear conditions per axis), so continuity holds to rounding error. The
 stability constraint is bilinear in the coefficients (P x P''); it is solved by sequential
-quadratic programming with analytic constraint Jacobians (quadprog, a dual active-set solver), or, as the
-baseline, by ``scipy.optimize.minimize(method="SLSQP")`` with analytic or finite-difference
+quadratic programming with analytic constraint Jacobians (compiled: :mod:`planners.cog_kernels`) and
+quadprog, a dual active-set solver, each QP warm-started from the previous one's active set
+(:mod:`planners.cog_qp`: the same optimum), or, as the baseline, by ``scipy.optimize.minimize(method="SLSQP")`` with analytic or finite-difference
 gradients. After solving, the index is checked on a dense grid; sample times where it dips
 below ``epsilon`` are added and the problem re-solved. Infeasibility raises
 :class:`~planners.types.PlanningError` naming the phase, the edge and the violation.
