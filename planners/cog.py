@@ -14,9 +14,10 @@ space of the 24 linear conditions per axis), so continuity holds to rounding err
 stability constraint is bilinear in the coefficients (P x P''); it is solved by sequential
 quadratic programming with analytic constraint Jacobians (compiled: :mod:`planners.cog_kernels`) and
 quadprog, a dual active-set solver, each QP warm-started from the previous one's active set
-(:mod:`planners.cog_qp`: the same optimum), or, as the baseline, by ``scipy.optimize.minimize(method="SLSQP")`` with analytic or finite-difference
-gradients. After solving, the index is checked on a dense grid; sample times where it dips
-below ``epsilon`` are added and the problem re-solved. Infeasibility raises
+(:mod:`planners.cog_qp`: the same optimum), or, as the baseline, by
+``scipy.optimize.minimize(method="SLSQP")`` with analytic or finite-difference gradients. After
+solving, the index is checked on a dense grid; sample times where it dips below ``epsilon`` are
+added and the problem re-solved. Infeasibility raises
 :class:`~planners.types.PlanningError` naming the phase, the edge and the violation.
 """
 
