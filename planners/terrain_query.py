@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from planners import terrain_query_kernels as TK
 from planners.types import HeightMap
 
 _RING = np.stack(
@@ -28,8 +29,20 @@ def max_height_in_disk(terrain: HeightMap, xy: np.ndarray, radius: float) -> np.
     """Highest terrain point (m) within ``radius`` (m) of each world point ``xy`` (T, 2), sampled.
 
     Samples the centre, rings at ``radius`` and ``radius / 2`` and four diagonals: conservative
-    to within the height change over the gap between samples.
+    to within the height change over the gap between samples. Compiled on a height field's grid
+    (:mod:`planners.terrain_query_kernels`), :func:`max_height_in_disk_numpy` on any other map.
     """
+    xy = np.ascontiguousarray(xy, dtype=float).reshape(-1, 2)
+    grid = getattr(terrain, "kernel_args", None)
+    if grid is None:
+        return max_height_in_disk_numpy(terrain, xy, radius)
+    out = np.empty(len(xy))
+    TK.max_height_in_disk_into(*grid, xy, float(radius), _DISK, out)
+    return out
+
+
+def max_height_in_disk_numpy(terrain: HeightMap, xy: np.ndarray, radius: float) -> np.ndarray:
+    """:func:`max_height_in_disk` in numpy, for any height map."""
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     pts = xy[:, None, :] + radius * _DISK[None, :, :]
     return terrain.height(pts[..., 0], pts[..., 1]).max(axis=1)
@@ -55,16 +68,38 @@ def capsule_clearance(
     ``radius`` of the segment's ground projection, the only terrain that can come closer than
     ``radius`` to the axis); the gap is the smallest distance from a sample to the segment minus
     the radius: exact at the samples, so on a plane or a slope it is the true gap, and next to an
-    edge it is at most about ``spacing / 2`` too large.
+    edge it is at most about ``spacing / 2`` too large. Compiled on a height field's grid
+    (:mod:`planners.terrain_query_kernels`), :func:`capsule_clearance_numpy` on any other map.
     """
+    a = np.ascontiguousarray(a, dtype=float).reshape(-1, 3)
+    b = np.ascontiguousarray(b, dtype=float).reshape(-1, 3)
+    grid = getattr(terrain, "kernel_args", None)
+    if grid is None:
+        return capsule_clearance_numpy(terrain, a, b, radius, spacing)
+    horiz = np.hypot(b[:, 0] - a[:, 0], b[:, 1] - a[:, 1])
+    n_u, n_v = _capsule_samples(horiz, radius, spacing)
+    out = np.empty(len(a))
+    TK.capsule_clearance_into(*grid, a, b, float(radius), n_u, n_v, out)
+    return out
+
+
+def _capsule_samples(horiz: np.ndarray, radius: float, spacing: float) -> tuple[int, int]:
+    """Samples along and across every capsule's footprint (the longest footprint sets them)."""
+    n_u = int(np.ceil((horiz.max(initial=0.0) + 2.0 * radius) / spacing)) + 1
+    return n_u, int(np.ceil(2.0 * radius / spacing)) + 1
+
+
+def capsule_clearance_numpy(
+    terrain: HeightMap, a: np.ndarray, b: np.ndarray, radius: float, spacing: float = 0.005
+) -> np.ndarray:
+    """:func:`capsule_clearance` in numpy, for any height map."""
     a = np.asarray(a, dtype=float).reshape(-1, 3)
     b = np.asarray(b, dtype=float).reshape(-1, 3)
     d = b - a
     horiz = np.hypot(d[:, 0], d[:, 1])
     along = np.where(horiz[:, None] > 1e-12, d[:, :2] / np.maximum(horiz, 1e-12)[:, None], [1.0, 0.0])
     across = np.column_stack([-along[:, 1], along[:, 0]])
-    n_u = int(np.ceil((horiz.max(initial=0.0) + 2.0 * radius) / spacing)) + 1
-    n_v = int(np.ceil(2.0 * radius / spacing)) + 1
+    n_u, n_v = _capsule_samples(horiz, radius, spacing)
     u = np.linspace(0.0, 1.0, n_u)[None, :, None] * (horiz[:, None, None] + 2.0 * radius) - radius  # (N, U, 1)
     v = np.linspace(-radius, radius, n_v)[None, None, :]  # (1, 1, V)
     xy = a[:, None, None, :2] + u[..., None] * along[:, None, None] + v[..., None] * across[:, None, None]

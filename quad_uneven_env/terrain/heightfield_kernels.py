@@ -12,23 +12,28 @@ import numba as nb
 import numpy as np
 
 
+@nb.njit(cache=False, nogil=True, inline="always")
+def height_at(flat, nrow, ncol, ox, oy, inv_cell, x, y):  # pragma: no cover - compiled
+    """MuJoCo's triangulated surface (m) at one point (x, y) (m, world); see :meth:`HeightField.height`."""
+    u = min(max((x - ox) * inv_cell, 0.0), ncol - 1.0)
+    v = min(max((y - oy) * inv_cell, 0.0), nrow - 1.0)
+    c = min(int(u), ncol - 2)
+    r = min(int(v), nrow - 2)
+    fu, fv = u - c, v - r
+    i00 = r * ncol + c
+    h00, h11 = flat[i00], flat[i00 + ncol + 1]
+    if fu >= fv:
+        hm = flat[i00 + 1]
+        return h00 + fu * (hm - h00) + fv * (h11 - hm)
+    hm = flat[i00 + ncol]
+    return h00 + fv * (hm - h00) + fu * (h11 - hm)
+
+
 @nb.njit(cache=False, nogil=True)
 def heights_into(flat, nrow, ncol, ox, oy, inv_cell, xs, ys, out):  # pragma: no cover - compiled
     """MuJoCo's triangulated surface at (xs[k], ys[k]) into out[k]; see :meth:`HeightField.height`."""
     for k in range(xs.shape[0]):
-        u = min(max((xs[k] - ox) * inv_cell, 0.0), ncol - 1.0)
-        v = min(max((ys[k] - oy) * inv_cell, 0.0), nrow - 1.0)
-        c = min(int(u), ncol - 2)
-        r = min(int(v), nrow - 2)
-        fu, fv = u - c, v - r
-        i00 = r * ncol + c
-        h00, h11 = flat[i00], flat[i00 + ncol + 1]
-        if fu >= fv:
-            hm = flat[i00 + 1]
-            out[k] = h00 + fu * (hm - h00) + fv * (h11 - hm)
-        else:
-            hm = flat[i00 + ncol]
-            out[k] = h00 + fv * (hm - h00) + fu * (h11 - hm)
+        out[k] = height_at(flat, nrow, ncol, ox, oy, inv_cell, xs[k], ys[k])
 
 
 @nb.njit(cache=False, nogil=True)
