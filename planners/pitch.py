@@ -128,16 +128,19 @@ class BodyPitch:
 
     def rotation(self, t: np.ndarray) -> np.ndarray:
         """R_WB (..., 3, 3) at times ``t`` (...) (s): ``Rz(psi) Ry(theta)`` (without yaw: about world y only)."""
-        th = self.angle(t)
+        th = np.asarray(self.angle(t))
         c, s = np.cos(th), np.sin(th)
-        z, o = np.zeros_like(th), np.ones_like(th)
-        ry = np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+        R = np.zeros((*th.shape, 3, 3))
+        R[..., 2, 0], R[..., 2, 2] = -s, c
         if not self.yawed:
-            return ry
+            R[..., 0, 0], R[..., 0, 2], R[..., 1, 1] = c, s, 1.0
+            return R
         psi = self.yaw(t)[0]
         cz, sz = np.cos(psi), np.sin(psi)
-        rz = np.stack([np.stack([cz, -sz, z], -1), np.stack([sz, cz, z], -1), np.stack([z, z, o], -1)], -2)
-        return rz @ ry
+        # Rz(psi) Ry(theta) written out
+        R[..., 0, 0], R[..., 0, 1], R[..., 0, 2] = cz * c, -sz, cz * s
+        R[..., 1, 0], R[..., 1, 1], R[..., 1, 2] = sz * c, cz, sz * s
+        return R
 
     def quaternion(self, t: np.ndarray) -> np.ndarray:
         """(..., 4) base orientation (w, x, y, z) at times ``t`` (...) (s): ``q_z(psi) q_y(theta)``."""
