@@ -163,7 +163,7 @@ class ComputedTorqueController:
     def last(self) -> IDResult | None:
         """The inverse-dynamics result of the last call (diagnostics; read it before the next call)."""
         last = self._last
-        if isinstance(last, WorkspaceResult):  # fast path, pinv forces inside the cones: built on demand
+        if isinstance(last, WorkspaceResult):  # fast path (pinv, or its QP): built on demand
             distribution = "qp" if self.distribution == "qp" and last.layout.n_stance else "pinv"
             last = self._last = last.build(self.id, distribution)
         return last

@@ -3,11 +3,11 @@
 :class:`FastControlStep` does what the readable path of
 :class:`~agents.control.controller.ComputedTorqueController` does at one physics step (measured
 contacts and stance set, PD command, dynamics terms, pinv inverse dynamics, terrain normals) in one
-call of :func:`~agents.control.controller_kernels.control_step`, and gives the same torques (tested
-in ``tests/agents/test_control_fast.py``). The friction-cone QP, when the pinv forces leave a cone,
-is the readable path's own :meth:`InverseDynamics.distribute_qp`. Every case the kernel does not
-handle (1-2 stance feet, a failed Cholesky, arrays of other types) returns None: the caller then
-takes the readable path.
+call of :func:`~agents.control.controller_kernels.control_step`, the friction-cone QP included, and
+gives the same torques (tested in ``tests/agents/test_control_fast.py``). A QP the compiled solver
+gives up on is the readable path's :meth:`InverseDynamics.distribute_qp` (DAQP). Every case the kernel
+does not handle (1-2 stance feet, a failed Cholesky, arrays of other types) returns None: the caller
+then takes the readable path.
 """
 
 from __future__ import annotations
@@ -109,16 +109,16 @@ class FastControlStep:
         if code < 0 or not (code >> 4) & K.DONE:
             return None
         lay = self.layouts[code & 15]
-        status, ws = code >> 4, self.id.workspace
+        status, ws = code >> 4 & 15, self.id.workspace
         tau = np.empty(C.N_JOINTS)
-        if self.id.distribution == "qp" and lay.n_stance and not code & FK.INSIDE_CONES:
-            result = self.id.result_from_workspace(status, lay)
+        if self.id.distribution == "qp" and lay.n_stance and not code & (FK.INSIDE_CONES | FK.QP_DONE):
+            result = self.id.result_from_workspace(status, lay)  # the compiled QP failed: with DAQP
             self.id.distribute_qp(lay, self._terms[1], ws.r, result, normals)
             K.clip_into(result.tau, self.torque_limit, tau)
             return tau, result
-        # the pinv torques (for "qp": its optimum, as control_step checked the cones); copied out only if asked
+        # the pinv torques, or the QP's (control_step wrote them); copied out only if asked
         K.clip_into(ws.tau, self.torque_limit, tau)
-        return tau, WorkspaceResult(status, lay, self.id.workspace_version)
+        return tau, WorkspaceResult(status, lay, self.id.workspace_version, bool(code & FK.QP_RELAXED))
 
     def forget_arguments(self) -> None:
         """Rebuild the kernel's arguments at the next step (after the solver's ``mu`` changed)."""
@@ -137,8 +137,8 @@ class FastControlStep:
         tail = (
             data.qpos, data.qvel, gains, self._bdd, *self.dynamics.data_views(data)[1:],
             *self._terms, data.qfrc_bias, 1.0 / SINGULAR_SIGMA, DAMPING, *self.id.workspace,
-            *hf_args, self.foot_sites, self._sites, self._normals,
-            self.id.mu if normals is not None else 0.0, self.id.cone_lower, self.id.cone_buffer,
+            *hf_args, self.foot_sites, self._sites, self.id.up_normals if normals is None else normals,
+            self.id.mu if qp else 0.0, self.id.cone_lower, self.id.cone_buffer,
         )  # fmt: skip
         self._cache = (data, hf, gains, tail, normals)
         return tail, normals
