@@ -56,7 +56,7 @@ def control_step(
     M_csr, rowadr, rownnz, colind, xpos, xmat, xanchor, xaxis, site_xpos, subtree_com, idx, par,
     M, J, Jdd, G, h, inv_sigma, damping, tau, F, qacc, r, Jinv, S,
     hf_flat, nrow, ncol, ox, oy, inv_cell, foot_sites, site_pos, normals,
-    mu, cone_lower, cones,
+    mu, cone_lower, cones, compiled_qp,
 ):  # fmt: skip  # pragma: no cover - compiled
     """Stance, PD command, dynamics terms, pinv inverse dynamics and foot normals at one physics step.
 
@@ -68,10 +68,11 @@ def control_step(
     the pinv forces are also checked against the stance legs' friction pyramids (written into
     ``cones``, (4, 5, 3)) with the lower bounds ``cone_lower`` (5,), as
     :func:`agents.control.inverse_dynamics_kernels.qp_fill` does: inside, they are the "qp" optimum;
-    outside, :func:`agents.control.qp_kernels.distribute_qp` replaces ``tau`` and ``F`` by the QP's. Returns
+    outside, with ``compiled_qp``, :func:`agents.control.qp_kernels.distribute_qp` replaces ``tau`` and ``F``
+    by the QP's. Returns
     ``stance_mask | status << 4 | n_beta << 8`` with ``status`` the bits of
     :func:`agents.control.inverse_dynamics_kernels.id_pinv`, or-ed with ``INSIDE_CONES``, or ``QP_DONE``
-    (and ``QP_RELAXED``); "qp" with neither bit: the compiled QP failed (solve it with DAQP). A negative
+    (and ``QP_RELAXED``); "qp" with neither bit: the QP is left to the caller (DAQP). A negative
     value when an input has the wrong size (the caller then takes the general path, which names it).
     """
     meas = K.foot_contact_mask(contact_geom, foot_of_geom, terrain_geom) if measured < 0 else measured
@@ -107,6 +108,8 @@ def control_step(
             k += 1
         if inside:
             return code | INSIDE_CONES
+        if not compiled_qp:
+            return code
         qp = QK.distribute_qp(normals, mu, J, mask, r, cone_lower, tau, F, cones)
         if qp == QK.QP_OPTIMAL:
             return code | QP_DONE

@@ -112,7 +112,7 @@ class FastControlStep:
         status, ws = code >> 4 & 15, self.id.workspace
         tau = np.empty(C.N_JOINTS)
         if self.id.distribution == "qp" and lay.n_stance and not code & (FK.INSIDE_CONES | FK.QP_DONE):
-            result = self.id.result_from_workspace(status, lay)  # the compiled QP failed: with DAQP
+            result = self.id.result_from_workspace(status, lay)  # "daqp", or the compiled QP failed
             self.id.distribute_qp(lay, self._terms[1], ws.r, result, normals)
             K.clip_into(result.tau, self.torque_limit, tau)
             return tau, result
@@ -121,7 +121,7 @@ class FastControlStep:
         return tau, WorkspaceResult(status, lay, self.id.workspace_version, bool(code & FK.QP_RELAXED))
 
     def forget_arguments(self) -> None:
-        """Rebuild the kernel's arguments at the next step (after the solver's ``mu`` changed)."""
+        """Rebuild the kernel's arguments at the next step (after the solver's ``mu`` or ``qp_solver`` changed)."""
         self._cache = None
 
     def _arguments(self, data: mujoco.MjData, terrain: Any, gains: np.ndarray) -> tuple[tuple, np.ndarray | None]:
@@ -138,7 +138,7 @@ class FastControlStep:
             data.qpos, data.qvel, gains, self._bdd, *self.dynamics.data_views(data)[1:],
             *self._terms, data.qfrc_bias, 1.0 / SINGULAR_SIGMA, DAMPING, *self.id.workspace,
             *hf_args, self.foot_sites, self._sites, self.id.up_normals if normals is None else normals,
-            self.id.mu if qp else 0.0, self.id.cone_lower, self.id.cone_buffer,
+            self.id.mu if qp else 0.0, self.id.cone_lower, self.id.cone_buffer, self.id.qp_solver == "compiled",
         )  # fmt: skip
         self._cache = (data, hf, gains, tail, normals)
         return tail, normals
