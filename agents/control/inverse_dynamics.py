@@ -104,8 +104,7 @@ class IDWorkspace(NamedTuple):
     """(4, 3, 6) stance blocks of the elimination matrix S."""
 
 
-@dataclasses.dataclass(frozen=True)
-class WorkspaceResult:
+class WorkspaceResult(NamedTuple):
     """A solution (pinv, or "qp" by the compiled step) still held in an :class:`InverseDynamics` workspace;
     :meth:`build` copies it out.
 
