@@ -101,8 +101,12 @@ class FastControlStep:
         self.id.workspace_version += 1  # control_step rewrites the inverse-dynamics buffers
         try:
             packed, normals = self._arguments(data, terrain, gains)
+            if packed is None:
+                return None
             code = FK.packed_control_step(row, planned, stance_mode, data.contact.geom, measured, packed)
-        except (TypeError, NumbaError):  # arrays the kernel does not take (numba dispatch): the readable path
+        except (TypeError, NumbaError):  # arrays the kernel does not take (numba dispatch): the readable path,
+            # for these inputs from now on: a failed compilation is not retried every step
+            self._cache = (data, getattr(terrain, "heightfield", None), gains, None, None)
             return None
         if code < 0 or not (code >> 4) & K.DONE:
             return None
@@ -123,9 +127,10 @@ class FastControlStep:
 
     def _arguments(
         self, data: mujoco.MjData, terrain: Any, gains: np.ndarray
-    ) -> tuple[FK.StepArguments, np.ndarray | None]:
-        """The arguments of ``control_step`` that outlive a step (views and buffers), packed, and the normals
-        buffer (None without "qp" or a height field); rebuilt when an input object changes."""
+    ) -> tuple[FK.StepArguments | None, np.ndarray | None]:
+        """The arguments of ``control_step`` that outlive a step (views and buffers), packed (None: refused by
+        the kernel), and the normals buffer (None without "qp" or a height field); rebuilt when an input object
+        changes."""
         hf = getattr(terrain, "heightfield", None)
         c = self._cache
         if c is not None and c[0] is data and c[1] is hf and c[2] is gains:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.control import controller_kernels as FK
 from agents.control import inverse_dynamics as ID
 from agents.control.controller import STANCE_MODES, ComputedTorqueController
 from agents.control.controller_kernels import select_stance_mask
@@ -100,3 +101,34 @@ def test_lazy_last_result_refuses_overwritten_buffers():
     ctrl(m, d)
     tau = ctrl.last.tau  # read right after the call: fine
     assert tau.shape == (12,) and np.isfinite(tau).all()
+
+
+def test_a_failing_compiled_step_takes_the_readable_path(monkeypatch):
+    """The kernel refusing its inputs (numba dispatch) gives the readable path's torques, and is not retried."""
+    env = gym.make("QuadUneven-v0", terrain="rough")
+    policy = attach_expert(env, ExpertConfig())
+    ctrl, u = policy.controller, env.unwrapped
+    obs, _ = env.reset(seed=0)
+    for _ in range(20):
+        obs, *_ = env.step(policy.predict(obs)[0])
+    m, d = u.model, u.data
+    mujoco.mj_forward(m, d)
+    calls = []
+
+    def refuse(*args):
+        calls.append(1)
+        raise TypeError("No matching definition for argument type(s)")
+
+    monkeypatch.setattr(FK, "packed_control_step", refuse)
+    tau = ctrl(m, d)
+    assert not isinstance(ctrl._last_reference, PackedReference), "the fast path was taken"
+    row_fn, ctrl.reference_row = ctrl.reference_row, None
+    try:
+        np.testing.assert_array_equal(tau, ctrl(m, d))
+    finally:
+        ctrl.reference_row = row_fn
+    ctrl(m, d)
+    assert len(calls) == 1
+    ctrl._fast.forget_arguments()  # e.g. after set_friction: tried again
+    ctrl(m, d)
+    assert len(calls) == 2
