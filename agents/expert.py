@@ -270,6 +270,9 @@ class ExpertPolicy:
         self.env = env.unwrapped
         self.cfg = self.env.robot_cfg
         self._foot_sensor_adr = np.array([int(a) for a in self.env.idx.foot_sensor_adr])
+        self._stance_sensor_adr = [
+            tuple(int(a) for i, a in enumerate(self._foot_sensor_adr) if mask >> i & 1) for mask in range(16)
+        ]  # the stance feet's contact-sensor addresses, per stance bitmask
         self._hips_B = hip_positions_B(self.cfg)
         self._slip = SlipDetector(
             self.config.slip_speed, self.cfg.foot_radius, SLIP_CHECK_EVERY * env.unwrapped.physics_dt
@@ -381,8 +384,7 @@ class ExpertPolicy:
                     IK.foot_contact_mask(data.contact.geom, ctrl.foot_of_geom, ctrl.terrain_geom) if data.ncon else 0
                 )
                 tau = ctrl(self._model, own, action, contacts)
-            if np.isfinite(tau).all():
-                self._tau_ok[:] = tau
+            if tau.shape == self._tau_ok.shape and IK.copy_if_finite(tau, self._tau_ok):
                 return tau
             err = "non-finite torques"
         except Exception as exc:  # degrade, never crash a rollout
@@ -502,10 +504,9 @@ class ExpertPolicy:
         packed = None if row_of is None else row_of(t - self._t_start)
         if packed is None:
             return None
-        planned = packed[1]
-        touch = self._sim.sensordata[self._foot_sensor_adr].tolist()
-        for i in range(4):
-            if planned >> i & 1 and touch[i] <= 0:
+        touch = self._sim.sensordata
+        for a in self._stance_sensor_adr[packed[1]]:
+            if touch[a] <= 0:
                 return None
         return packed
 

@@ -38,7 +38,14 @@ import numpy as np
 from agents.control import inverse_dynamics_kernels as K
 from agents.control.elimination import ProjectedDynamics, eliminate_constraints, stance_layout
 from agents.control.fast_path import FastControlStep, PackedReference
-from agents.control.inverse_dynamics import DISTRIBUTIONS, IDResult, InverseDynamics, WorkspaceResult, friction_pyramid
+from agents.control.inverse_dynamics import (
+    DISTRIBUTIONS,
+    QP_SOLVERS,
+    IDResult,
+    InverseDynamics,
+    WorkspaceResult,
+    friction_pyramid,
+)
 from agents.control.verify import IDCheck, verify_inverse_dynamics
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
@@ -123,6 +130,7 @@ class ComputedTorqueController:
         "mujoco" backend the controller then runs one compiled call per step
         (:class:`agents.control.fast_path.FastControlStep`) and gives the same torques.
     :param mu: friction coefficient of the "qp" cones (-); None: the model's foot friction.
+    :param qp_solver: "qp" solver, ``"compiled"`` or ``"daqp"`` (:class:`InverseDynamics`).
     """
 
     def __init__(
@@ -135,6 +143,7 @@ class ComputedTorqueController:
         min_normal_force: float = 5.0,
         reference_row: Callable[[float], tuple[np.ndarray, int] | None] | None = None,
         mu: float | None = None,
+        qp_solver: str = "compiled",
     ) -> None:
         if distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {distribution!r}")
@@ -150,6 +159,9 @@ class ComputedTorqueController:
         if mu is not None and not mu > 0:
             raise ValueError(f"mu must be > 0 (friction coefficient of the cones), got {mu!r}")
         self.mu = mu
+        if qp_solver not in QP_SOLVERS:
+            raise ValueError(f"qp_solver must be one of {list(QP_SOLVERS)}, got {qp_solver!r}")
+        self.qp_solver = qp_solver
         self.t0 = 0.0
         self.terrain: Any = None
         self._model: mujoco.MjModel | None = None
@@ -163,7 +175,7 @@ class ComputedTorqueController:
     def last(self) -> IDResult | None:
         """The inverse-dynamics result of the last call (diagnostics; read it before the next call)."""
         last = self._last
-        if isinstance(last, WorkspaceResult):  # fast path, pinv forces inside the cones: built on demand
+        if isinstance(last, WorkspaceResult):  # fast path (pinv, or its QP): built on demand
             distribution = "qp" if self.distribution == "qp" and last.layout.n_stance else "pinv"
             last = self._last = last.build(self.id, distribution)
         return last
@@ -191,7 +203,13 @@ class ComputedTorqueController:
     def _bind(self, model: mujoco.MjModel) -> None:
         self._model = model
         self.dynamics = make_dynamics(self.backend, model)
-        self.id = InverseDynamics(self.dynamics, self.distribution, mu=self.mu, min_normal_force=self.min_normal_force)
+        self.id = InverseDynamics(
+            self.dynamics,
+            self.distribution,
+            mu=self.mu,
+            min_normal_force=self.min_normal_force,
+            qp_solver=self.qp_solver,
+        )
         act = [model.actuator(a).id for a in C.ACTUATOR_NAMES]
         if [int(model.actuator_trnid[a, 0]) for a in act] != [model.joint(j).id for j in C.JOINT_NAMES]:
             raise ValueError("actuators must drive the joints in JOINT_NAMES order")

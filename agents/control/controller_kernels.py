@@ -4,23 +4,32 @@
 otherwise does in a dozen (each paying Python and dispatch overhead): the measured foot contacts and
 the stance set, the PD command from a packed reference row (:data:`planners.types.PACKED_FIELDS`),
 the dynamics terms from ``mj_step1``'s results, the pinv inverse dynamics, and the terrain normals
-under the feet. It calls the same kernels as the general path (:mod:`agents.control.inverse_dynamics_kernels`,
+under the feet, and the "qp" distribution when the pinv forces leave a friction cone. It calls the same
+kernels as the general path (:mod:`agents.control.inverse_dynamics_kernels`, :mod:`agents.control.qp_kernels`,
 :mod:`quad_uneven_env.robot.dynamics.mujoco_kernels`, the height field's normal kernel), so the two
-paths give the same torques (tested); the QP solve itself (when the pinv forces leave a
-friction cone) and every rare case (1-2 stance feet, a failed Cholesky) stay in Python.
-:func:`control_step` compiles on its first call (a few seconds per process), the others at import.
+paths give the same torques (tested); every rare case (1-2 stance feet, a failed Cholesky, a QP the
+compiled solver gives up on) stays in Python.
+:func:`packed_control_step` is the same call with the arguments that outlive a step packed in one
+:class:`StepArguments` (numba unboxes one argument instead of ~45). :func:`control_step` and
+:func:`packed_control_step` compile on their first call (a few seconds per process), the others at import.
 """
 
 from __future__ import annotations
 
 import numba as nb
+from numba.core import types
+from numba.experimental import structref
 
 from agents.control import inverse_dynamics_kernels as K
+from agents.control import qp_kernels as QK
 from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
 from quad_uneven_env.terrain.heightfield_kernels import normals_into
 
 INSIDE_CONES = 1 << 16
 """bit of :func:`control_step`'s result: the pinv forces lie in every stance friction pyramid."""
+QP_DONE, QP_RELAXED = 1 << 17, 1 << 18
+"""bits of :func:`control_step`'s result: the "qp" distribution was applied (the workspace's tau and F are
+its solution), and it was the relaxed problem's (``InverseDynamics._relax``)."""
 
 STANCE_BOTH, STANCE_PLANNED, STANCE_MEASURED = 0, 1, 2
 """``stance_mode`` codes of :func:`control_step` (``ComputedTorqueController.stance_mode``)."""
@@ -51,7 +60,7 @@ def control_step(
     M_csr, rowadr, rownnz, colind, xpos, xmat, xanchor, xaxis, site_xpos, subtree_com, idx, par,
     M, J, Jdd, G, h, inv_sigma, damping, tau, F, qacc, r, Jinv, S,
     hf_flat, nrow, ncol, ox, oy, inv_cell, foot_sites, site_pos, normals,
-    mu, cone_lower, cones,
+    mu, cone_lower, cones, compiled_qp,
 ):  # fmt: skip  # pragma: no cover - compiled
     """Stance, PD command, dynamics terms, pinv inverse dynamics and foot normals at one physics step.
 
@@ -59,13 +68,16 @@ def control_step(
     bitmask, ``stance_mode`` a ``STANCE_*`` code; ``measured`` the bitmask of feet in contact, or -1
     to read it from the contact list ``contact_geom``; MuJoCo arrays after ``mj_step1``; ``tau, F,
     qacc, r, Jinv, S`` the inverse-dynamics outputs; ``normals`` (4, 3) is written when
-    ``hf_flat`` is not empty. With normals and ``mu > 0`` the pinv forces are also checked
-    against the stance legs' friction pyramids (written into ``cones``, (4, 5, 3)) with the
-    lower bounds ``cone_lower`` (5,), as :func:`agents.control.inverse_dynamics_kernels.qp_fill` does: inside,
-    they are the "qp" optimum and no QP is needed. Returns
-    ``stance_mask | status << 4 | n_beta << 8 | INSIDE_CONES`` with ``status`` the bits of
-    :func:`agents.control.inverse_dynamics_kernels.id_pinv`; a negative value when an input has the wrong size
-    (the caller then takes the general path, which names it).
+    ``hf_flat`` is not empty (else it must hold the normals to use, e.g. +z). With ``mu > 0`` ("qp")
+    the pinv forces are also checked against the stance legs' friction pyramids (written into
+    ``cones``, (4, 5, 3)) with the lower bounds ``cone_lower`` (5,), as
+    :func:`agents.control.inverse_dynamics_kernels.qp_fill` does: inside, they are the "qp" optimum;
+    outside, with ``compiled_qp``, :func:`agents.control.qp_kernels.distribute_qp` replaces ``tau`` and ``F``
+    by the QP's. Returns
+    ``stance_mask | status << 4 | n_beta << 8`` with ``status`` the bits of
+    :func:`agents.control.inverse_dynamics_kernels.id_pinv`, or-ed with ``INSIDE_CONES``, or ``QP_DONE``
+    (and ``QP_RELAXED``); "qp" with neither bit: the QP is left to the caller (DAQP). A negative
+    value when an input has the wrong size (the caller then takes the general path, which names it).
     """
     meas = K.foot_contact_mask(contact_geom, foot_of_geom, terrain_geom) if measured < 0 else measured
     mask = select_stance_mask(planned, meas, stance_mode)
@@ -85,18 +97,70 @@ def control_step(
             for k in range(3):
                 site_pos[i, k] = site_xpos[foot_sites[i], k]
         normals_into(hf_flat, nrow, ncol, ox, oy, inv_cell, site_pos, normals)
-        if mu > 0.0 and status > 0 and mask != 0:
-            K.stance_pyramids_into(normals, mask, mu, cones)
-            inside = True
-            k = 0
-            for leg in range(4):
-                if not (mask >> leg) & 1:
-                    continue
-                for a in range(5):
-                    s = cones[k, a, 0] * F[leg, 0] + cones[k, a, 1] * F[leg, 1] + cones[k, a, 2] * F[leg, 2]
-                    if s < cone_lower[a]:
-                        inside = False
-                k += 1
-            if inside:
-                return mask | status << 4 | n_beta << 8 | INSIDE_CONES
-    return mask | status << 4 | n_beta << 8
+    code = mask | status << 4 | n_beta << 8
+    if mu > 0.0 and status > 0 and mask != 0:
+        K.stance_pyramids_into(normals, mask, mu, cones)
+        inside = True
+        k = 0
+        for leg in range(4):
+            if not (mask >> leg) & 1:
+                continue
+            for a in range(5):
+                s = cones[k, a, 0] * F[leg, 0] + cones[k, a, 1] * F[leg, 1] + cones[k, a, 2] * F[leg, 2]
+                if s < cone_lower[a]:
+                    inside = False
+            k += 1
+        if inside:
+            return code | INSIDE_CONES
+        if not compiled_qp:
+            return code
+        qp = QK.distribute_qp(normals, mu, J, mask, r, cone_lower, tau, F, cones)
+        if qp == QK.QP_OPTIMAL:
+            return code | QP_DONE
+        if qp == QK.QP_RELAXED:
+            return code | QP_DONE | QP_RELAXED
+    return code
+
+
+STEP_FIELDS: tuple[str, ...] = (
+    "foot_of_geom", "terrain_geom",
+    "qpos", "qvel", "gains", "bdd",
+    "M_csr", "rowadr", "rownnz", "colind", "xpos", "xmat", "xanchor", "xaxis", "site_xpos", "subtree_com", "idx", "par",
+    "M", "J", "Jdd", "G", "h", "inv_sigma", "damping", "tau", "F", "qacc", "r", "Jinv", "S",
+    "hf_flat", "nrow", "ncol", "ox", "oy", "inv_cell", "foot_sites", "site_pos", "normals",
+    "mu", "cone_lower", "cones", "compiled_qp", "torque_limit", "tau_out",
+)  # fmt: skip
+"""The fields of :class:`StepArguments`: :func:`control_step`'s arguments that outlive a step (in its order),
+then the motor limits and the output of the clipped torques (:func:`packed_control_step`)."""
+
+
+@structref.register
+class _StepArgumentsType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class StepArguments(structref.StructRefProxy):
+    """:data:`STEP_FIELDS` in one compiled record: one argument to unbox per call instead of ~45
+    (numba's per-call dispatch and unboxing of every array argument costs ~70 ns each)."""
+
+
+structref.define_proxy(StepArguments, _StepArgumentsType, list(STEP_FIELDS))
+
+
+@nb.njit(cache=False, nogil=True)
+def packed_control_step(row, planned, stance_mode, contact_geom, measured, a):  # pragma: no cover - compiled
+    """:func:`control_step` with the arguments that outlive a step in ``a`` (a :class:`StepArguments`); when it
+    solved the step (a non-negative result with the ``DONE`` status bit), ``a.tau`` clipped to
+    ``±a.torque_limit`` is written into ``a.tau_out``."""
+    code = control_step(
+        row, planned, stance_mode, contact_geom, a.foot_of_geom, a.terrain_geom, measured,
+        a.qpos, a.qvel, a.gains, a.bdd,
+        a.M_csr, a.rowadr, a.rownnz, a.colind, a.xpos, a.xmat, a.xanchor, a.xaxis, a.site_xpos, a.subtree_com,
+        a.idx, a.par, a.M, a.J, a.Jdd, a.G, a.h, a.inv_sigma, a.damping, a.tau, a.F, a.qacc, a.r, a.Jinv, a.S,
+        a.hf_flat, a.nrow, a.ncol, a.ox, a.oy, a.inv_cell, a.foot_sites, a.site_pos, a.normals,
+        a.mu, a.cone_lower, a.cones, a.compiled_qp,
+    )  # fmt: skip
+    if code >= 0 and (code >> 4) & K.DONE:
+        K.clip_into(a.tau, a.torque_limit, a.tau_out)
+    return code

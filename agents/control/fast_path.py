@@ -3,20 +3,20 @@
 :class:`FastControlStep` does what the readable path of
 :class:`~agents.control.controller.ComputedTorqueController` does at one physics step (measured
 contacts and stance set, PD command, dynamics terms, pinv inverse dynamics, terrain normals) in one
-call of :func:`~agents.control.controller_kernels.control_step`, and gives the same torques (tested
-in ``tests/agents/test_control_fast.py``). The friction-cone QP, when the pinv forces leave a cone,
-is the readable path's own :meth:`InverseDynamics.distribute_qp`. Every case the kernel does not
-handle (1-2 stance feet, a failed Cholesky, arrays of other types) returns None: the caller then
-takes the readable path.
+call of :func:`~agents.control.controller_kernels.control_step`, the friction-cone QP included, and
+gives the same torques (tested in ``tests/agents/test_control_fast.py``). A QP the compiled solver
+gives up on is the readable path's :meth:`InverseDynamics.distribute_qp` (DAQP). Every case the kernel
+does not handle (1-2 stance feet, a failed Cholesky, arrays of other types) returns None: the caller
+then takes the readable path.
 """
 
 from __future__ import annotations
 
-import dataclasses
-from typing import Any
+from typing import Any, NamedTuple
 
 import mujoco
 import numpy as np
+from numba.core.errors import NumbaError
 
 from agents.control import controller_kernels as FK
 from agents.control import inverse_dynamics_kernels as K
@@ -29,8 +29,7 @@ _NO_TERRAIN = (np.empty(0), 0, 0, 0.0, 0.0, 0.0)
 """height-field kernel arguments that tell ``control_step`` to skip the normals."""
 
 
-@dataclasses.dataclass(frozen=True)
-class PackedReference:
+class PackedReference(NamedTuple):
     """A reference sample as the fast path received it: a packed row (:data:`PACKED_FIELDS`) and a stance mask."""
 
     t: float
@@ -79,6 +78,7 @@ class FastControlStep:
         self._bdd = np.empty(C.NV)
         self._sites = np.empty((C.N_LEGS, 3))
         self._normals = np.empty((C.N_LEGS, 3))
+        self._tau = np.empty(C.N_JOINTS)  # the clipped torques
         self._cache: tuple | None = None
 
     def step(
@@ -98,35 +98,39 @@ class FastControlStep:
         :param row: (55,) packed reference; ``planned`` its stance bitmask.
         :param measured: bitmask of the feet in contact (bit i: leg i), or -1: from ``data.contact``.
         """
-        tail, normals = self._arguments(data, terrain, gains)
         self.id.workspace_version += 1  # control_step rewrites the inverse-dynamics buffers
         try:
-            code = FK.control_step(
-                row, planned, stance_mode, data.contact.geom, self.foot_of_geom, self.terrain_geom, measured, *tail
-            )
-        except TypeError:  # arrays the kernel does not take (numba dispatch): the readable path
+            packed, normals = self._arguments(data, terrain, gains)
+            if packed is None:
+                return None
+            code = FK.packed_control_step(row, planned, stance_mode, data.contact.geom, measured, packed)
+        except (TypeError, NumbaError):  # arrays the kernel does not take (numba dispatch): the readable path,
+            # for these inputs from now on: a failed compilation is not retried every step
+            self._cache = (data, getattr(terrain, "heightfield", None), gains, None, None)
             return None
         if code < 0 or not (code >> 4) & K.DONE:
             return None
         lay = self.layouts[code & 15]
-        status, ws = code >> 4, self.id.workspace
-        tau = np.empty(C.N_JOINTS)
-        if self.id.distribution == "qp" and lay.n_stance and not code & FK.INSIDE_CONES:
-            result = self.id.result_from_workspace(status, lay)
-            self.id.distribute_qp(lay, self._terms[1], ws.r, result, normals)
+        status = code >> 4 & 15
+        if self.id.distribution == "qp" and lay.n_stance and not code & (FK.INSIDE_CONES | FK.QP_DONE):
+            result = self.id.result_from_workspace(status, lay)  # "daqp", or the compiled QP failed
+            self.id.distribute_qp(lay, self._terms[1], self.id.workspace.r, result, normals)
+            tau = np.empty(C.N_JOINTS)
             K.clip_into(result.tau, self.torque_limit, tau)
             return tau, result
-        # the pinv torques (for "qp": its optimum, as control_step checked the cones); copied out only if asked
-        K.clip_into(ws.tau, self.torque_limit, tau)
-        return tau, WorkspaceResult(status, lay, self.id.workspace_version)
+        # the pinv torques, or the QP's (control_step wrote them, and their clipped copy); copied out only if asked
+        return self._tau.copy(), WorkspaceResult(status, lay, self.id.workspace_version, bool(code & FK.QP_RELAXED))
 
     def forget_arguments(self) -> None:
-        """Rebuild the kernel's arguments at the next step (after the solver's ``mu`` changed)."""
+        """Rebuild the kernel's arguments at the next step (after the solver's ``mu`` or ``qp_solver`` changed)."""
         self._cache = None
 
-    def _arguments(self, data: mujoco.MjData, terrain: Any, gains: np.ndarray) -> tuple[tuple, np.ndarray | None]:
-        """The arguments of ``control_step`` after the contacts (views and buffers that outlive a step),
-        and the normals buffer (None without "qp" or a height field); rebuilt when an input object changes."""
+    def _arguments(
+        self, data: mujoco.MjData, terrain: Any, gains: np.ndarray
+    ) -> tuple[FK.StepArguments | None, np.ndarray | None]:
+        """The arguments of ``control_step`` that outlive a step (views and buffers), packed (None: refused by
+        the kernel), and the normals buffer (None without "qp" or a height field); rebuilt when an input object
+        changes."""
         hf = getattr(terrain, "heightfield", None)
         c = self._cache
         if c is not None and c[0] is data and c[1] is hf and c[2] is gains:
@@ -135,10 +139,13 @@ class FastControlStep:
         normals = self._normals if qp and hasattr(hf, "kernel_args") else None
         hf_args = _NO_TERRAIN if normals is None else hf.kernel_args
         tail = (
+            self.foot_of_geom, self.terrain_geom,
             data.qpos, data.qvel, gains, self._bdd, *self.dynamics.data_views(data)[1:],
             *self._terms, data.qfrc_bias, 1.0 / SINGULAR_SIGMA, DAMPING, *self.id.workspace,
-            *hf_args, self.foot_sites, self._sites, self._normals,
-            self.id.mu if normals is not None else 0.0, self.id.cone_lower, self.id.cone_buffer,
+            *hf_args, self.foot_sites, self._sites, self.id.up_normals if normals is None else normals,
+            self.id.mu if qp else 0.0, self.id.cone_lower, self.id.cone_buffer, self.id.qp_solver == "compiled",
+            self.torque_limit, self._tau,
         )  # fmt: skip
-        self._cache = (data, hf, gains, tail, normals)
-        return tail, normals
+        packed = FK.StepArguments(*tail)
+        self._cache = (data, hf, gains, packed, normals)
+        return packed, normals

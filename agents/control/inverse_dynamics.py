@@ -24,10 +24,12 @@ the pinv torques whose stance forces lie in a linearised friction cone (4-sided 
 the cone of the model's mu) with a minimum normal force. It is posed in the contact forces:
 ``min (F - F_pinv)^T W (F - F_pinv)`` (``W = blockdiag(J_L,i J_L,i^T)``, so the cost is
 ``|tau - tau_pinv|^2``) subject to the six base rows ``sum_i J_b,i^T F_i = (M qacc + h)_base``
-and the cone rows; then ``tau_i = (M qacc + h)_i - J_L,i^T F_i``. Solver: DAQP
-(a dual active-set method for small dense QPs, made for real-time MPC): exact, handles equality
-and inequality rows natively, reports infeasibility, and has no per-solve setup cost (timings:
-docs/results.md). An infeasible problem is relaxed (see
+and the cone rows; then ``tau_i = (M qacc + h)_i - J_L,i^T F_i``. Solver (``qp_solver``):
+``"compiled"`` (default), a Goldfarb-Idnani dual active-set method compiled with the problem's fill
+and the torques (:func:`agents.control.qp_kernels.distribute_qp`, one call); or ``"daqp"``, DAQP (a
+dual active-set method for small dense QPs) through its Python wrapper, the reference it is tested
+against and its fallback when it fails (iteration cap, degenerate step). Both are exact and report
+infeasibility; the optimum is unique, so they agree to rounding. An infeasible problem is relaxed (see
 ``_relax``); an unsolved one falls back to "pinv" and sets ``result.qp_fallback``.
 """
 
@@ -41,6 +43,7 @@ import mujoco
 import numpy as np
 
 from agents.control import inverse_dynamics_kernels as K
+from agents.control import qp_kernels as QK
 from agents.control.elimination import (
     DAMPING,
     SINGULAR_SIGMA,
@@ -54,6 +57,9 @@ from quad_uneven_env.robot.dynamics.base import Dynamics, DynamicsTerms
 
 DISTRIBUTIONS: tuple[str, ...] = ("pinv", "qp")
 """Allowed values of ``InverseDynamics(distribution=...)``."""
+
+QP_SOLVERS: tuple[str, ...] = ("compiled", "daqp")
+"""Allowed values of ``InverseDynamics(qp_solver=...)`` (module doc)."""
 
 
 @dataclasses.dataclass
@@ -98,9 +104,9 @@ class IDWorkspace(NamedTuple):
     """(4, 3, 6) stance blocks of the elimination matrix S."""
 
 
-@dataclasses.dataclass(frozen=True)
-class WorkspaceResult:
-    """A pinv solution still held in an :class:`InverseDynamics` workspace; :meth:`build` copies it out.
+class WorkspaceResult(NamedTuple):
+    """A solution (pinv, or "qp" by the compiled step) still held in an :class:`InverseDynamics` workspace;
+    :meth:`build` copies it out.
 
     The fast path records this instead of copying every step; it is valid until the workspace is reused.
     """
@@ -111,6 +117,8 @@ class WorkspaceResult:
     """the stance layout solved for."""
     version: int
     """``workspace_version`` right after the solve."""
+    relaxed: bool = False
+    """the workspace holds the relaxed "qp" problem's solution (``IDResult.relaxed``)."""
 
     def build(self, inverse_dynamics: InverseDynamics, distribution: str) -> IDResult:
         """The :class:`IDResult` (``distribution`` as recorded).
@@ -122,7 +130,7 @@ class WorkspaceResult:
                 "controller.last: the inverse-dynamics buffers were reused since; read it right after the call"
             )
         result = inverse_dynamics.result_from_workspace(self.status, self.layout)
-        result.distribution = distribution
+        result.distribution, result.relaxed = distribution, self.relaxed
         return result
 
 
@@ -148,6 +156,7 @@ class InverseDynamics:
     :param mu: friction coefficient of the cone (default: the model's foot friction, if the
         backend has a model, else 1.0).
     :param min_normal_force: N, lower bound of each stance foot's normal force in "qp".
+    :param qp_solver: ``"compiled"`` or ``"daqp"`` (module doc).
     """
 
     def __init__(
@@ -156,9 +165,13 @@ class InverseDynamics:
         distribution: str = "pinv",
         mu: float | None = None,
         min_normal_force: float = 5.0,
+        qp_solver: str = "compiled",
     ) -> None:
         if distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {distribution!r}")
+        if qp_solver not in QP_SOLVERS:
+            raise ValueError(f"qp_solver must be one of {list(QP_SOLVERS)}, got {qp_solver!r}")
+        self.qp_solver = qp_solver
         if min_normal_force < 0:
             raise ValueError(f"min_normal_force must be >= 0 N, got {min_normal_force}")
         self.dynamics = dynamics
@@ -177,6 +190,8 @@ class InverseDynamics:
         """(5,) lower bounds of the friction-pyramid rows (the last one: the minimum normal force, N)."""
         self.cone_buffer = np.empty((C.N_LEGS, 5, 3))
         """(4, 5, 3) friction pyramids of the feet, rewritten by the kernels from the terrain normals."""
+        self.up_normals = np.tile([0.0, 0.0, 1.0], (C.N_LEGS, 1))
+        """(4, 3) the normals of level ground (+z): the cones without terrain normals."""
         self.workspace = IDWorkspace(
             np.zeros(C.N_JOINTS), np.zeros((C.N_LEGS, 3)), np.zeros(C.NV), np.zeros(C.NV),
             np.zeros((C.N_LEGS, 3, 3)), np.zeros((C.N_LEGS, 3, 6)),
@@ -322,6 +337,17 @@ class InverseDynamics:
 
         :param J_feet: (4, 3, 18) foot Jacobians; ``r`` (18,) = M qacc + h; ``normals_W`` (4, 3) or None (+z).
         """
+        if self.qp_solver == "compiled":
+            try:
+                status = QK.distribute_qp(
+                    self.up_normals if normals_W is None else normals_W, self.mu, J_feet, lay.mask, r,
+                    self.cone_lower, result.tau, result.contact_forces, self.cone_buffer,
+                )  # fmt: skip
+            except TypeError:  # arrays the kernel does not take (numba dispatch): the DAQP path converts them
+                status = QK.QP_FAILED
+            if status != QK.QP_FAILED:
+                result.distribution, result.relaxed = "qp", status == QK.QP_RELAXED
+                return
         p = lay.n_stance
         qp = self._qp.get(p)
         if qp is None:
@@ -362,7 +388,7 @@ class InverseDynamics:
         falls. The stance torques follow from the leg rows, r_i - J_L,i^T F_i.
         """
         H, g, A, b, _, _ = qp.problem
-        x = qp.solve_relaxed(A.T @ A + 1e-3 * H, -A.T @ b + 1e-3 * g)
+        x = qp.solve_relaxed(A.T @ A + QK.RELAX_WEIGHT * H, -A.T @ b + QK.RELAX_WEIGHT * g)
         if x is None:
             result.qp_fallback = True
             return
@@ -375,7 +401,8 @@ class InverseDynamics:
 
 
 class _StanceQP:
-    """A preallocated "qp" problem for p stance feet (3p forces, 6 equalities, 5p cone rows), solved by DAQP.
+    """A preallocated "qp" problem for p stance feet (3p forces, 6 equalities, 5p cone rows), solved by DAQP
+    (``qp_solver="daqp"``, and the compiled solver's fallback).
 
     DAQP (Arnström et al., a dual active-set solver for small dense QPs) solves these 12-variable
     problems exactly in a few active-set iterations, with no setup cost per solve (small problems).

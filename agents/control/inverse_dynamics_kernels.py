@@ -310,6 +310,17 @@ def clip_into(x, limit, out):  # pragma: no cover - compiled
         out[i] = v if v != v else min(max(v, -limit[i]), limit[i])  # NaN passes through, as np.clip
 
 
+@nb.njit(nb.boolean(_f1, _f1), cache=False, nogil=True)
+def copy_if_finite(x, out):  # pragma: no cover - compiled
+    """out[:] = x if every x is finite (returns True); else False and out untouched."""
+    for i in range(x.shape[0]):
+        if not math.isfinite(x[i]):
+            return False
+    for i in range(x.shape[0]):
+        out[i] = x[i]
+    return True
+
+
 @nb.njit(nb.boolean(_f3, nb.int64, _f1, _f2, _f3, _f1, _f2, _f1, _f2, _f1, _f2, _f1), cache=False, nogil=True)
 def qp_fill(J, mask, r, F0, cones, lower, H, g, A, b, C, l):  # pragma: no cover - compiled
     """The "qp" problem in the stance forces x = [F_i]_i (see ``inverse_dynamics``), into preallocated arrays.

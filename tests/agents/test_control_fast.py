@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.control import controller_kernels as FK
+from agents.control import inverse_dynamics as ID
 from agents.control.controller import STANCE_MODES, ComputedTorqueController
 from agents.control.controller_kernels import select_stance_mask
 from agents.control.fast_path import PackedReference
@@ -27,12 +29,22 @@ def test_stance_mask_selection_matches_select_stance():
         assert bits(select_stance_mask(planned, measured, STANCE_MODES.index(mode))) == want, (mode, planned, measured)
 
 
-@pytest.mark.parametrize("distribution, atol", [("pinv", 1e-12), ("qp", 1e-6)])
-def test_fast_path_gives_the_general_paths_torques(distribution, atol):
-    env = gym.make("QuadUneven-v0", terrain="rough")
+STAIRS = {"kind": "stairs", "riser": 0.08, "direction": "down"}
+
+
+@pytest.mark.parametrize(
+    "distribution, terrain, atol", [("pinv", "rough", 1e-12), ("qp", "rough", 1e-9), ("qp", STAIRS, 1e-9)]
+)
+def test_fast_path_gives_the_general_paths_torques(distribution, terrain, atol, monkeypatch):
+    """The one-call path against the readable one, and for "qp" against the readable one with DAQP too
+    (the compiled QP inside the kernel against the reference solver)."""
+    env = gym.make("QuadUneven-v0", terrain=terrain)
     policy = attach_expert(env, ExpertConfig(distribution=distribution))
     ctrl, u = policy.controller, env.unwrapped
     obs, _ = env.reset(seed=0)
+    daqp_solves = []
+    solve = ID._StanceQP.solve
+    monkeypatch.setattr(ID._StanceQP, "solve", lambda self: daqp_solves.append(1) or solve(self))
     compared = 0
     for step in range(300):
         obs, *_ = env.step(policy.predict(obs)[0])
@@ -49,17 +61,24 @@ def test_fast_path_gives_the_general_paths_torques(distribution, atol):
         row_fn, ctrl.reference_row = ctrl.reference_row, None
         try:
             tau_general = ctrl(m, d)
+            general, ref_general = ctrl.last, ctrl.last_reference
+            ctrl.id.qp_solver = "daqp"
+            tau_daqp = ctrl(m, d)
+            with_daqp = ctrl.last
         finally:
-            ctrl.reference_row = row_fn
-        general, ref_general = ctrl.last, ctrl.last_reference
+            ctrl.reference_row, ctrl.id.qp_solver = row_fn, "compiled"
         np.testing.assert_allclose(tau_fast, tau_general, rtol=0, atol=atol)
         np.testing.assert_allclose(fast.contact_forces, general.contact_forces, rtol=0, atol=1e3 * atol)
-        assert fast.stance == general.stance and fast.distribution == general.distribution
+        np.testing.assert_allclose(tau_fast, tau_daqp, rtol=0, atol=1e-7)
+        np.testing.assert_allclose(fast.contact_forces, with_daqp.contact_forces, rtol=0, atol=1e-5)
+        for other in (general, with_daqp):
+            assert (fast.stance, fast.distribution, fast.relaxed) == (other.stance, other.distribution, other.relaxed)
         for name, _ in PACKED_FIELDS:
             np.testing.assert_array_equal(getattr(ref_fast, name), getattr(ref_general, name), err_msg=name)
         assert ref_fast.stance == ref_general.stance
         compared += 1
     assert compared >= 10
+    assert distribution == "pinv" or len(daqp_solves) >= 3, "no compared step needed the QP"
 
 
 def test_lazy_last_result_refuses_overwritten_buffers():
@@ -82,3 +101,34 @@ def test_lazy_last_result_refuses_overwritten_buffers():
     ctrl(m, d)
     tau = ctrl.last.tau  # read right after the call: fine
     assert tau.shape == (12,) and np.isfinite(tau).all()
+
+
+def test_a_failing_compiled_step_takes_the_readable_path(monkeypatch):
+    """The kernel refusing its inputs (numba dispatch) gives the readable path's torques, and is not retried."""
+    env = gym.make("QuadUneven-v0", terrain="rough")
+    policy = attach_expert(env, ExpertConfig())
+    ctrl, u = policy.controller, env.unwrapped
+    obs, _ = env.reset(seed=0)
+    for _ in range(20):
+        obs, *_ = env.step(policy.predict(obs)[0])
+    m, d = u.model, u.data
+    mujoco.mj_forward(m, d)
+    calls = []
+
+    def refuse(*args):
+        calls.append(1)
+        raise TypeError("No matching definition for argument type(s)")
+
+    monkeypatch.setattr(FK, "packed_control_step", refuse)
+    tau = ctrl(m, d)
+    assert not isinstance(ctrl._last_reference, PackedReference), "the fast path was taken"
+    row_fn, ctrl.reference_row = ctrl.reference_row, None
+    try:
+        np.testing.assert_array_equal(tau, ctrl(m, d))
+    finally:
+        ctrl.reference_row = row_fn
+    ctrl(m, d)
+    assert len(calls) == 1
+    ctrl._fast.forget_arguments()  # e.g. after set_friction: tried again
+    ctrl(m, d)
+    assert len(calls) == 2
