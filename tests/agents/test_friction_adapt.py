@@ -44,18 +44,21 @@ def test_no_slip_and_no_change_on_the_nominal_floor():
 
 @pytest.mark.parametrize(("floor", "friction_min"), [(0.45, None), (0.4, None), (0.35, None)])
 def test_a_slipping_floor_lowers_the_assumption_and_the_walk_goes_on(floor, friction_min):
-    """Without the adaptation the start assumption (0.6) lets the feet slip and the walk ends (fall or stall
-    short of 1 m in 12 s); with it the assumption comes down (below the floor's friction, or to
-    ``friction_min``) and the expert walks on."""
+    """Without the adaptation the start assumption (0.6) lets the feet slip and the walk ends (fall, or stall
+    short of 1.5 m, in 20 s); with it the assumption comes down (below the floor's friction, or to
+    ``friction_min``) and the expert walks on (over 1.1 m in 12 s, no fall).
+
+    When the fixed expert falls on the 0.45 floor is chaotic (its feet slip): after 0.3-1.3 m, within 12.4 s, across
+    float-level changes of the planner and the QP solver; a 30 s walk of the adapting one covers 3.2 m."""
     extra = {} if friction_min is None else {"friction_min": friction_min}
     distance, fell, expert = walk(floor, 12.0, **extra)
     assert not fell and distance > 1.1
     assert expert.assumed_friction < floor or expert.assumed_friction == ExpertConfig(**extra).friction_min
     slips = [m for m in expert.failure_log if "slips" in m]
     assert slips and all("assumed friction" in m for m in slips)
-    fixed_distance, fixed_fell, fixed = walk(floor, 12.0, friction_adapt=False)
+    fixed_distance, fixed_fell, fixed = walk(floor, 20.0, friction_adapt=False)
     assert fixed.assumed_friction == 0.6
-    assert fixed_fell or fixed_distance < 1.0
+    assert fixed_fell or fixed_distance < 1.5
 
 
 def test_reset_restores_the_configured_assumption():
