@@ -13,7 +13,17 @@ from quad_uneven_env.terrain.grid import SPAWN_XY, Grid
 from quad_uneven_env.terrain.heightfield import MAX_CELLS, HeightField, PatchStats
 from quad_uneven_env.terrain.kinds.paper import PAPER_BLOCKS
 from quad_uneven_env.terrain.spec import TERRAIN_KINDS, TerrainSpec, parse_terrain_spec, preset_names
-from quad_uneven_env.terrain.terrain import Terrain
+
+
+def __getattr__(name: str):
+    """:class:`Terrain` on first use: it needs MuJoCo, while the height field and its kernels (what the planners
+    use) do not."""
+    if name == "Terrain":
+        from quad_uneven_env.terrain.terrain import Terrain
+
+        return Terrain
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "MAX_CELLS",
