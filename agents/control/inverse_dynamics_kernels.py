@@ -370,6 +370,27 @@ def qp_fill(J, mask, r, F0, cones, lower, H, g, A, b, C, l):  # pragma: no cover
     return inside
 
 
+@nb.njit(nb.void(_f1, _f3, nb.int64, _f1, _f1, _f2), cache=False, nogil=True)
+def stance_forces_and_torques_into(x, J, mask, r, tau, F):  # pragma: no cover - compiled
+    """The stance forces x (3p,) into F (4, 3) (zeros for swing legs) and each stance leg's torques
+    r_i - J_L,i^T F_i into tau (12,) (swing legs' entries untouched)."""
+    k = 0
+    for leg in range(N_LEGS):
+        for a in range(3):
+            F[leg, a] = 0.0
+        if not (mask >> leg) & 1:
+            continue
+        for a in range(3):
+            F[leg, a] = x[3 * k + a]
+        c0 = 6 + 3 * leg
+        for a in range(3):
+            s = r[c0 + a]
+            for e in range(3):
+                s -= J[leg, e, c0 + a] * F[leg, e]
+            tau[3 * leg + a] = s
+        k += 1
+
+
 @nb.njit(nb.boolean(_f1, _f2, _f1, _f2, _f1, _f3, nb.int64, _f1, _f1, _f2), cache=False, nogil=True)
 def qp_apply(x, C, l, A, b, J, mask, r, tau, F):  # pragma: no cover - compiled
     """Accept the QP solution x if finite, inside the cones (1e-6) and on the base equation (1e-6 relative);
@@ -392,21 +413,7 @@ def qp_apply(x, C, l, A, b, J, mask, r, tau, F):  # pragma: no cover - compiled
         big = max(big, abs(b[i]))
     if not err < 1e-6 * big:
         return False
-    k = 0
-    for leg in range(N_LEGS):
-        for a in range(3):
-            F[leg, a] = 0.0
-        if not (mask >> leg) & 1:
-            continue
-        for a in range(3):
-            F[leg, a] = x[3 * k + a]
-        c0 = 6 + 3 * leg
-        for a in range(3):
-            s = r[c0 + a]
-            for e in range(3):
-                s -= J[leg, e, c0 + a] * F[leg, e]
-            tau[3 * leg + a] = s
-        k += 1
+    stance_forces_and_torques_into(x, J, mask, r, tau, F)
     return True
 
 

@@ -301,19 +301,5 @@ def distribute_qp(normals, mu, J, mask, r, lower, tau, F, cones):  # pragma: no 
     for i in range(n):
         if not math.isfinite(x[i]):
             return QP_FAILED
-    k = 0
-    for leg in range(4):
-        for a in range(3):
-            F[leg, a] = 0.0
-        if not (mask >> leg) & 1:
-            continue
-        for a in range(3):
-            F[leg, a] = x[3 * k + a]
-        c0 = 6 + 3 * leg
-        for a in range(3):
-            s = r[c0 + a]
-            for e in range(3):
-                s -= J[leg, e, c0 + a] * F[leg, e]
-            tau[3 * leg + a] = s
-        k += 1
+    K.stance_forces_and_torques_into(x, J, mask, r, tau, F)
     return QP_RELAXED
