@@ -203,6 +203,12 @@ def measure_ppo(env_id: str, steps: int, seed: int = RANDOM_SEED, **kwargs) -> d
         import agents.rl  # noqa: F401  (registers QuadUnevenResidual-v0)
     torch.set_num_threads(1)
     venv = make_vec_env(env_id, n_envs=2, seed=seed, env_kwargs=kwargs)
+    # Warm-up outside the timing: the env's (and the residual env's expert's) numba kernels compile on first
+    # use, several seconds that would otherwise count as a third of a short run's wall time.
+    venv.seed(seed + 1)
+    venv.reset()
+    for _ in range(20):
+        venv.step(np.stack([venv.action_space.sample() for _ in range(venv.num_envs)]))
     # configs/rl/ppo_residual.yaml's hyperparameters, n_steps shortened so a short run holds 2 updates.
     n_steps = max(64, steps // 4)
     model = PPO(
