@@ -9,10 +9,15 @@ Parameters of every kind: docs/terrain.md. Typical use::
     terrain.upload(model)   # rewrites model.hfield_data, no recompilation
 """
 
+from typing import TYPE_CHECKING
+
 from quad_uneven_env.terrain.grid import SPAWN_XY, Grid
 from quad_uneven_env.terrain.heightfield import MAX_CELLS, HeightField, PatchStats
 from quad_uneven_env.terrain.kinds.paper import PAPER_BLOCKS
 from quad_uneven_env.terrain.spec import TERRAIN_KINDS, TerrainSpec, parse_terrain_spec, preset_names
+
+if TYPE_CHECKING:  # for type checkers and IDEs; at run time ``__getattr__`` imports it on first use
+    from quad_uneven_env.terrain.terrain import Terrain
 
 
 def __getattr__(name: str):
