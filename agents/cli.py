@@ -293,6 +293,12 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     p.add_argument("--n-envs", type=int, default=None, help="parallel envs (default: the config's)")
     p.add_argument("--residual-scale", type=float, default=None, help="residual torque per unit action / limit")
     p.add_argument(
+        "--residual-legs",
+        choices=("all", "stance"),
+        default=None,
+        help="which legs take the residual: all, or only those whose foot touches the ground (default: the config's)",
+    )
+    p.add_argument(
         "--time-limit-min", type=float, default=None, help="stop (and save) after this many minutes of training"
     )
     p.add_argument("--config", default=None, help="training config YAML (default configs/rl/ALGO_residual.yaml)")
@@ -320,6 +326,7 @@ def run_train_command(args: argparse.Namespace) -> int:
         "seed": args.seed,
         "n_envs": args.n_envs,
         "residual_scale": args.residual_scale,
+        "residual_legs": args.residual_legs,
         "time_limit_min": args.time_limit_min,
     }
     cfg = load_train_config(args.config, overrides)

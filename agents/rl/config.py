@@ -21,6 +21,9 @@ from quad_uneven_env.terrain import parse_terrain_spec
 RL_CONFIG_DIR = CONFIG_DIR / "rl"
 """Directory of the shipped training configs (``configs/rl/NAME.yaml``)."""
 
+RESIDUAL_LEGS = ("all", "stance")
+"""Which legs take the residual: every leg, or only those whose foot touches the ground (per physics step)."""
+
 ALGOS = ("ppo", "sac")
 """Stable-Baselines3 algorithms ``quad-uneven train`` supports."""
 
@@ -69,6 +72,9 @@ class TrainConfig:
     """``auto``, ``dummy`` or ``subproc``."""
     residual_scale: float = param(0.1, "of the torque limit", lo=0.0, hi=1.0, lo_open=True)
     """residual torque per unit action as a fraction of the torque limit, in (0, 1]."""
+    residual_legs: str = param("all", kind="choice", choices=RESIDUAL_LEGS)
+    """``all``: every leg takes the residual; ``stance``: only a leg whose foot touches the ground, at each
+    physics step (the residual then cannot move a swinging foot)."""
     max_episode_steps: int = param(1000, "steps", kind="int", lo=1)
     """control steps per training episode (1000 = 20 s)."""
     env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
@@ -127,10 +133,11 @@ def validate(cfg: TrainConfig) -> TrainConfig:
     bad = sorted(set(env_kwargs) & set(FORBIDDEN_ENV_KWARGS))
     if bad:
         raise TrainConfigError(f"env_kwargs may not set {bad} (the trainer and the residual env own them)")
-    if not cfg.residual and (cfg.expert_features or cfg.residual_penalty):
+    if not cfg.residual and (cfg.expert_features or cfg.residual_penalty or cfg.residual_legs != "all"):
         raise TrainConfigError(
-            "residual: false trains from scratch without the expert, so expert_features must be false and "
-            f"residual_penalty 0, got expert_features={cfg.expert_features}, residual_penalty={cfg.residual_penalty}"
+            "residual: false trains from scratch without the expert, so expert_features must be false, "
+            f"residual_penalty 0 and residual_legs 'all', got expert_features={cfg.expert_features}, "
+            f"residual_penalty={cfg.residual_penalty}, residual_legs={cfg.residual_legs!r}"
         )
     _mapping("hyperparams", cfg.hyperparams)
     _mapping("policy_kwargs", cfg.policy_kwargs)

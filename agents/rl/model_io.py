@@ -56,7 +56,7 @@ def read_metadata(model_path: str | Path) -> dict[str, Any] | None:
 
 def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
     """``meta`` with the fields the evaluation uses checked (``algo``, ``residual``, ``residual_scale``, ...)."""
-    from agents.rl.config import ALGOS
+    from agents.rl.config import ALGOS, RESIDUAL_LEGS
 
     if meta.get("algo") not in (None, *ALGOS):
         raise ModelError(f"{path}: algo must be one of {list(ALGOS)}, got {meta.get('algo')!r}")
@@ -68,6 +68,9 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
             raise ModelError(f"{path}: residual_scale is missing (a residual model needs a number in (0, 1])")
         if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0.0 < scale <= 1.0:
             raise ModelError(f"{path}: residual_scale must be a number in (0, 1] (of the torque limit), got {scale!r}")
+        legs = meta.get("residual_legs", "all")  # absent in models trained before the option: every leg
+        if legs not in RESIDUAL_LEGS:
+            raise ModelError(f"{path}: residual_legs must be one of {list(RESIDUAL_LEGS)}, got {legs!r}")
     env_kwargs = meta.get("env_kwargs")
     if env_kwargs is not None and not isinstance(env_kwargs, dict):
         raise ModelError(f"{path}: env_kwargs must be a mapping of QuadUneven-v0 arguments, got {env_kwargs!r}")
@@ -340,7 +343,9 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
     if meta is not None and meta.get("residual"):
         from agents.rl.residual_env import install_residual_controller
 
-        expert, _ = install_residual_controller(env, float(meta["residual_scale"]))
+        expert, _ = install_residual_controller(
+            env, float(meta["residual_scale"]), residual_legs=meta.get("residual_legs", "all")
+        )
     return SB3Policy(model, normalizer, expert, env.unwrapped if spaces_of.expert_features else None)
 
 

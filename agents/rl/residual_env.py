@@ -12,7 +12,9 @@ by the expert features (:mod:`agents.rl.expert_features`: the expert's plan now,
 and its torques), or the env's alone with ``expert_features=False``.
 
 ``residual_scale`` (default 0.1: up to 12 N m on top of the expert, with 120 N m motors) bounds how
-far the learned agent can move away from the expert.
+far the learned agent can move away from the expert. ``residual_legs="stance"`` applies the residual only
+to the legs whose foot touches the ground at that physics step (the robot's contact switches): it can
+then change how the robot carries itself, but not where a swinging foot goes.
 
 Usage::
 
@@ -33,6 +35,7 @@ import numpy as np
 from gymnasium.envs.registration import register, registry
 
 from agents.expert import ExpertConfig, ExpertPolicy
+from agents.rl.config import RESIDUAL_LEGS
 from agents.rl.expert_features import augmented_space, expert_features
 from quad_uneven_env.env import QuadUnevenEnv
 
@@ -44,6 +47,16 @@ DEFAULT_RESIDUAL_SCALE = 0.1
 
 DEFAULT_MAX_EPISODE_STEPS = 1000
 """Control steps per episode of the registered env (20 s at the default 50 Hz)."""
+
+
+def check_residual_legs(residual_legs: Any) -> str:
+    """``residual_legs`` if it is one of :data:`RESIDUAL_LEGS`.
+
+    :raises ValueError: naming ``residual_legs`` and its allowed values otherwise.
+    """
+    if not isinstance(residual_legs, str) or residual_legs not in RESIDUAL_LEGS:
+        raise ValueError(f"residual_legs must be one of {list(RESIDUAL_LEGS)}, got {residual_legs!r}")
+    return residual_legs
 
 
 def check_residual_scale(residual_scale: Any) -> float:
@@ -67,24 +80,49 @@ class ResidualController:
         its ``reset(model, data, terrain)`` is forwarded.
     :param torque_limit: (12,) motor limits (N m).
     :param residual_scale: residual torque per unit action as a fraction of ``torque_limit``, in (0, 1].
+    :param residual_legs: ``"all"``, or ``"stance"``: a leg takes its residual only at the physics steps
+        where its foot touches the ground (``data.sensordata[foot_sensor_adr]``).
+    :param foot_sensor_adr: (4,) sensordata addresses of the feet's contact switches, leg order (needed
+        for ``"stance"``).
     """
 
-    def __init__(self, expert: Any, torque_limit: np.ndarray, residual_scale: float = DEFAULT_RESIDUAL_SCALE) -> None:
+    def __init__(
+        self,
+        expert: Any,
+        torque_limit: np.ndarray,
+        residual_scale: float = DEFAULT_RESIDUAL_SCALE,
+        residual_legs: str = "all",
+        foot_sensor_adr: Any = None,
+    ) -> None:
         self.expert = expert
         self.residual_scale = check_residual_scale(residual_scale)
+        self.residual_legs = check_residual_legs(residual_legs)
         self.torque_limit = np.asarray(torque_limit, dtype=np.float64).copy()
         self.gain = self.residual_scale * self.torque_limit
         """(12,) N m of residual torque per unit action."""
         self._tau = np.zeros_like(self.torque_limit)
+        self._foot_adr = None
+        if self.residual_legs == "stance":
+            if foot_sensor_adr is None or len(foot_sensor_adr) != len(self.torque_limit) // 3:
+                raise ValueError("residual_legs='stance' needs the feet's contact sensor addresses, one per leg")
+            self._foot_adr = np.asarray(foot_sensor_adr, dtype=np.intp)
+        self._applied_sum = 0.0  # mean |applied residual| (N m) summed over physics steps since the last query
+        self._applied_n = 0
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any) -> None:
         """Forwarded to the expert at every env reset."""
+        self._applied_sum, self._applied_n = 0.0, 0
         if hasattr(self.expert, "reset"):
             self.expert.reset(model, data, terrain)
 
     def residual_torque(self, action: np.ndarray) -> float:
-        """N m: mean over the 12 joints of |residual torque| that ``action`` commands (clipped to [-1, 1]),
-        before the motor limit."""
+        """N m: mean over the 12 joints of |residual torque| before the motor limit. With ``"all"`` legs
+        it is what ``action`` (clipped to [-1, 1]) commands; with ``"stance"`` the mean of what was applied
+        over the physics steps since the previous call (what ``action`` commands if there were none)."""
+        if self._applied_n:
+            value = self._applied_sum / self._applied_n
+            self._applied_sum, self._applied_n = 0.0, 0
+            return value
         return float(np.mean(np.abs(np.clip(np.asarray(action, dtype=float), -1.0, 1.0) * self.gain)))
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
@@ -94,18 +132,26 @@ class ResidualController:
         """
         tau_expert = self.expert(model, data, action)
         np.multiply(action, self.gain, out=self._tau)
+        if self._foot_adr is not None:
+            self._tau *= np.repeat(data.sensordata[self._foot_adr] > 0.0, 3)
+            self._applied_sum += float(np.mean(np.abs(self._tau)))
+            self._applied_n += 1
         self._tau += tau_expert
         np.clip(self._tau, -self.torque_limit, self.torque_limit, out=self._tau)
         return self._tau
 
 
 def install_residual_controller(
-    env: gym.Env, residual_scale: float = DEFAULT_RESIDUAL_SCALE, expert_config: ExpertConfig | None = None
+    env: gym.Env,
+    residual_scale: float = DEFAULT_RESIDUAL_SCALE,
+    expert_config: ExpertConfig | None = None,
+    residual_legs: str = "all",
 ) -> tuple[ExpertPolicy, ResidualController]:
     """Put the expert plus a residual on ``env.unwrapped``'s physics-rate hook (call before ``reset``).
 
     :param env: a ``QuadUneven-v0`` env (wrapped or not) in ``action_mode="torque"``.
     :param residual_scale: see :class:`ResidualController`.
+    :param residual_legs: see :class:`ResidualController`.
     :return: the expert (planner times, failure log) and the installed controller.
     :raises ValueError: on another action mode or a bad ``residual_scale``.
     """
@@ -117,8 +163,9 @@ def install_residual_controller(
             f"action_mode must be 'torque' for the residual env (expert torques), got {base.action_mode!r}"
         )
     scale = check_residual_scale(residual_scale)
+    legs = check_residual_legs(residual_legs)
     expert = ExpertPolicy(env, expert_config)
-    controller = ResidualController(expert, base.idx.torque_limit, scale)
+    controller = ResidualController(expert, base.idx.torque_limit, scale, legs, base.idx.foot_sensor_adr)
     base.set_controller(controller)
     return expert, controller
 
@@ -137,6 +184,7 @@ class ResidualExpertEnv(gym.Wrapper):
     :param expert_features: append the expert features to the observation.
     :param residual_penalty: >= 0: subtracted from the reward per unit of mean(action^2) over the 12 joints
         (``info["reward_terms"]["residual"]``); 0 keeps the env's reward.
+    :param residual_legs: ``"all"`` or ``"stance"`` (see :class:`ResidualController`).
     """
 
     def __init__(
@@ -146,6 +194,7 @@ class ResidualExpertEnv(gym.Wrapper):
         expert_config: ExpertConfig | None = None,
         expert_features: bool = True,
         residual_penalty: float = 0.0,
+        residual_legs: str = "all",
     ) -> None:
         super().__init__(env)
         if not isinstance(expert_features, bool):
@@ -157,7 +206,7 @@ class ResidualExpertEnv(gym.Wrapper):
         if not (0.0 <= penalty < float("inf")):
             raise ValueError(f"residual_penalty must be a finite number >= 0, got {residual_penalty!r}")
         self.residual_penalty = penalty
-        self.expert, self.controller = install_residual_controller(env, residual_scale, expert_config)
+        self.expert, self.controller = install_residual_controller(env, residual_scale, expert_config, residual_legs)
         self.residual_scale = self.controller.residual_scale
         self.expert_features = expert_features
         if expert_features:
@@ -195,6 +244,7 @@ def make_residual_env(
     expert_config: ExpertConfig | None = None,
     expert_features: bool = True,
     residual_penalty: float = 0.0,
+    residual_legs: str = "all",
     **env_kwargs: Any,
 ) -> ResidualExpertEnv:
     """The residual env (entry point of ``QuadUnevenResidual-v0``).
@@ -204,6 +254,7 @@ def make_residual_env(
     :param expert_config: the expert's settings.
     :param expert_features: append the expert features (:mod:`agents.rl.expert_features`) to the observation.
     :param residual_penalty: reward penalty per unit of mean(action^2) (see :class:`ResidualExpertEnv`).
+    :param residual_legs: ``"all"`` or ``"stance"``: which legs take the residual (:class:`ResidualController`).
     :param env_kwargs: ``QuadUnevenEnv`` arguments (``terrain``, ``reward_weights``, ...); ``action_mode`` must be
         ``"torque"`` and ``controller`` is not accepted.
     :raises ValueError: on a bad argument (named).
@@ -211,7 +262,7 @@ def make_residual_env(
     if "controller" in env_kwargs:
         raise ValueError("controller is not accepted by the residual env: expert plus residual is its controller")
     return ResidualExpertEnv(
-        QuadUnevenEnv(**env_kwargs), residual_scale, expert_config, expert_features, residual_penalty
+        QuadUnevenEnv(**env_kwargs), residual_scale, expert_config, expert_features, residual_penalty, residual_legs
     )
 
 
@@ -225,8 +276,10 @@ if RESIDUAL_ENV_ID not in registry:
 __all__ = [
     "DEFAULT_RESIDUAL_SCALE",
     "RESIDUAL_ENV_ID",
+    "RESIDUAL_LEGS",
     "ResidualController",
     "ResidualExpertEnv",
+    "check_residual_legs",
     "install_residual_controller",
     "make_residual_env",
 ]

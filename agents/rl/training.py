@@ -197,6 +197,7 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
         **common,
         "residual": True,
         "residual_scale": float(cfg.residual_scale),
+        "residual_legs": cfg.residual_legs,
         "env_id": RESIDUAL_ENV_ID,
         "env_kwargs": dict(cfg.env_kwargs),
         "expert_features": bool(cfg.expert_features),

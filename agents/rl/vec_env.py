@@ -79,6 +79,7 @@ def make_train_env(
     expert_features: bool = True,
     residual_penalty: float = 0.0,
     residual: bool = True,
+    residual_legs: str = "all",
 ) -> gym.Env:
     """One residual env (expert in the loop) with a time limit and :class:`EpisodeStats`.
 
@@ -90,6 +91,7 @@ def make_train_env(
     :param randomization: the training world's randomization (None: nominal).
     :param expert_features: append the expert features to the observation.
     :param residual_penalty: reward penalty per unit of mean(action^2).
+    :param residual_legs: ``all`` or ``stance``: which legs take the residual.
     :param residual: false: plain ``QuadUneven-v0`` in ``joint_pd`` mode instead (training from scratch).
     """
 
@@ -111,6 +113,7 @@ def make_train_env(
             randomization=randomization,
             expert_features=expert_features,
             residual_penalty=residual_penalty,
+            residual_legs=residual_legs,
             **(env_kwargs or {}),
         )
 
@@ -155,6 +158,7 @@ def build_vec_env(
         cfg.expert_features,
         float(cfg.residual_penalty),
         cfg.residual,
+        cfg.residual_legs,
     )
     if kind == "subproc":
         env_fn = functools.partial(_ignoring_interrupts, env_fn)

@@ -196,3 +196,68 @@ def test_residual_penalty_is_a_named_reward_term():
         assert info["residual_torque"] == pytest.approx(float(np.mean(np.abs(action) * 12.0)))
     with pytest.raises(ValueError, match="residual_penalty must be a finite number >= 0"):
         gym.make(RESIDUAL_ENV_ID, terrain="flat", residual_penalty=-1.0)
+
+
+class _Data:
+    """Just the contact switches a stance-gated controller reads (sensordata, 7 values per foot)."""
+
+    def __init__(self, touch: list[float]) -> None:
+        self.sensordata = np.zeros(28)
+        self.sensordata[[0, 7, 14, 21]] = touch
+
+
+def test_stance_gated_residual_acts_only_on_legs_whose_foot_touches():
+    """residual_legs="stance": leg i gets its residual only while sensordata[foot i] > 0; the reported
+    residual torque is the mean of what was applied over the physics steps since the last query."""
+    limit = np.full(12, 120.0)
+    tau_expert = np.linspace(-30.0, 30.0, 12)
+    ctrl = ResidualController(_ConstantExpert(tau_expert), limit, 0.2, "stance", [0, 7, 14, 21])
+    action = np.linspace(1.0, -1.0, 12)
+    full = tau_expert + 0.2 * action * limit
+    got = ctrl(None, _Data([1.0, 0.0, 2.0, 0.0]), action).copy()  # LF and LH touch
+    np.testing.assert_allclose(got[0:3], full[0:3], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(got[3:6], tau_expert[3:6])
+    np.testing.assert_allclose(got[6:9], full[6:9], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(got[9:12], tau_expert[9:12])
+    first = np.mean(np.abs(0.2 * action * limit) * np.repeat([1, 0, 1, 0], 3))
+    ctrl(None, _Data([0.0, 0.0, 0.0, 0.0]), action)  # a flight phase: the expert alone
+    np.testing.assert_array_equal(ctrl(None, _Data([0.0, 0.0, 0.0, 0.0]), action), tau_expert)
+    assert ctrl.residual_torque(action) == pytest.approx(first / 3)
+    # no physics step since the query: what the action commands on every leg
+    assert ctrl.residual_torque(action) == pytest.approx(np.mean(np.abs(0.2 * action * limit)))
+    with pytest.raises(ValueError, match="residual_legs must be one of"):
+        ResidualController(_ConstantExpert(tau_expert), limit, 0.2, "swing")
+    with pytest.raises(ValueError, match="contact sensor"):
+        ResidualController(_ConstantExpert(tau_expert), limit, 0.2, "stance")
+
+
+def test_stance_gated_env_equals_the_plain_residual_on_touching_legs():
+    """In the env, the motors get the expert's torques plus the residual on the legs in contact at that
+    physics step (checked on the last one), and zero residual still reproduces the expert exactly."""
+    env = make_residual_env(residual_scale=0.2, terrain="flat", residual_legs="stance")
+    seen = []
+
+    class Spy:
+        def reset(self, model, data, terrain):
+            env.expert.reset(model, data, terrain)
+
+        def __call__(self, model, data, action):
+            tau = env.expert(model, data, action)
+            seen.append((tau.copy(), data.sensordata[env.unwrapped.idx.foot_sensor_adr].copy()))
+            return tau
+
+    env.controller.expert = Spy()
+    env.reset(seed=1)
+    action = np.linspace(-1.0, 1.0, 12).astype(np.float32)
+    for _ in range(10):
+        env.step(action)
+    tau, touch = seen[-1]
+    lim = env.unwrapped.idx.torque_limit
+    gate = np.repeat(touch > 0, 3)
+    assert 0 < gate.sum() < 12  # some leg swings, some stands: the gate is exercised
+    expected = np.clip(tau + 0.2 * action.astype(np.float64) * lim * gate, -lim, lim)
+    np.testing.assert_allclose(env.unwrapped.data.ctrl, expected, rtol=0, atol=1e-9)
+    plain = make_residual_env(terrain="rough", expert_config=ExpertConfig(distribution="pinv"))
+    gated = make_residual_env(terrain="rough", expert_config=ExpertConfig(distribution="pinv"), residual_legs="stance")
+    zeros = np.zeros((40, 12), dtype=np.float32)
+    np.testing.assert_array_equal(_rollout(plain, zeros, 3)["qpos"], _rollout(gated, zeros, 3)["qpos"])

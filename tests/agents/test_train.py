@@ -82,6 +82,8 @@ def test_argparse_rejects_unknown_algo_and_non_integer_timesteps(tmp_path, capsy
         ({"eval_episodes": 0}, "eval_episodes"),
         ({"residual": False}, "residual"),  # expert_features still on
         ({"residual": "no"}, "residual"),
+        ({"residual_legs": "swing"}, "residual_legs"),
+        ({"residual": False, "expert_features": False, "residual_legs": "stance"}, "residual"),
     ],
 )
 def test_bad_config_fields_are_named(tmp_path, changes, field):
@@ -211,18 +213,28 @@ def test_residual_policy_installs_expert_and_normalizes(tmp_path):
     from agents.rl.residual_env import ResidualController
     from agents.rl.training import train
 
-    cfg = load_train_config(write_config(tmp_path / "c.yaml", timesteps=32, eval_freq=0, checkpoint_freq=0))
+    cfg = load_train_config(
+        write_config(tmp_path / "c.yaml", timesteps=32, eval_freq=0, checkpoint_freq=0, residual_legs="stance")
+    )
     train(cfg, tmp_path / "run", progress=False)
     path = str(tmp_path / "run" / "model.zip")
+    meta_path = tmp_path / "run" / "rl_meta.json"
+    assert json.loads(meta_path.read_text())["residual_legs"] == "stance"
     env = gym.make("QuadUneven-v0", terrain="flat", **policy_env_kwargs(path))
     policy = make_policy(path, env)
     assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
+    assert env.unwrapped.controller.residual_legs == "stance"  # the evaluation applies the training's gate
     assert policy.obs_normalizer is not None and policy.expert is env.unwrapped.controller.expert
     obs, _ = env.reset(seed=0)
     action, _ = policy.predict(obs)
     assert action.shape == (12,) and np.all(np.abs(action) <= 1)
-    (tmp_path / "run" / "model_obs_norm.npz").unlink()
     from agents.evaluation.policies import PolicyError
+
+    meta_path.write_text(meta_path.read_text().replace('"residual_legs": "stance"', '"residual_legs": "swing"'))
+    with pytest.raises(PolicyError, match="residual_legs must be one of"):
+        make_policy(path, gym.make("QuadUneven-v0", terrain="flat"))
+    meta_path.write_text(meta_path.read_text().replace('"residual_legs": "swing"', '"residual_legs": "stance"'))
+    (tmp_path / "run" / "model_obs_norm.npz").unlink()
 
     with pytest.raises(PolicyError, match=r"obs_norm\.npz is missing"):
         make_policy(path, gym.make("QuadUneven-v0", terrain="flat"))
