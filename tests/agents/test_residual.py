@@ -151,6 +151,19 @@ def test_residual_env_accepts_randomization_and_passes_the_checkers():
         gym.make(RESIDUAL_ENV_ID, terrain="flat", randomization={"friction": [0.0, 1.0]})
 
 
+@pytest.mark.filterwarnings("ignore:.*different from the unwrapped")
+def test_the_shipped_training_world_passes_both_checkers():
+    """The residual wrapper itself, stance-gated, on stairs in the extreme world: Gymnasium's checker
+    (with its exact seeded-reset comparison) and SB3's."""
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = make_residual_env(terrain="stairs", randomization="extreme", residual_legs="stance", residual_scale=0.2)
+    assert env.unwrapped.randomization.motor_strength == (0.5, 1.3)
+    check_env(env, skip_render_check=True)
+    sb3_check_env(env, warn=True)
+
+
 def test_registered_id_and_defaults():
     env = gym.make("agents.rl:QuadUnevenResidual-v0", terrain="flat")
     assert env.spec.max_episode_steps == 1000
