@@ -1,13 +1,14 @@
 """Speed of the residual env while the agent explores: env steps/s at several residual noise levels.
 
-One process, the training world of ``configs/rl/ppo_residual_hard.yaml`` (hard randomization on the
-robust_hard terrain mix, expert features on), the same seeds for every row. Each row steps
+One process, the training world of a training config (default ``configs/rl/ppo_residual_extreme.yaml``,
+the shipped baseline's: extreme randomization on its terrain mix, stance-gated residual at scale 0.2,
+expert features on), the same seeds for every row. Each row steps
 QuadUnevenResidual-v0 with Gaussian residual actions of the given std (clipped to [-1, 1]; PPO's
 exploration noise with ``log_std_init`` = ln(std)), resets included, and reports env steps/s and the
 ratio to the zero-residual row measured in the same run, and the falls. The reference row, std 0, is
 the expert alone.
 
-Usage: ``python benchmarks/residual_exploration.py [--steps 1500] [--stds 0,0.08,0.135,0.37]``
+Usage: ``python benchmarks/residual_exploration.py [--steps 1500] [--stds 0,0.08,0.2,0.37] [--config YAML]``
 """
 
 from __future__ import annotations
@@ -23,7 +24,13 @@ from agents.rl.vec_env import make_train_env
 
 def _rate(cfg, std: float, steps: int, seed: int) -> dict[str, float]:
     env = make_train_env(
-        cfg.terrain, cfg.residual_scale, cfg.max_episode_steps, dict(cfg.env_kwargs), cfg.randomization, True
+        cfg.terrain,
+        cfg.residual_scale,
+        cfg.max_episode_steps,
+        dict(cfg.env_kwargs),
+        cfg.randomization,
+        expert_features=True,
+        residual_legs=cfg.residual_legs,
     )
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
@@ -48,8 +55,8 @@ def main(argv: list[str] | None = None) -> None:
     """Measure every noise level and print the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=1500, help="control steps per row (20 ms each)")
-    parser.add_argument("--stds", default="0,0.08,0.135,0.37", help="comma-separated residual noise stds")
-    parser.add_argument("--config", default="configs/rl/ppo_residual_hard.yaml")
+    parser.add_argument("--stds", default="0,0.08,0.2,0.37", help="comma-separated residual noise stds")
+    parser.add_argument("--config", default="configs/rl/ppo_residual_extreme.yaml")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     cfg = load_train_config(args.config)

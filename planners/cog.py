@@ -13,7 +13,7 @@ paper's cost only sees the six junction points. The equalities are eliminated ex
 space of the 24 linear conditions per axis), so continuity holds to rounding error. The
 stability constraint is bilinear in the coefficients (P x P''); it is solved by sequential
 quadratic programming with analytic constraint Jacobians (compiled: :mod:`planners.cog_kernels`) and
-quadprog, a dual active-set solver, each QP warm-started from the previous one's active set
+DAQP, a dual active-set solver with an iteration limit, each QP warm-started from the previous one's active set
 (:mod:`planners.cog_qp`: the same optimum), or, as the baseline, by
 ``scipy.optimize.minimize(method="SLSQP")`` with analytic or finite-difference gradients. After
 solving, the index is checked on a dense grid; sample times where it dips below ``epsilon`` are
@@ -152,7 +152,7 @@ def _hessian(
         H[sl, sl] = 2.0 * (weights[a] * RN.T @ RN + smoothing * N.T @ GN)
     H += 1e-12 * np.eye(H.shape[0])
     Hinv = np.linalg.inv(H)
-    Hinv.setflags(write=False)  # H stays writable: quadprog takes only writable buffers (and copies them)
+    Hinv.setflags(write=False)  # H stays writable (the QP step copies it for the solver)
     return H, Hinv
 
 
@@ -412,7 +412,7 @@ def plan_cog(
 ) -> tuple[PiecewisePolynomial, CogStats]:
     """Solve the COG problem; returns the path and solver statistics.
 
-    :param method: ``"sqp"`` (sequential QP on quadprog, default), ``"slsqp"`` (scipy, analytic
+    :param method: ``"sqp"`` (sequential QP on DAQP, default), ``"slsqp"`` (scipy, analytic
         gradients) or ``"slsqp-fd"`` (scipy with finite-difference gradients, the reference).
     :param samples_per_phase: initial stability sample times per phase (uniform in local time).
     :param margin: extra moment (N m) enforced at the samples above ``epsilon``; default
