@@ -57,7 +57,7 @@ def test_a_zero_row_with_a_positive_bound_is_infeasible():
 def test_the_saved_qp_through_the_warm_start_equals_quadprog():
     """The same problem through :class:`WarmStartQP`: cold (working set from the unconstrained optimum), then
     warm (the KKT shortcut from its own active set); both equal quadprog on all rows."""
-    from planners.cog_qp import WarmStartQP, solve_qp
+    from planners.cog_qp import WarmStartQP
 
     d = np.load(QP)
     H, g, C, lo = d["H"], d["g"], d["C"], d["lo"]
