@@ -97,9 +97,9 @@ def test_residual_law_and_clipping():
     assert ctrl.expert.resets == 1
 
 
-def test_env_applies_expert_plus_residual_torques():
-    """At every physics step the motors get clip(expert + scale x action x limit): checked on the last one."""
-    env = make_residual_env(residual_scale=0.15, terrain="flat")
+def _spy_on_expert(env: ResidualExpertEnv) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Put a spy between ``env``'s residual controller and its expert; the list it returns fills with the
+    expert's torques and the feet's contact switches at every physics step."""
     seen = []
 
     class Spy:
@@ -108,15 +108,22 @@ def test_env_applies_expert_plus_residual_torques():
 
         def __call__(self, model, data, action):
             tau = env.expert(model, data, action)
-            seen.append(tau.copy())
+            seen.append((tau.copy(), data.sensordata[env.unwrapped.idx.foot_sensor_adr].copy()))
             return tau
 
     env.controller.expert = Spy()
+    return seen
+
+
+def test_env_applies_expert_plus_residual_torques():
+    """At every physics step the motors get clip(expert + scale x action x limit): checked on the last one."""
+    env = make_residual_env(residual_scale=0.15, terrain="flat")
+    seen = _spy_on_expert(env)
     env.reset(seed=1)
     action = np.linspace(-1.0, 1.0, 12).astype(np.float32)
     env.step(action)
     lim = env.unwrapped.idx.torque_limit
-    expected = np.clip(seen[-1] + 0.15 * action.astype(np.float64) * lim, -lim, lim)
+    expected = np.clip(seen[-1][0] + 0.15 * action.astype(np.float64) * lim, -lim, lim)
     np.testing.assert_allclose(env.unwrapped.data.ctrl, expected, rtol=0, atol=1e-9)
     assert len(seen) == env.unwrapped.frame_skip
 
@@ -248,18 +255,7 @@ def test_stance_gated_env_equals_the_plain_residual_on_touching_legs():
     """In the env, the motors get the expert's torques plus the residual on the legs in contact at that
     physics step (checked on the last one), and zero residual still reproduces the expert exactly."""
     env = make_residual_env(residual_scale=0.2, terrain="flat", residual_legs="stance")
-    seen = []
-
-    class Spy:
-        def reset(self, model, data, terrain):
-            env.expert.reset(model, data, terrain)
-
-        def __call__(self, model, data, action):
-            tau = env.expert(model, data, action)
-            seen.append((tau.copy(), data.sensordata[env.unwrapped.idx.foot_sensor_adr].copy()))
-            return tau
-
-    env.controller.expert = Spy()
+    seen = _spy_on_expert(env)
     env.reset(seed=1)
     action = np.linspace(-1.0, 1.0, 12).astype(np.float32)
     for _ in range(10):

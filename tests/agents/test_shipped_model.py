@@ -1,4 +1,5 @@
-"""The shipped models (models/ppo_residual_hard, models/ppo_scratch): load as data, run, match their configs."""
+"""The shipped models (models/ppo_residual_extreme, the baseline; models/ppo_residual_hard, its predecessor;
+models/ppo_scratch): load as data, run, match their configs."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import pytest
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.evaluation.policies import make_policy, policy_env_kwargs
@@ -16,27 +18,37 @@ from agents.rl.model_io import SB3Policy, read_metadata
 from agents.rl.residual_env import ResidualController
 
 ROOT = Path(__file__).resolve().parents[2]
-MODEL = ROOT / "models" / "ppo_residual_hard" / "model.zip"
+RESIDUAL_MODELS = {
+    "extreme": (ROOT / "models" / "ppo_residual_extreme" / "model.zip", "stance"),
+    "hard": (ROOT / "models" / "ppo_residual_hard" / "model.zip", "all"),
+}
+"""randomization preset -> (the model trained in it by configs/rl/ppo_residual_PRESET.yaml, its residual_legs)."""
 
 
-def test_the_shipped_model_was_trained_with_the_shipped_config():
+@pytest.mark.parametrize("world", sorted(RESIDUAL_MODELS))
+def test_the_shipped_model_was_trained_with_the_shipped_config(world):
     """``make rl-baseline`` retrains it: its recorded config is the YAML's, field for field (fields added
     since the run was recorded take their defaults)."""
     from agents.rl.config import TrainConfig
 
-    recorded = json.loads((MODEL.parent / "train_config.json").read_text())
-    shipped = json.loads(json.dumps(load_train_config(ROOT / "configs/rl/ppo_residual_hard.yaml").to_dict()))
+    model, legs = RESIDUAL_MODELS[world]
+    recorded = json.loads((model.parent / "train_config.json").read_text())
+    shipped = json.loads(json.dumps(load_train_config(ROOT / f"configs/rl/ppo_residual_{world}.yaml").to_dict()))
     defaults = json.loads(json.dumps(TrainConfig().to_dict()))
     assert {**{k: defaults[k] for k in shipped.keys() - recorded.keys()}, **recorded} == shipped
-    meta = read_metadata(MODEL)
-    assert meta["residual"] and meta["expert_features"] and meta["randomization"] == "hard"
-    assert not list(MODEL.parent.glob("*.pkl"))
+    meta = read_metadata(model)
+    assert meta["residual"] and meta["expert_features"] and meta["randomization"] == world
+    assert meta.get("residual_legs", "all") == legs
+    assert not list(model.parent.glob("*.pkl"))
 
 
-def test_the_shipped_model_drives_the_expert_in_a_randomized_world():
-    env = gym.make("QuadUneven-v0", terrain="rough", randomization="hard", **policy_env_kwargs(str(MODEL)))
-    policy = make_policy(str(MODEL), env)  # the safe loader: nothing unpickled
+@pytest.mark.parametrize("world", sorted(RESIDUAL_MODELS))
+def test_the_shipped_model_drives_the_expert_in_a_randomized_world(world):
+    model, legs = RESIDUAL_MODELS[world]
+    env = gym.make("QuadUneven-v0", terrain="rough", randomization=world, **policy_env_kwargs(str(model)))
+    policy = make_policy(str(model), env)  # the safe loader: nothing unpickled
     assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
+    assert env.unwrapped.controller.residual_legs == legs
     assert policy.model.observation_space.shape == (env.observation_space.shape[0] + EXPERT_FEATURE_SIZE,)
     obs, _ = env.reset(seed=100)
     x0 = env.unwrapped.data.qpos[0]
