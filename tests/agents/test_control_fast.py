@@ -29,6 +29,20 @@ def test_stance_mask_selection_matches_select_stance():
         assert bits(select_stance_mask(planned, measured, STANCE_MODES.index(mode))) == want, (mode, planned, measured)
 
 
+def _expert_states(terrain, config: ExpertConfig, steps: int, every: int):
+    """The expert walking ``steps`` env steps from seed 0 on ``terrain``; at every ``every``-th step (the first
+    included) ``(policy, model, data)`` with the derived quantities the hook sees after ``mj_step1``."""
+    env = gym.make("QuadUneven-v0", terrain=terrain)
+    policy = attach_expert(env, config)
+    u = env.unwrapped
+    obs, _ = env.reset(seed=0)
+    for step in range(steps):
+        obs, *_ = env.step(policy.predict(obs)[0])
+        if step % every == 0:
+            mujoco.mj_forward(u.model, u.data)
+            yield policy, u.model, u.data
+
+
 STAIRS = {"kind": "stairs", "riser": 0.08, "direction": "down"}
 
 
@@ -38,20 +52,12 @@ STAIRS = {"kind": "stairs", "riser": 0.08, "direction": "down"}
 def test_fast_path_gives_the_general_paths_torques(distribution, terrain, atol, monkeypatch):
     """The one-call path against the readable one, and for "qp" against the readable one with DAQP too
     (the compiled QP inside the kernel against the reference solver)."""
-    env = gym.make("QuadUneven-v0", terrain=terrain)
-    policy = attach_expert(env, ExpertConfig(distribution=distribution))
-    ctrl, u = policy.controller, env.unwrapped
-    obs, _ = env.reset(seed=0)
     daqp_solves = []
     solve = ID._StanceQP.solve
     monkeypatch.setattr(ID._StanceQP, "solve", lambda self: daqp_solves.append(1) or solve(self))
     compared = 0
-    for step in range(300):
-        obs, *_ = env.step(policy.predict(obs)[0])
-        if step % 7:
-            continue
-        m, d = u.model, u.data
-        mujoco.mj_forward(m, d)  # the derived quantities the hook sees after mj_step1
+    for policy, m, d in _expert_states(terrain, ExpertConfig(distribution=distribution), steps=300, every=7):
+        ctrl = policy.controller
         t = float(d.time) - ctrl.t0
         if policy._reference_row(t) is None:
             continue
@@ -178,17 +184,9 @@ def test_the_grid_step_walks_exactly_as_the_controller_call_it_replaces(distribu
 
 def test_the_grid_step_leaves_the_controllers_diagnostics():
     """After ``step_on_grid`` the controller's ``last`` and ``last_reference`` are those of the call it replaces."""
-    env = gym.make("QuadUneven-v0", terrain="rough")
-    policy = attach_expert(env, ExpertConfig())
-    ctrl, u = policy.controller, env.unwrapped
-    obs, _ = env.reset(seed=0)
     compared = 0
-    for step in range(200):
-        obs, *_ = env.step(policy.predict(obs)[0])
-        if step % 5:
-            continue
-        m, d = u.model, u.data
-        mujoco.mj_forward(m, d)
+    for policy, m, d in _expert_states("rough", ExpertConfig(), steps=200, every=5):
+        ctrl = policy.controller
         tau_ok = np.zeros(12)
         args = (policy._grid, policy._t_start, policy._t_end, d.sensordata, policy._foot_sensor_adr, tau_ok)
         tau = ctrl.step_on_grid(m, d, *args)
