@@ -68,7 +68,7 @@ from planners.gait import validate_durations
 from planners.pitch import pitch_of_quaternion, yaw_pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
 from planners.scenario import BODY_PITCH_MODES
-from planners.types import ReferenceSample
+from planners.types import ReferenceGrid, ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env import physics
 from quad_uneven_env.fields import check_fields, param
@@ -303,6 +303,7 @@ class ExpertPolicy:
         self._current: Any = None
         self._current_ref: Any = None
         self._row_of: Any = None
+        self._grid: ReferenceGrid | None = None  # the current plan's rows (None: a hold)
         self._t_start = 0.0
         self._t_end = 0.0
         self._data: mujoco.MjData | None = None  # the data the expert plans and controls with
@@ -376,14 +377,21 @@ class ExpertPolicy:
                 self._check_disturbance(own)
             if self._adapt_friction and self._steps % SLIP_CHECK_EVERY == 0:
                 self._check_slip(own)
+            ctrl = self.controller
             if self.shares_simulator_data:
-                tau = self.controller(model, data, action)
+                contacts = None
             else:
-                ctrl = self.controller
                 contacts = (
                     IK.foot_contact_mask(data.contact.geom, ctrl.foot_of_geom, ctrl.terrain_geom) if data.ncon else 0
                 )
-                tau = ctrl(self._model, own, action, contacts)
+            grid = self._grid
+            if grid is not None:  # the controller's call below when it takes its fast path, in one compiled call
+                m = model if contacts is None else self._model
+                t0, t1, touch = self._t_start, self._t_end, self._sim.sensordata
+                tau = ctrl.step_on_grid(m, own, grid, t0, t1, touch, self._foot_sensor_adr, self._tau_ok, contacts)
+                if tau is not None:
+                    return tau
+            tau = ctrl(model, data, action) if contacts is None else ctrl(self._model, own, action, contacts)
             if tau.shape == self._tau_ok.shape and IK.copy_if_finite(tau, self._tau_ok):
                 return tau
             err = "non-finite torques"
@@ -697,6 +705,7 @@ class ExpertPolicy:
             duration = plan.duration
             self._yaw += turn
         self._row_of = getattr(self._current_ref, "row", None)
+        self._grid = getattr(self._current_ref, "grid", None)
         self.plans.append((t0, self._current))
         self._t_start, self._t_end = t0, t0 + duration
 

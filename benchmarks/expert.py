@@ -6,10 +6,12 @@ computed-torque controller at every 2 ms physics step, through QuadUneven-v0's h
 (restarted every 2 s so it keeps simulating contacts rather than a pile on the ground).
 Targets (issue 13): expert >= 0.6 x the zero-torque rate and >= 25 x real time.
 
-Usage: ``python benchmarks/expert.py [--seconds 30] [--terrain rough] [--model nominal|oracle] [--copy] [--split]``
-(``--copy``: the nominal expert copies the measured state into its own model every physics step even in
-the nominal world, as it does whenever the simulated robot differs from the nominal one; ``--split``: also
-time ``mj_step1`` and ``mj_step2`` inside the env's loop and print where each physics step's time goes).
+Usage: ``python benchmarks/expert.py [--seconds 30] [--terrain rough] [--model nominal|oracle] [--copy] [--split]
+[--hook-cpu]`` (``--copy``: the nominal expert copies the measured state into its own model every physics step even
+in the nominal world, as it does whenever the simulated robot differs from the nominal one; ``--split``: also
+time ``mj_step1`` and ``mj_step2`` inside the env's loop and print where each physics step's time goes;
+``--hook-cpu``: the expert hook's CPU time (``time.thread_time_ns``, which a preempting process on a shared machine
+does not inflate the way it does wall time), split into planning, the plans' reference grids and the rest).
 """
 
 from __future__ import annotations
@@ -34,8 +36,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--model", default="nominal", choices=["nominal", "oracle"])
     parser.add_argument("--copy", action="store_true", help="never share the simulator's data (nominal model)")
     parser.add_argument("--split", action="store_true", help="time mj_step1/mj_step2 in the env's loop too")
+    parser.add_argument("--hook-cpu", action="store_true", help="CPU time of the expert's hook, split")
     args = parser.parse_args(argv)
     split = _StepTimer.install() if args.split else None
+    hook_cpu = _HookCPU.install() if args.hook_cpu else None
 
     from agents.expert import ExpertConfig
 
@@ -46,9 +50,13 @@ def main(argv: list[str] | None = None) -> None:
     obs, _ = env.reset(seed=1)
     for _ in range(5):
         obs, *_ = env.step(policy.predict(obs)[0])
+    if hook_cpu is not None:
+        hook_cpu.wrap(env.unwrapped)
     obs, info = env.reset(seed=0)
     if split is not None:
         split.clear()
+    if hook_cpu is not None:
+        hook_cpu.clear()
     u = env.unwrapped
     standing = mujoco.MjData(u.model)
     standing.qpos[:] = u.data.qpos
@@ -63,6 +71,8 @@ def main(argv: list[str] | None = None) -> None:
     sim_expert = u.data.time
     if split is not None:
         split.uninstall()
+    if hook_cpu is not None:
+        hook_cpu.uninstall()
     planner_s = sum(policy.planner_times_ms) / 1e3
 
     d = mujoco.MjData(u.model)
@@ -107,6 +117,69 @@ def main(argv: list[str] | None = None) -> None:
             f"mj_step2 {split.step2 / n * 1e6:.0f} + planning {planner_s / n * 1e6:.0f} + controller and the "
             f"rest {rest / n * 1e6:.0f}"
         )
+    if hook_cpu is not None:
+        n = round(sim_expert / u.model.opt.timestep)
+        h = hook_cpu
+        print(
+            f"expert hook, CPU time per physics step ({n} steps): {h.hook / n / 1e3:.1f} us = planning "
+            f"{h.plan / n / 1e3:.1f} + reference grids {h.grid / n / 1e3:.1f} + controller and the rest "
+            f"{(h.hook - h.plan - h.grid) / n / 1e3:.1f}"
+        )
+
+
+class _HookCPU:
+    """CPU time (``time.thread_time_ns``) of the env's physics-rate hook, of the planner
+    (``agents.expert.plan_gait_cycle``) and of the plans' reference grids (``planners.reference.Reference.__init__``),
+    each wrapped."""
+
+    def __init__(self) -> None:
+        self.hook = self.plan = self.grid = 0
+
+    @classmethod
+    def install(cls) -> _HookCPU:
+        import agents.expert as expert_module
+        from planners import reference
+
+        timer, clock = cls(), time.thread_time_ns
+        init, plan = reference.Reference.__init__, expert_module.plan_gait_cycle
+
+        def timed_init(ref, *args, **kwargs):
+            t = clock()
+            init(ref, *args, **kwargs)
+            timer.grid += clock() - t
+
+        def timed_plan(*args, **kwargs):
+            t = clock()
+            try:
+                return plan(*args, **kwargs)
+            finally:
+                timer.plan += clock() - t
+
+        timer._originals = (init, plan)
+        reference.Reference.__init__ = timed_init
+        expert_module.plan_gait_cycle = timed_plan
+        return timer
+
+    def wrap(self, env) -> None:
+        """Time ``env``'s hook (after ``attach_expert``)."""
+        hook, clock = env._controller, time.thread_time_ns
+
+        def timed(model, data, action):
+            t = clock()
+            tau = hook(model, data, action)
+            self.hook += clock() - t
+            return tau
+
+        env._controller = timed
+
+    def clear(self) -> None:
+        self.hook = self.plan = self.grid = 0
+
+    def uninstall(self) -> None:
+        import agents.expert as expert_module
+        from planners import reference
+
+        reference.Reference.__init__, expert_module.plan_gait_cycle = self._originals
 
 
 class _StepTimer:

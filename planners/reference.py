@@ -18,7 +18,7 @@ import numpy as np
 from planners.gait import phase_index
 from planners.pitch import LEVEL
 from planners.terrain_query import foot_site_on
-from planners.types import ReferenceSample
+from planners.types import ReferenceGrid, ReferenceSample
 from planners.wholebody import WholeBody
 from quad_uneven_env.config import RobotConfig, load_robot_config
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
@@ -65,6 +65,10 @@ class Reference:
         # Python lists: the controller looks one up every physics step, and list indexing is cheaper.
         self._rows = list(self._packed)
         self._grid_t_list = self._grid_t.tolist()
+        self.grid = ReferenceGrid(
+            self._grid_t, self._grid_dt, self.t_end, self._packed, np.array(self._grid_mask, dtype=np.int64), self._rows
+        )
+        """the rows :meth:`row` returns, for the controller's compiled lookup (:class:`ReferenceGrid`)."""
 
     def row(self, t: float) -> tuple[np.ndarray, int] | None:
         """The packed reference at grid time ``t`` (s from the cycle start, clipped to the cycle), or None off the grid.

@@ -5,13 +5,14 @@
 - :class:`ReferenceSample` (and its packed row layout :data:`PACKED_FIELDS`): the planned state of
   the whole robot at one instant in the canonical coordinates (MuJoCo's), from which the controller
   builds beta_ref, its derivatives and the stance set;
+- :class:`ReferenceGrid`: a plan's packed rows on its time grid, for the controller's compiled path;
 - :class:`PlanningError`: the planners' one error type.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -85,3 +86,21 @@ PACKED_FIELDS: tuple[tuple[str, int], ...] = (
     ("domega_base_B", 3), ("q_joints", 12), ("qd_joints", 12), ("qdd_joints", 12),
 )  # fmt: skip
 """Layout of a packed reference row (55 floats): the :class:`ReferenceSample` arrays in this order."""
+
+
+class ReferenceGrid(NamedTuple):
+    """A plan's reference on its time grid, packed for one compiled lookup per physics step
+    (:meth:`planners.reference.Reference.row` in :func:`planners.reference_kernels.grid_index`)."""
+
+    t: np.ndarray
+    """(T,) s from the cycle start: the grid times."""
+    dt: float
+    """s, the grid spacing."""
+    t_end: float
+    """s, the cycle's duration (times are clipped to [0, t_end])."""
+    packed: np.ndarray
+    """(T, 55) the packed rows (:data:`PACKED_FIELDS`); not to be written."""
+    masks: np.ndarray
+    """(T,) int64 planned stance bitmask of each row (bit i: leg i)."""
+    rows: list
+    """the rows of ``packed`` as a list of (55,) views (cheaper to index from Python)."""

@@ -34,7 +34,9 @@ from typing import Any
 
 import mujoco
 import numpy as np
+from numba.core.errors import NumbaError
 
+from agents.control import controller_kernels as FK
 from agents.control import inverse_dynamics_kernels as K
 from agents.control.elimination import ProjectedDynamics, eliminate_constraints, stance_layout
 from agents.control.fast_path import FastControlStep, PackedReference
@@ -47,7 +49,7 @@ from agents.control.inverse_dynamics import (
     friction_pyramid,
 )
 from agents.control.verify import IDCheck, verify_inverse_dynamics
-from planners.types import ReferenceSample
+from planners.types import ReferenceGrid, ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env.fields import check_fields, param
 from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
@@ -170,6 +172,7 @@ class ComputedTorqueController:
         self._last_reference: ReferenceSample | PackedReference | None = None
         self._bdd = np.empty(C.NV)
         self._stance_memo: dict = {}
+        self._grid_cache: tuple | None = None  # (grid, touch, tau_ok, their GridArguments) of step_on_grid
 
     @property
     def last(self) -> IDResult | None:
@@ -226,6 +229,7 @@ class ComputedTorqueController:
             np.empty(C.NV),
         )
         self._stance_memo.clear()
+        self._grid_cache = None
         self._fast = None
         if self.backend == "mujoco":
             self._fast = FastControlStep(
@@ -304,6 +308,60 @@ class ComputedTorqueController:
         tau = np.empty(C.N_JOINTS)
         K.clip_into(result.tau, self.torque_limit, tau)
         return tau
+
+    def step_on_grid(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        grid: ReferenceGrid,
+        t_start: float,
+        t_stop: float,
+        touch: np.ndarray,
+        touch_adr: np.ndarray,
+        tau_ok: np.ndarray,
+        contacts: int | None = None,
+    ) -> np.ndarray | None:
+        """The call ``self(model, data, None, contacts)`` makes when ``reference_row(t)`` is ``grid``'s row at
+        ``t - t_start`` and the fast path solves the step, in one compiled call
+        (:func:`~agents.control.controller_kernels.grid_control_step`); else None, and nothing but the
+        inverse-dynamics buffers changed: the caller then makes that call.
+
+        For a physics-rate hook that plans on a grid (the expert): the row lookup, the check that every planned
+        stance foot touches (``touch[touch_adr[leg]] > 0``, the simulator's touch sensors), the step and the
+        torques' finite check happen inside the compiled call.
+
+        :param grid: the plan's rows, valid for controller times ``t`` (s) in [``t_start``, ``t_stop``).
+        :param tau_ok: (12,) the last finite torques: overwritten with the step's torques when it returns them.
+        :return: the torques (12, N m, clipped, finite; a copy of ``tau_ok``), or None.
+        """
+        t = float(data.time) - self.t0
+        fast = self._fast
+        if t >= t_stop or fast is None or model is not self._model or self.reference_row is None:
+            return None
+        packed, _ = fast.arguments(data, self.terrain, self._gains)
+        if packed is None:
+            return None
+        c = self._grid_cache
+        if c is None or c[0] is not grid or c[1] is not touch or c[2] is not tau_ok:
+            qp = self.distribution == "qp"
+            g = FK.GridArguments(grid.t, grid.dt, grid.t_end, grid.packed, grid.masks, touch, touch_adr, tau_ok, qp)
+            c = self._grid_cache = (grid, touch, tau_ok, g)
+        self.id.workspace_version += 1  # the compiled call rewrites the inverse-dynamics buffers
+        try:
+            code = FK.grid_control_step(
+                t - t_start, STANCE_MODES.index(self.stance_mode), data.contact.geom,
+                -1 if contacts is None else contacts, packed, c[3],
+            )  # fmt: skip
+        except (TypeError, NumbaError):  # arrays the kernel does not take: the general path
+            return None
+        if code < 0:
+            return None
+        planned = code >> FK.GRID_PLANNED_SHIFT & 15
+        self._last = WorkspaceResult(
+            code >> 4 & 15, fast.layouts[code & 15], self.id.workspace_version, bool(code & FK.QP_RELAXED)
+        )
+        self._last_reference = PackedReference(t, grid.rows[code >> FK.GRID_ROW_SHIFT], planned)
+        return tau_ok.copy()
 
     def select_stance(self, planned, measured: np.ndarray) -> tuple[bool, bool, bool, bool]:
         """Stance set from the plan and the measured contacts (rule in the module docstring)."""

@@ -10,8 +10,11 @@ kernels as the general path (:mod:`agents.control.inverse_dynamics_kernels`, :mo
 paths give the same torques (tested); every rare case (1-2 stance feet, a failed Cholesky, a QP the
 compiled solver gives up on) stays in Python.
 :func:`packed_control_step` is the same call with the arguments that outlive a step packed in one
-:class:`StepArguments` (numba unboxes one argument instead of ~45). :func:`control_step` and
-:func:`packed_control_step` compile on their first call (a few seconds per process), the others at import.
+:class:`StepArguments` (numba unboxes one argument instead of ~45). :func:`grid_control_step` is that call
+with the reference row looked up on the plan's grid and the expert's touch-down check done inside it
+(:class:`GridArguments`), so that the expert's physics-rate hook is one Python layer over one compiled call.
+:func:`control_step`, :func:`packed_control_step` and :func:`grid_control_step` compile on their first call (a
+few seconds per process), the others at import.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from numba.experimental import structref
 
 from agents.control import inverse_dynamics_kernels as K
 from agents.control import qp_kernels as QK
+from planners.reference_kernels import grid_index
 from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
 from quad_uneven_env.terrain.heightfield_kernels import normals_into
 
@@ -164,3 +168,55 @@ def packed_control_step(row, planned, stance_mode, contact_geom, measured, a):  
     if code >= 0 and (code >> 4) & K.DONE:
         K.clip_into(a.tau, a.torque_limit, a.tau_out)
     return code
+
+
+GRID_PLANNED_SHIFT, GRID_ROW_SHIFT = 20, 24
+"""bit offsets in :func:`grid_control_step`'s result of the planned stance bitmask and of the grid row's index."""
+
+GRID_FIELDS: tuple[str, ...] = ("grid_t", "grid_dt", "t_end", "rows", "masks", "touch", "touch_adr", "tau_ok", "qp")
+"""The fields of :class:`GridArguments`: a plan's :class:`planners.types.ReferenceGrid` (``t, dt, t_end, packed,
+masks``), the simulator's touch sensors (``sensordata``) and the four feet's addresses in it, the buffer of the
+last finite torques, and whether the distribution is "qp"."""
+
+
+@structref.register
+class _GridArgumentsType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class GridArguments(structref.StructRefProxy):
+    """:data:`GRID_FIELDS` in one compiled record (one per plan and simulator data)."""
+
+
+structref.define_proxy(GridArguments, _GridArgumentsType, list(GRID_FIELDS))
+
+
+@nb.njit(cache=False, nogil=True)
+def grid_control_step(t, stance_mode, contact_geom, measured, a, g):  # pragma: no cover - compiled
+    """:func:`packed_control_step` at the row of ``g``'s grid at plan time ``t`` (s), where the readable path's
+    fast form would take it, with the torques' finite check.
+
+    The row is the one :meth:`planners.reference.Reference.row` returns (:func:`grid_index`), and the step is
+    taken only if every planned stance foot's touch sensor reads > 0 (``ExpertPolicy._reference_row``; else the
+    expert pushes the late foot down on the readable path). Returns -1 where the caller must take its general
+    path: no grid row, a planned foot not touching, a step :func:`packed_control_step` did not solve, a "qp"
+    step whose QP it left to DAQP (``g.qp``, stance feet, neither ``INSIDE_CONES`` nor ``QP_DONE``), or
+    non-finite torques; otherwise the clipped torques are in ``a.tau_out`` and ``g.tau_ok``, and the result is
+    :func:`control_step`'s code or-ed with ``planned << GRID_PLANNED_SHIFT | row << GRID_ROW_SHIFT``.
+    """
+    k = grid_index(t, g.grid_t, g.grid_dt, g.t_end)
+    if k < 0:
+        return -1
+    planned = g.masks[k]
+    for leg in range(4):
+        if (planned >> leg) & 1 and g.touch[g.touch_adr[leg]] <= 0:
+            return -1
+    code = packed_control_step(g.rows[k], planned, stance_mode, contact_geom, measured, a)
+    if code < 0 or not (code >> 4) & K.DONE:
+        return -1
+    if g.qp and code & 15 and not code & (INSIDE_CONES | QP_DONE):
+        return -1
+    if not K.copy_if_finite(a.tau_out, g.tau_ok):
+        return -1
+    return code | planned << GRID_PLANNED_SHIFT | k << GRID_ROW_SHIFT

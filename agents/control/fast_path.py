@@ -100,7 +100,7 @@ class FastControlStep:
         """
         self.id.workspace_version += 1  # control_step rewrites the inverse-dynamics buffers
         try:
-            packed, normals = self._arguments(data, terrain, gains)
+            packed, normals = self.arguments(data, terrain, gains)
             if packed is None:
                 return None
             code = FK.packed_control_step(row, planned, stance_mode, data.contact.geom, measured, packed)
@@ -125,7 +125,7 @@ class FastControlStep:
         """Rebuild the kernel's arguments at the next step (after the solver's ``mu`` or ``qp_solver`` changed)."""
         self._cache = None
 
-    def _arguments(
+    def arguments(
         self, data: mujoco.MjData, terrain: Any, gains: np.ndarray
     ) -> tuple[FK.StepArguments | None, np.ndarray | None]:
         """The arguments of ``control_step`` that outlive a step (views and buffers), packed (None: refused by

@@ -29,6 +29,20 @@ def test_stance_mask_selection_matches_select_stance():
         assert bits(select_stance_mask(planned, measured, STANCE_MODES.index(mode))) == want, (mode, planned, measured)
 
 
+def _expert_states(terrain, config: ExpertConfig, steps: int, every: int):
+    """The expert walking ``steps`` env steps from seed 0 on ``terrain``; at every ``every``-th step (the first
+    included) ``(policy, model, data)`` with the derived quantities the hook sees after ``mj_step1``."""
+    env = gym.make("QuadUneven-v0", terrain=terrain)
+    policy = attach_expert(env, config)
+    u = env.unwrapped
+    obs, _ = env.reset(seed=0)
+    for step in range(steps):
+        obs, *_ = env.step(policy.predict(obs)[0])
+        if step % every == 0:
+            mujoco.mj_forward(u.model, u.data)
+            yield policy, u.model, u.data
+
+
 STAIRS = {"kind": "stairs", "riser": 0.08, "direction": "down"}
 
 
@@ -38,20 +52,12 @@ STAIRS = {"kind": "stairs", "riser": 0.08, "direction": "down"}
 def test_fast_path_gives_the_general_paths_torques(distribution, terrain, atol, monkeypatch):
     """The one-call path against the readable one, and for "qp" against the readable one with DAQP too
     (the compiled QP inside the kernel against the reference solver)."""
-    env = gym.make("QuadUneven-v0", terrain=terrain)
-    policy = attach_expert(env, ExpertConfig(distribution=distribution))
-    ctrl, u = policy.controller, env.unwrapped
-    obs, _ = env.reset(seed=0)
     daqp_solves = []
     solve = ID._StanceQP.solve
     monkeypatch.setattr(ID._StanceQP, "solve", lambda self: daqp_solves.append(1) or solve(self))
     compared = 0
-    for step in range(300):
-        obs, *_ = env.step(policy.predict(obs)[0])
-        if step % 7:
-            continue
-        m, d = u.model, u.data
-        mujoco.mj_forward(m, d)  # the derived quantities the hook sees after mj_step1
+    for policy, m, d in _expert_states(terrain, ExpertConfig(distribution=distribution), steps=300, every=7):
+        ctrl = policy.controller
         t = float(d.time) - ctrl.t0
         if policy._reference_row(t) is None:
             continue
@@ -132,3 +138,74 @@ def test_a_failing_compiled_step_takes_the_readable_path(monkeypatch):
     ctrl._fast.forget_arguments()  # e.g. after set_friction: tried again
     ctrl(m, d)
     assert len(calls) == 2
+
+
+@pytest.mark.parametrize(
+    "distribution, terrain, share",
+    [("qp", "rough", True), ("qp", STAIRS, False), ("pinv", "flat", True)],
+)
+def test_the_grid_step_walks_exactly_as_the_controller_call_it_replaces(distribution, terrain, share, monkeypatch):
+    """The expert's hook with ``step_on_grid`` (row lookup, touch-down check and step in one compiled call)
+    against the same hook with it refused (``controller(...)`` every step): the same trajectory bit for bit,
+    in the simulator's data and in the nominal model's copy (measured contacts handed in), with both branches
+    taken: the grid step, and the general path at late touch-downs (a planned foot not touching), plan ends
+    and QPs."""
+    runs = []
+    for grid_step in (True, False):
+        env = gym.make("QuadUneven-v0", terrain=terrain)
+        policy = attach_expert(env, ExpertConfig(distribution=distribution, share_nominal_world=share))
+        ctrl = policy.controller
+        taken = []
+        real = type(ctrl).step_on_grid
+
+        def counted(self, *args, _real=real, _taken=taken, _on=grid_step):
+            tau = _real(self, *args) if _on else None
+            _taken.append(tau is not None)
+            return tau
+
+        monkeypatch.setattr(type(ctrl), "step_on_grid", counted)
+        obs, _ = env.reset(seed=0)
+        assert policy.shares_simulator_data is share
+        qpos, torques = [], []
+        for _ in range(250):
+            obs, _, fell, *_ = env.step(policy.predict(obs)[0])
+            qpos.append(env.unwrapped.data.qpos.copy())
+            torques.append(policy.last_torques.copy())
+            if fell:  # the "pinv" expert tips over after ~2.2 s, on either path
+                break
+        runs.append((np.array(qpos), np.array(torques), taken, list(policy.failure_log)))
+        monkeypatch.undo()
+    (q_grid, tau_grid, taken, log_grid), (q_call, tau_call, _, log_call) = runs
+    np.testing.assert_array_equal(tau_grid, tau_call)
+    np.testing.assert_array_equal(q_grid, q_call)
+    assert log_grid == log_call
+    assert 0.8 * len(taken) < sum(taken) < len(taken), "both branches must be taken"
+
+
+def test_the_grid_step_leaves_the_controllers_diagnostics():
+    """After ``step_on_grid`` the controller's ``last`` and ``last_reference`` are those of the call it replaces."""
+    compared = 0
+    for policy, m, d in _expert_states("rough", ExpertConfig(), steps=200, every=5):
+        ctrl = policy.controller
+        tau_ok = np.zeros(12)
+        args = (policy._grid, policy._t_start, policy._t_end, d.sensordata, policy._foot_sensor_adr, tau_ok)
+        tau = ctrl.step_on_grid(m, d, *args)
+        if tau is None:
+            assert not tau_ok.any()
+            continue
+        np.testing.assert_array_equal(tau, tau_ok)
+        last, ref = ctrl.last, ctrl.last_reference
+        np.testing.assert_array_equal(tau, ctrl(m, d))
+        assert isinstance(ctrl._last_reference, PackedReference)
+        np.testing.assert_array_equal(last.tau, ctrl.last.tau)
+        np.testing.assert_array_equal(last.contact_forces, ctrl.last.contact_forces)
+        assert (last.stance, last.distribution, last.relaxed) == (
+            ctrl.last.stance,
+            ctrl.last.distribution,
+            ctrl.last.relaxed,
+        )
+        assert ref.t == ctrl.last_reference.t and ref.stance == ctrl.last_reference.stance
+        for name, _ in PACKED_FIELDS:
+            np.testing.assert_array_equal(getattr(ref, name), getattr(ctrl.last_reference, name), err_msg=name)
+        compared += 1
+    assert compared >= 20

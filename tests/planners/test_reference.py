@@ -81,6 +81,32 @@ def test_sample_is_a_reference_sample(ref):
     np.testing.assert_allclose(off.qdd_joints, e[5][0], atol=1e-8)
 
 
+def test_compiled_grid_lookup_equals_row(ref):
+    """``reference_kernels.grid_index`` against :meth:`Reference.row` where they could part: grid times,
+    times within and just beyond the 1e-9 s tolerance, half-way between grid points (Python rounds half
+    to even), before the start and past the end (clipped), and the grid's last point."""
+    from planners.reference_kernels import grid_index
+
+    g = ref.grid
+    assert g.packed.shape == (len(g.t), 55) and g.masks.dtype == np.int64
+    k = np.arange(len(g.t))
+    times = np.concatenate([
+        g.t, g.t + 5e-10, g.t - 5e-10, g.t + 2e-9, g.t - 2e-9, (k + 0.5) * g.dt, k * g.dt + 0.5 * g.dt,
+        [-1.0, -1e-12, 0.0, g.t_end, g.t_end + 1e-3, g.t_end + 10.0, 0.0007, 0.001, 0.003],
+    ])  # fmt: skip
+    hits = 0
+    for t in times.tolist():
+        want = ref.row(t)
+        got = grid_index(t, g.t, g.dt, g.t_end)
+        if want is None:
+            assert got == -1, t
+            continue
+        hits += 1
+        assert got >= 0 and g.rows[got] is want[0] and int(g.masks[got]) == want[1], t
+        np.testing.assert_array_equal(g.packed[got], want[0])
+    assert 3 * len(g.t) <= hits < len(times)
+
+
 def test_com_offset_matches_mujoco_random_pose(rng, robot_cfg, mj):
     m, d = mj
     wb = WholeBody(robot_cfg)
