@@ -85,6 +85,10 @@ def test_presets_match_the_robust_suites():
     assert mild.push_impulse[1] <= 15.0 and mild.push_interval == (4.0, 6.0)
     assert hard.push_impulse[1] == pytest.approx(25.0)
     assert load_randomization(mild) is mild and load_randomization(None) is None
+    extreme = load_randomization("extreme")  # hard, with weaker motors and heavier payloads
+    assert extreme.motor_strength == (0.5, 1.3) and extreme.payload_mass[1] == pytest.approx(0.5 * total)
+    changed = {f for f in hard.__dataclass_fields__ if getattr(hard, f) != getattr(extreme, f)}
+    assert changed == {"motor_strength", "payload_mass"}
 
 
 def test_yaml_path_and_dict_give_the_same_config(tmp_path):
