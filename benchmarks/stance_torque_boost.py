@@ -1,0 +1,79 @@
+"""Diagnostic: can a torque residual help the expert in the extreme world at all?
+
+A fixed, hand-made residual: the expert's own torque times ``gain - 1`` on the legs whose foot touches the
+ground (the contact switches, every physics step), zero on swinging legs. Run on one terrain of the
+``robust_extreme`` suite with its held-out seeds, it tells whether the residual space holds a policy better
+than the expert (the RL agent of docs/rl.md did not find one). ``--gain 1`` is the expert alone and
+reproduces the suite's episodes (same seeds, same worlds).
+
+Usage: ``python benchmarks/stance_torque_boost.py --gain 1.3 [--entry stairs_up] [--seeds 100-119]``
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import gymnasium as gym
+import numpy as np
+
+import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.expert import ExpertConfig, attach_expert
+
+ENTRIES = {
+    "rough": {"kind": "rough", "amplitude": 0.05, "wavelength": 0.6},
+    "stairs_up": {"kind": "stairs", "direction": "up", "riser": 0.08, "tread": 0.3, "n_steps": 5},
+    "stairs_down": {"kind": "stairs", "direction": "down", "riser": 0.08, "tread": 0.3, "n_steps": 5},
+}
+"""robust_extreme's terrain entries."""
+
+
+class StanceTorqueBoost:
+    """Physics-rate controller: the expert's torques (N m) times ``gain`` on the legs whose foot touches."""
+
+    def __init__(self, expert, foot_sensor_adr: np.ndarray, gain: float) -> None:
+        self.expert, self.adr, self.gain = expert, np.asarray(foot_sensor_adr), gain
+
+    def reset(self, model, data, terrain) -> None:
+        self.expert.reset(model, data, terrain)
+
+    def __call__(self, model, data, action) -> np.ndarray:
+        tau = self.expert(model, data, action).copy()
+        tau[np.repeat(data.sensordata[self.adr] > 0.0, 3)] *= self.gain
+        return tau  # the env clips to the motor limits
+
+
+def episode(terrain: dict, seed: int, gain: float, goal: float = 3.0, time_limit: float = 90.0) -> tuple[str, float]:
+    """One robust_extreme episode: ("goal" | "fall" | "stall", distance in m)."""
+    env = gym.make("QuadUneven-v0", terrain=terrain, randomization="extreme", max_episode_steps=10**6)
+    policy = attach_expert(env, ExpertConfig())
+    base = env.unwrapped
+    base.set_controller(StanceTorqueBoost(policy, base.idx.foot_sensor_adr, gain))
+    obs, _ = env.reset(seed=seed)
+    info = {"distance": 0.0}
+    for _ in range(round(time_limit / base.dt)):
+        obs, _, terminated, _, info = env.step(policy.predict(obs)[0])
+        if info["distance"] >= goal:
+            return "goal", float(info["distance"])
+        if terminated:
+            return "fall", float(info["distance"])
+    return "stall", float(info["distance"])
+
+
+def main() -> None:
+    """Run every seed and print one line each, then the counts."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--gain", type=float, default=1.3, help="stance-leg torque factor (1: the expert alone)")
+    ap.add_argument("--entry", choices=sorted(ENTRIES), default="stairs_up")
+    ap.add_argument("--seeds", default="100-119", help="first-last (inclusive)")
+    args = ap.parse_args()
+    first, last = (int(v) for v in args.seeds.split("-"))
+    counts = {"goal": 0, "fall": 0, "stall": 0}
+    for seed in range(first, last + 1):
+        end, dist = episode(ENTRIES[args.entry], seed, args.gain)
+        counts[end] += 1
+        print(f"gain {args.gain:g} {args.entry} seed {seed}: {end} at {dist:.2f} m", flush=True)
+    print(f"gain {args.gain:g} {args.entry} seeds {args.seeds}: {counts}")
+
+
+if __name__ == "__main__":
+    main()
