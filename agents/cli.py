@@ -299,6 +299,13 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         help="which legs take the residual: all, or only those whose foot touches the ground (default: the config's)",
     )
     p.add_argument(
+        "--residual-basis",
+        choices=("torque_limit", "expert_torque"),
+        default=None,
+        help="a unit of residual action: a fraction of the torque limit, or of the expert's own torque (a gain) "
+        "(default: the config's)",
+    )
+    p.add_argument(
         "--time-limit-min", type=float, default=None, help="stop (and save) after this many minutes of training"
     )
     p.add_argument("--config", default=None, help="training config YAML (default configs/rl/ALGO_residual.yaml)")
@@ -327,6 +334,7 @@ def run_train_command(args: argparse.Namespace) -> int:
         "n_envs": args.n_envs,
         "residual_scale": args.residual_scale,
         "residual_legs": args.residual_legs,
+        "residual_basis": args.residual_basis,
         "time_limit_min": args.time_limit_min,
     }
     cfg = load_train_config(args.config, overrides)

@@ -6,7 +6,8 @@ ground (the contact switches, every physics step), zero on swinging legs. Run on
 than the expert (the RL agent of docs/rl.md did not find one). ``--gain 1`` is the expert alone and
 reproduces the suite's episodes (same seeds, same worlds).
 
-Usage: ``python benchmarks/stance_torque_boost.py --gain 1.3 [--entry stairs_up] [--seeds 100-119]``
+Usage: ``python benchmarks/stance_torque_boost.py --gain 1.3 [--entry stairs_up] [--seeds 100-119]``, or on
+another suite's entry (its world, goal and time limit): ``--suite targets --entry 5 --seeds 0-9``.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import gymnasium as gym
 import numpy as np
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.evaluation.suites import load_suite
 from agents.expert import ExpertConfig, attach_expert
 
 ENTRIES = {
@@ -42,9 +44,11 @@ class StanceTorqueBoost:
         return tau  # the env clips to the motor limits
 
 
-def episode(terrain: dict, seed: int, gain: float, goal: float = 3.0, time_limit: float = 90.0) -> tuple[str, float]:
-    """One robust_extreme episode: ("goal" | "fall" | "stall", distance in m)."""
-    env = gym.make("QuadUneven-v0", terrain=terrain, randomization="extreme", max_episode_steps=10**6)
+def episode(
+    terrain: dict, seed: int, gain: float, goal: float = 3.0, time_limit: float = 90.0, randomization="extreme"
+) -> tuple[str, float]:
+    """One episode (robust_extreme's world by default): ("goal" | "fall" | "stall", distance in m)."""
+    env = gym.make("QuadUneven-v0", terrain=terrain, randomization=randomization, max_episode_steps=10**6)
     policy = attach_expert(env, ExpertConfig())
     base = env.unwrapped
     base.set_controller(StanceTorqueBoost(policy, base.idx.foot_sensor_adr, gain))
@@ -63,13 +67,26 @@ def main() -> None:
     """Run every seed and print one line each, then the counts."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--gain", type=float, default=1.3, help="stance-leg torque factor (1: the expert alone)")
-    ap.add_argument("--entry", choices=sorted(ENTRIES), default="stairs_up")
+    ap.add_argument("--entry", default="stairs_up", help=f"one of {sorted(ENTRIES)}, or an entry index with --suite")
+    ap.add_argument("--suite", default=None, help="a suite name: --entry is then the index of its terrain entry")
     ap.add_argument("--seeds", default="100-119", help="first-last (inclusive)")
     args = ap.parse_args()
     first, last = (int(v) for v in args.seeds.split("-"))
+    if args.suite is None:
+        if args.entry not in ENTRIES:
+            ap.error(f"--entry must be one of {sorted(ENTRIES)} without --suite, got {args.entry!r}")
+        terrain, world = ENTRIES[args.entry], dict(randomization="extreme")
+    else:
+        suite = load_suite(args.suite)
+        try:
+            entry = suite.terrains[int(args.entry)]
+        except (ValueError, IndexError):
+            ap.error(f"--entry must be an index in 0..{len(suite.terrains) - 1} with --suite, got {args.entry!r}")
+        terrain = {"kind": entry.kind, **entry.params}
+        world = dict(goal=suite.goal_distance, time_limit=suite.time_limit, randomization=entry.randomization)
     counts = {"goal": 0, "fall": 0, "stall": 0}
     for seed in range(first, last + 1):
-        end, dist = episode(ENTRIES[args.entry], seed, args.gain)
+        end, dist = episode(terrain, seed, args.gain, **world)
         counts[end] += 1
         print(f"gain {args.gain:g} {args.entry} seed {seed}: {end} at {dist:.2f} m", flush=True)
     print(f"gain {args.gain:g} {args.entry} seeds {args.seeds}: {counts}")

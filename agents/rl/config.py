@@ -24,6 +24,10 @@ RL_CONFIG_DIR = CONFIG_DIR / "rl"
 RESIDUAL_LEGS = ("all", "stance")
 """Which legs take the residual: every leg, or only those whose foot touches the ground (per physics step)."""
 
+RESIDUAL_BASES = ("torque_limit", "expert_torque")
+"""What one unit of residual action is: a fraction of the motor's torque limit (additive), or of the expert's
+own torque at that physics step (a gain on the expert: ``tau = tau_expert x (1 + residual_scale x action)``)."""
+
 ALGOS = ("ppo", "sac")
 """Stable-Baselines3 algorithms ``quad-uneven train`` supports."""
 
@@ -75,6 +79,13 @@ class TrainConfig:
     residual_legs: str = param("all", kind="choice", choices=RESIDUAL_LEGS)
     """``all``: every leg takes the residual; ``stance``: only a leg whose foot touches the ground, at each
     physics step (the residual then cannot move a swinging foot)."""
+    residual_basis: str = param("torque_limit", kind="choice", choices=RESIDUAL_BASES)
+    """``torque_limit``: residual torque = residual_scale x action x the motor limit; ``expert_torque``:
+    residual_scale x action x the expert's own torque (per joint and physics step: a gain on the expert)."""
+    initial_action: float = param(0.0, "action units", lo=-1.0, hi=1.0)
+    """the untrained policy's mean action, every joint (0: the expert exactly). With ``expert_torque`` and
+    ``stance`` legs, ``initial_action x residual_scale`` is a hand-made prior: e.g. 0.6 x 0.5 = +30 % torque
+    on stance legs (benchmarks/stance_torque_boost.py); PPO refines from there."""
     max_episode_steps: int = param(1000, "steps", kind="int", lo=1)
     """control steps per training episode (1000 = 20 s)."""
     env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
@@ -133,11 +144,19 @@ def validate(cfg: TrainConfig) -> TrainConfig:
     bad = sorted(set(env_kwargs) & set(FORBIDDEN_ENV_KWARGS))
     if bad:
         raise TrainConfigError(f"env_kwargs may not set {bad} (the trainer and the residual env own them)")
-    if not cfg.residual and (cfg.expert_features or cfg.residual_penalty or cfg.residual_legs != "all"):
+    if not cfg.residual and (
+        cfg.expert_features
+        or cfg.residual_penalty
+        or cfg.residual_legs != "all"
+        or cfg.residual_basis != "torque_limit"
+        or cfg.initial_action
+    ):
         raise TrainConfigError(
             "residual: false trains from scratch without the expert, so expert_features must be false, "
-            f"residual_penalty 0 and residual_legs 'all', got expert_features={cfg.expert_features}, "
-            f"residual_penalty={cfg.residual_penalty}, residual_legs={cfg.residual_legs!r}"
+            "residual_penalty 0, residual_legs 'all', residual_basis 'torque_limit' and initial_action 0, got "
+            f"expert_features={cfg.expert_features}, residual_penalty={cfg.residual_penalty}, "
+            f"residual_legs={cfg.residual_legs!r}, residual_basis={cfg.residual_basis!r}, "
+            f"initial_action={cfg.initial_action}"
         )
     _mapping("hyperparams", cfg.hyperparams)
     _mapping("policy_kwargs", cfg.policy_kwargs)

@@ -5,9 +5,10 @@ action (N, 12) float32`` that computes exactly what :class:`agents.rl.model_io.S
 (normalisation, the network, and SB3's action post-processing: PPO clips to the action bounds, SAC
 squashes with tanh and rescales), the format Isaac Lab, MuJoCo Playground and mjlab users deploy. The
 metadata travels in the ONNX ``metadata_props``: ``observation_layout`` (JSON name -> [start, stop]),
-``action_low``/``action_high``, ``residual``, ``residual_scale`` and ``residual_legs`` (a residual action is
-added to the expert's torques as ``residual_scale x action x torque_limit``; with ``residual_legs`` "stance"
-only on the legs whose foot touches the ground), ``torque_limit`` (N m), ``algo``,
+``action_low``/``action_high``, ``residual``, ``residual_scale``, ``residual_legs`` and ``residual_basis`` (a
+residual action is added to the expert's torques as ``residual_scale x action x torque_limit``, or with
+``residual_basis`` "expert_torque" as ``residual_scale x action x`` the expert's torque; with ``residual_legs``
+"stance" only on the legs whose foot touches the ground), ``torque_limit`` (N m), ``algo``,
 ``env_id``, ``env_kwargs``, ``observation_normalization`` ("folded" or "none").
 """
 
@@ -115,6 +116,7 @@ def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None
         "residual": json.dumps(bool(meta.get("residual", False))),
         "residual_scale": json.dumps(meta.get("residual_scale")),
         "residual_legs": json.dumps(meta.get("residual_legs", "all") if meta.get("residual") else None),
+        "residual_basis": json.dumps(meta.get("residual_basis", "torque_limit") if meta.get("residual") else None),
         "torque_limit": json.dumps(torque_limit),
         "algo": algo,
         "env_id": str(meta.get("env_id", "QuadUneven-v0")),

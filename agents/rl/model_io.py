@@ -56,7 +56,7 @@ def read_metadata(model_path: str | Path) -> dict[str, Any] | None:
 
 def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
     """``meta`` with the fields the evaluation uses checked (``algo``, ``residual``, ``residual_scale``, ...)."""
-    from agents.rl.config import ALGOS, RESIDUAL_LEGS
+    from agents.rl.config import ALGOS, RESIDUAL_BASES, RESIDUAL_LEGS
 
     if meta.get("algo") not in (None, *ALGOS):
         raise ModelError(f"{path}: algo must be one of {list(ALGOS)}, got {meta.get('algo')!r}")
@@ -71,6 +71,9 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
         legs = meta.get("residual_legs", "all")  # absent in models trained before the option: every leg
         if legs not in RESIDUAL_LEGS:
             raise ModelError(f"{path}: residual_legs must be one of {list(RESIDUAL_LEGS)}, got {legs!r}")
+        basis = meta.get("residual_basis", "torque_limit")  # absent in models trained before the option
+        if basis not in RESIDUAL_BASES:
+            raise ModelError(f"{path}: residual_basis must be one of {list(RESIDUAL_BASES)}, got {basis!r}")
     env_kwargs = meta.get("env_kwargs")
     if env_kwargs is not None and not isinstance(env_kwargs, dict):
         raise ModelError(f"{path}: env_kwargs must be a mapping of QuadUneven-v0 arguments, got {env_kwargs!r}")
@@ -344,7 +347,10 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
         from agents.rl.residual_env import install_residual_controller
 
         expert, _ = install_residual_controller(
-            env, float(meta["residual_scale"]), residual_legs=meta.get("residual_legs", "all")
+            env,
+            float(meta["residual_scale"]),
+            residual_legs=meta.get("residual_legs", "all"),
+            residual_basis=meta.get("residual_basis", "torque_limit"),
         )
     return SB3Policy(model, normalizer, expert, env.unwrapped if spaces_of.expert_features else None)
 

@@ -5,7 +5,8 @@ physics rate through the env's controller hook; the RL action is added on top of
 
     tau = clip(tau_expert + residual_scale * action * torque_limit, -torque_limit, torque_limit)   (N m)
 
-at every 2 ms physics step, with ``action`` in [-1, 1]^12 (joint order LF RF LH RH x HAA HFE KFE)
+at every 2 ms physics step (``residual_basis="expert_torque"`` makes the residual a gain on the expert instead:
+``tau = clip(tau_expert * (1 + residual_scale * action), ...)``, per joint), with ``action`` in [-1, 1]^12 (joint order LF RF LH RH x HAA HFE KFE)
 held over the control step. With ``action = 0`` the env reproduces the expert exactly. Reward,
 termination and info are those of ``QuadUneven-v0``; the observation is ``QuadUneven-v0``'s followed
 by the expert features (:mod:`agents.rl.expert_features`: the expert's plan now, the tracking error
@@ -15,6 +16,11 @@ and its torques), or the env's alone with ``expert_features=False``.
 far the learned agent can move away from the expert. ``residual_legs="stance"`` applies the residual only
 to the legs whose foot touches the ground at that physics step (the robot's contact switches): it can
 then change how the robot carries itself, but not where a swinging foot goes.
+
+Two bases for one unit of action, because they suit different model errors: ``torque_limit`` can add torque
+in any direction, also where the expert commands none; ``expert_torque`` scales what the expert already
+commands, which is the shape of a weaker motor or a heavier body than the expert's model (a motor at 70 % of
+its torque is undone by ``action = 0.3 / 0.7 / residual_scale``), and needs no sign from the policy.
 
 Usage::
 
@@ -35,7 +41,7 @@ import numpy as np
 from gymnasium.envs.registration import register, registry
 
 from agents.expert import ExpertConfig, ExpertPolicy
-from agents.rl.config import RESIDUAL_LEGS
+from agents.rl.config import RESIDUAL_BASES, RESIDUAL_LEGS
 from agents.rl.expert_features import augmented_space, expert_features
 from quad_uneven_env.env import QuadUnevenEnv
 
@@ -59,6 +65,16 @@ def check_residual_legs(residual_legs: Any) -> str:
     return residual_legs
 
 
+def check_residual_basis(residual_basis: Any) -> str:
+    """``residual_basis`` if it is one of :data:`RESIDUAL_BASES`.
+
+    :raises ValueError: naming ``residual_basis`` and its allowed values otherwise.
+    """
+    if not isinstance(residual_basis, str) or residual_basis not in RESIDUAL_BASES:
+        raise ValueError(f"residual_basis must be one of {list(RESIDUAL_BASES)}, got {residual_basis!r}")
+    return residual_basis
+
+
 def check_residual_scale(residual_scale: Any) -> float:
     """``residual_scale`` as a float in (0, 1].
 
@@ -74,7 +90,8 @@ def check_residual_scale(residual_scale: Any) -> float:
 
 
 class ResidualController:
-    """Physics-rate controller: the expert's torques plus ``residual_scale`` x action x torque limit.
+    """Physics-rate controller: the expert's torques plus ``residual_scale`` x action x torque limit (or x the
+    expert's torque with ``residual_basis="expert_torque"``).
 
     :param expert: a callable ``(model, data, action) -> (12,)`` torques (N m), e.g. :class:`ExpertPolicy`;
         its ``reset(model, data, terrain)`` is forwarded.
@@ -84,6 +101,8 @@ class ResidualController:
         where its foot touches the ground (``data.sensordata[foot_sensor_adr]``).
     :param foot_sensor_adr: (4,) sensordata addresses of the feet's contact switches, leg order (needed
         for ``"stance"``).
+    :param residual_basis: ``"torque_limit"`` (residual = scale x action x ``torque_limit``) or
+        ``"expert_torque"`` (residual = scale x action x the expert's torque, joint by joint).
     """
 
     def __init__(
@@ -93,13 +112,15 @@ class ResidualController:
         residual_scale: float = DEFAULT_RESIDUAL_SCALE,
         residual_legs: str = "all",
         foot_sensor_adr: Any = None,
+        residual_basis: str = "torque_limit",
     ) -> None:
         self.expert = expert
         self.residual_scale = check_residual_scale(residual_scale)
         self.residual_legs = check_residual_legs(residual_legs)
+        self.residual_basis = check_residual_basis(residual_basis)
         self.torque_limit = np.asarray(torque_limit, dtype=np.float64).copy()
         self.gain = self.residual_scale * self.torque_limit
-        """(12,) N m of residual torque per unit action."""
+        """(12,) N m of residual torque per unit action (``torque_limit`` basis)."""
         self._tau = np.zeros_like(self.torque_limit)
         self._foot_adr = None
         if self.residual_legs == "stance":
@@ -116,9 +137,9 @@ class ResidualController:
             self.expert.reset(model, data, terrain)
 
     def residual_torque(self, action: np.ndarray) -> float:
-        """N m: mean over the 12 joints of |residual torque| before the motor limit. With ``"all"`` legs
-        it is what ``action`` (clipped to [-1, 1]) commands; with ``"stance"`` the mean of what was applied
-        over the physics steps since the previous call (what ``action`` commands if there were none)."""
+        """N m: mean over the 12 joints of |residual torque| before the motor limit, averaged over the
+        physics steps since the previous call (with none, what ``action`` would command in the
+        ``torque_limit`` basis on every leg)."""
         if self._applied_n:
             value = self._applied_sum / self._applied_n
             self._applied_sum, self._applied_n = 0.0, 0
@@ -131,11 +152,15 @@ class ResidualController:
         :param action: (12,) residual action in [-1, 1] (the env has clipped it).
         """
         tau_expert = self.expert(model, data, action)
-        np.multiply(action, self.gain, out=self._tau)
+        if self.residual_basis == "expert_torque":
+            np.multiply(action, tau_expert, out=self._tau)
+            self._tau *= self.residual_scale
+        else:
+            np.multiply(action, self.gain, out=self._tau)
         if self._foot_adr is not None:
             self._tau *= np.repeat(data.sensordata[self._foot_adr] > 0.0, 3)
-            self._applied_sum += float(np.mean(np.abs(self._tau)))
-            self._applied_n += 1
+        self._applied_sum += float(np.mean(np.abs(self._tau)))
+        self._applied_n += 1
         self._tau += tau_expert
         np.clip(self._tau, -self.torque_limit, self.torque_limit, out=self._tau)
         return self._tau
@@ -146,12 +171,14 @@ def install_residual_controller(
     residual_scale: float = DEFAULT_RESIDUAL_SCALE,
     expert_config: ExpertConfig | None = None,
     residual_legs: str = "all",
+    residual_basis: str = "torque_limit",
 ) -> tuple[ExpertPolicy, ResidualController]:
     """Put the expert plus a residual on ``env.unwrapped``'s physics-rate hook (call before ``reset``).
 
     :param env: a ``QuadUneven-v0`` env (wrapped or not) in ``action_mode="torque"``.
     :param residual_scale: see :class:`ResidualController`.
     :param residual_legs: see :class:`ResidualController`.
+    :param residual_basis: see :class:`ResidualController`.
     :return: the expert (planner times, failure log) and the installed controller.
     :raises ValueError: on another action mode or a bad ``residual_scale``.
     """
@@ -164,8 +191,9 @@ def install_residual_controller(
         )
     scale = check_residual_scale(residual_scale)
     legs = check_residual_legs(residual_legs)
+    basis = check_residual_basis(residual_basis)
     expert = ExpertPolicy(env, expert_config)
-    controller = ResidualController(expert, base.idx.torque_limit, scale, legs, base.idx.foot_sensor_adr)
+    controller = ResidualController(expert, base.idx.torque_limit, scale, legs, base.idx.foot_sensor_adr, basis)
     base.set_controller(controller)
     return expert, controller
 
@@ -185,6 +213,7 @@ class ResidualExpertEnv(gym.Wrapper):
     :param residual_penalty: >= 0: subtracted from the reward per unit of mean(action^2) over the 12 joints
         (``info["reward_terms"]["residual"]``); 0 keeps the env's reward.
     :param residual_legs: ``"all"`` or ``"stance"`` (see :class:`ResidualController`).
+    :param residual_basis: ``"torque_limit"`` or ``"expert_torque"`` (see :class:`ResidualController`).
     """
 
     def __init__(
@@ -195,6 +224,7 @@ class ResidualExpertEnv(gym.Wrapper):
         expert_features: bool = True,
         residual_penalty: float = 0.0,
         residual_legs: str = "all",
+        residual_basis: str = "torque_limit",
     ) -> None:
         super().__init__(env)
         if not isinstance(expert_features, bool):
@@ -206,7 +236,9 @@ class ResidualExpertEnv(gym.Wrapper):
         if not (0.0 <= penalty < float("inf")):
             raise ValueError(f"residual_penalty must be a finite number >= 0, got {residual_penalty!r}")
         self.residual_penalty = penalty
-        self.expert, self.controller = install_residual_controller(env, residual_scale, expert_config, residual_legs)
+        self.expert, self.controller = install_residual_controller(
+            env, residual_scale, expert_config, residual_legs, residual_basis
+        )
         self.residual_scale = self.controller.residual_scale
         self.expert_features = expert_features
         if expert_features:
@@ -245,6 +277,7 @@ def make_residual_env(
     expert_features: bool = True,
     residual_penalty: float = 0.0,
     residual_legs: str = "all",
+    residual_basis: str = "torque_limit",
     **env_kwargs: Any,
 ) -> ResidualExpertEnv:
     """The residual env (entry point of ``QuadUnevenResidual-v0``).
@@ -255,6 +288,7 @@ def make_residual_env(
     :param expert_features: append the expert features (:mod:`agents.rl.expert_features`) to the observation.
     :param residual_penalty: reward penalty per unit of mean(action^2) (see :class:`ResidualExpertEnv`).
     :param residual_legs: ``"all"`` or ``"stance"``: which legs take the residual (:class:`ResidualController`).
+    :param residual_basis: ``"torque_limit"`` or ``"expert_torque"``: what a unit of action is.
     :param env_kwargs: ``QuadUnevenEnv`` arguments (``terrain``, ``reward_weights``, ...); ``action_mode`` must be
         ``"torque"`` and ``controller`` is not accepted.
     :raises ValueError: on a bad argument (named).
@@ -262,7 +296,13 @@ def make_residual_env(
     if "controller" in env_kwargs:
         raise ValueError("controller is not accepted by the residual env: expert plus residual is its controller")
     return ResidualExpertEnv(
-        QuadUnevenEnv(**env_kwargs), residual_scale, expert_config, expert_features, residual_penalty, residual_legs
+        QuadUnevenEnv(**env_kwargs),
+        residual_scale,
+        expert_config,
+        expert_features,
+        residual_penalty,
+        residual_legs,
+        residual_basis,
     )
 
 
@@ -279,6 +319,7 @@ __all__ = [
     "RESIDUAL_LEGS",
     "ResidualController",
     "ResidualExpertEnv",
+    "check_residual_basis",
     "check_residual_legs",
     "install_residual_controller",
     "make_residual_env",

@@ -198,6 +198,8 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
         "residual": True,
         "residual_scale": float(cfg.residual_scale),
         "residual_legs": cfg.residual_legs,
+        "residual_basis": cfg.residual_basis,
+        "initial_action": float(cfg.initial_action),
         "env_id": RESIDUAL_ENV_ID,
         "env_kwargs": dict(cfg.env_kwargs),
         "expert_features": bool(cfg.expert_features),
@@ -226,24 +228,27 @@ def _make_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) ->
     except TypeError as err:  # an unknown keyword of the algorithm or of its policy
         raise TrainConfigError(f"hyperparams/policy_kwargs: {err}") from None
     if cfg.residual:
-        _zero_mean_action(model)
+        _constant_mean_action(model, cfg.initial_action)
     return model
 
 
-def _zero_mean_action(model: Any) -> None:
-    """Zero the layer that outputs the mean action (PPO ``action_net``, SAC ``actor.mu``).
+def _constant_mean_action(model: Any, action: float = 0.0) -> None:
+    """Make the layer that outputs the mean action (PPO ``action_net``, SAC ``actor.mu``) output ``action``.
 
-    The untrained deterministic agent is then exactly the expert (residual 0); the weights still get
-    gradients, since the layer's inputs are not zero.
+    Its weights are zeroed and its bias set (through ``atanh`` for SAC's squashed Gaussian), so the untrained
+    deterministic agent commands ``action`` on every joint: with 0 it is exactly the expert. The weights
+    still get gradients, since the layer's inputs are not zero.
     """
     import torch
 
     head = getattr(model.policy, "action_net", None)
+    bias = float(action)
     if head is None:
         head = model.actor.mu
+        bias = float(np.arctanh(np.clip(bias, -0.999, 0.999)))
     with torch.no_grad():
         head.weight.zero_()
-        head.bias.zero_()
+        head.bias.fill_(bias)
 
 
 def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCallback], Any]:

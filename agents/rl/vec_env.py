@@ -80,6 +80,7 @@ def make_train_env(
     residual_penalty: float = 0.0,
     residual: bool = True,
     residual_legs: str = "all",
+    residual_basis: str = "torque_limit",
 ) -> gym.Env:
     """One residual env (expert in the loop) with a time limit and :class:`EpisodeStats`.
 
@@ -92,6 +93,7 @@ def make_train_env(
     :param expert_features: append the expert features to the observation.
     :param residual_penalty: reward penalty per unit of mean(action^2).
     :param residual_legs: ``all`` or ``stance``: which legs take the residual.
+    :param residual_basis: ``torque_limit`` or ``expert_torque``: what a unit of residual action is.
     :param residual: false: plain ``QuadUneven-v0`` in ``joint_pd`` mode instead (training from scratch).
     """
 
@@ -114,6 +116,7 @@ def make_train_env(
             expert_features=expert_features,
             residual_penalty=residual_penalty,
             residual_legs=residual_legs,
+            residual_basis=residual_basis,
             **(env_kwargs or {}),
         )
 
@@ -159,6 +162,7 @@ def build_vec_env(
         float(cfg.residual_penalty),
         cfg.residual,
         cfg.residual_legs,
+        cfg.residual_basis,
     )
     if kind == "subproc":
         env_fn = functools.partial(_ignoring_interrupts, env_fn)

@@ -270,3 +270,48 @@ def test_stance_gated_env_equals_the_plain_residual_on_touching_legs():
     gated = make_residual_env(terrain="rough", expert_config=ExpertConfig(distribution="pinv"), residual_legs="stance")
     zeros = np.zeros((40, 12), dtype=np.float32)
     np.testing.assert_array_equal(_rollout(plain, zeros, 3)["qpos"], _rollout(gated, zeros, 3)["qpos"])
+
+
+def test_expert_torque_basis_is_a_gain_on_the_expert():
+    """residual_basis="expert_torque": tau = tau_expert x (1 + scale x action) joint by joint (on touching legs
+    with "stance"), so a zero expert torque takes no residual; the reported torque is what was applied."""
+    limit = np.full(12, 120.0)
+    tau_expert = np.linspace(-30.0, 30.0, 12)
+    tau_expert[4] = 0.0
+    action = np.linspace(1.0, -1.0, 12)
+    every = ResidualController(_ConstantExpert(tau_expert), limit, 0.5, residual_basis="expert_torque")
+    np.testing.assert_allclose(every(None, _Data([0.0] * 4), action), tau_expert * (1 + 0.5 * action), atol=1e-12)
+    assert every.residual_torque(action) == pytest.approx(np.mean(np.abs(0.5 * action * tau_expert)))
+    gated = ResidualController(_ConstantExpert(tau_expert), limit, 0.5, "stance", [0, 7, 14, 21], "expert_torque")
+    got = gated(None, _Data([0.0, 1.0, 0.0, 1.0]), action).copy()  # RF and RH touch
+    gate = np.repeat([0.0, 1.0, 0.0, 1.0], 3)
+    np.testing.assert_allclose(got, tau_expert * (1 + 0.5 * action * gate), rtol=0, atol=1e-12)
+    assert got[4] == 0.0
+    big = ResidualController(_ConstantExpert(np.full(12, 100.0)), limit, 1.0, residual_basis="expert_torque")
+    np.testing.assert_array_equal(big(None, _Data([0.0] * 4), np.ones(12)), limit)  # 200 N m clipped to the limit
+    with pytest.raises(ValueError, match=r"residual_basis must be one of \['torque_limit', 'expert_torque'\]"):
+        ResidualController(_ConstantExpert(tau_expert), limit, 0.5, residual_basis="gain")
+    with pytest.raises(ValueError, match="residual_basis must be one of"):
+        make_residual_env(terrain="flat", residual_basis=None)
+
+
+def test_expert_torque_basis_in_the_env_scales_the_experts_motor_commands():
+    """In the env (extreme world, stance legs): the motors get the expert's torques scaled on the touching legs
+    at that physics step."""
+    env = make_residual_env(
+        residual_scale=0.5, terrain="rough", randomization="extreme", residual_legs="stance", residual_basis="expert_torque"
+    )
+    seen = _spy_on_expert(env)
+    env.reset(seed=3)
+    action = np.linspace(-1.0, 1.0, 12).astype(np.float32)
+    for _ in range(300):  # until a control step ends with a leg in the air
+        env.step(action)
+        if 0 < np.count_nonzero(seen[-1][1] > 0) < 4:
+            break
+    tau, touch = seen[-1]
+    lim = env.unwrapped.idx.torque_limit
+    gate = np.repeat(touch > 0, 3)
+    assert 0 < gate.sum() < 12
+    expected = np.clip(tau * (1 + 0.5 * action.astype(np.float64) * gate), -lim, lim)
+    # the env's motor model (strength, latency) acts after the controller: compare the controller's output
+    np.testing.assert_allclose(env.unwrapped.controller._tau, expected, rtol=0, atol=1e-9)

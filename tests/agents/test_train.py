@@ -84,6 +84,10 @@ def test_argparse_rejects_unknown_algo_and_non_integer_timesteps(tmp_path, capsy
         ({"residual": "no"}, "residual"),
         ({"residual_legs": "swing"}, "residual_legs"),
         ({"residual": False, "expert_features": False, "residual_legs": "stance"}, "residual"),
+        ({"residual_basis": "gain"}, "residual_basis"),
+        ({"initial_action": 1.5}, "initial_action"),
+        ({"residual": False, "expert_features": False, "residual_basis": "expert_torque"}, "residual"),
+        ({"residual": False, "expert_features": False, "initial_action": 0.2}, "residual"),
     ],
 )
 def test_bad_config_fields_are_named(tmp_path, changes, field):
@@ -214,16 +218,26 @@ def test_residual_policy_installs_expert_and_normalizes(tmp_path):
     from agents.rl.training import train
 
     cfg = load_train_config(
-        write_config(tmp_path / "c.yaml", timesteps=32, eval_freq=0, checkpoint_freq=0, residual_legs="stance")
+        write_config(
+            tmp_path / "c.yaml",
+            timesteps=32,
+            eval_freq=0,
+            checkpoint_freq=0,
+            residual_legs="stance",
+            residual_basis="expert_torque",
+            initial_action=0.4,
+        )
     )
     train(cfg, tmp_path / "run", progress=False)
     path = str(tmp_path / "run" / "model.zip")
     meta_path = tmp_path / "run" / "rl_meta.json"
-    assert json.loads(meta_path.read_text())["residual_legs"] == "stance"
+    meta = json.loads(meta_path.read_text())
+    assert (meta["residual_legs"], meta["residual_basis"], meta["initial_action"]) == ("stance", "expert_torque", 0.4)
     env = gym.make("QuadUneven-v0", terrain="flat", **policy_env_kwargs(path))
     policy = make_policy(path, env)
     assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
     assert env.unwrapped.controller.residual_legs == "stance"  # the evaluation applies the training's gate
+    assert env.unwrapped.controller.residual_basis == "expert_torque"
     assert policy.obs_normalizer is not None and policy.expert is env.unwrapped.controller.expert
     obs, _ = env.reset(seed=0)
     action, _ = policy.predict(obs)
@@ -234,6 +248,10 @@ def test_residual_policy_installs_expert_and_normalizes(tmp_path):
     with pytest.raises(PolicyError, match="residual_legs must be one of"):
         make_policy(path, gym.make("QuadUneven-v0", terrain="flat"))
     meta_path.write_text(meta_path.read_text().replace('"residual_legs": "swing"', '"residual_legs": "stance"'))
+    meta_path.write_text(meta_path.read_text().replace('"expert_torque"', '"gain"'))
+    with pytest.raises(PolicyError, match="residual_basis must be one of"):
+        make_policy(path, gym.make("QuadUneven-v0", terrain="flat"))
+    meta_path.write_text(meta_path.read_text().replace('"gain"', '"expert_torque"'))
     (tmp_path / "run" / "model_obs_norm.npz").unlink()
 
     with pytest.raises(PolicyError, match=r"obs_norm\.npz is missing"):
@@ -252,19 +270,21 @@ def test_wall_clock_limit_stops_training_and_still_saves(tmp_path):
 
 
 @pytest.mark.parametrize("algo", ["PPO", "SAC"])
-def test_untrained_agent_has_zero_residual(algo):
-    """The mean-action layer starts at zero: the untrained deterministic agent is the expert."""
+@pytest.mark.parametrize("initial", [0.0, 0.6, -0.3])
+def test_untrained_agent_commands_the_initial_action(algo, initial):
+    """The mean-action layer starts constant: the untrained deterministic agent commands ``initial_action`` on
+    every joint (0: the expert), through SAC's tanh squashing too."""
     import gymnasium as gym
     import stable_baselines3
 
-    from agents.rl.training import _zero_mean_action
+    from agents.rl.training import _constant_mean_action
 
-    env = gym.make("Pendulum-v1")
+    env = gym.wrappers.RescaleAction(gym.make("Pendulum-v1"), -1.0, 1.0)
     model = getattr(stable_baselines3, algo)("MlpPolicy", env, policy_kwargs={"net_arch": [8]}, device="cpu", seed=0)
     obs = np.stack([env.observation_space.sample() for _ in range(5)])
-    assert np.abs(model.predict(obs, deterministic=True)[0]).max() > 0  # not zero by SB3's own init
-    _zero_mean_action(model)
-    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], 0.0)
+    assert np.abs(model.predict(obs, deterministic=True)[0] - initial).max() > 0  # not so by SB3's own init
+    _constant_mean_action(model, initial)
+    np.testing.assert_allclose(model.predict(obs, deterministic=True)[0], initial, atol=1e-6)
 
 
 def test_sigterm_stops_training_and_still_saves(tmp_path, monkeypatch):
