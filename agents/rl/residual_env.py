@@ -5,12 +5,12 @@ physics rate through the env's controller hook; the RL action is added on top of
 
     tau = clip(tau_expert + residual_scale * action * torque_limit, -torque_limit, torque_limit)   (N m)
 
-at every 2 ms physics step (``residual_basis="expert_torque"`` makes the residual a gain on the expert instead:
-``tau = clip(tau_expert * (1 + residual_scale * action), ...)``, per joint), with ``action`` in [-1, 1]^12 (joint order LF RF LH RH x HAA HFE KFE)
-held over the control step. With ``action = 0`` the env reproduces the expert exactly. Reward,
-termination and info are those of ``QuadUneven-v0``; the observation is ``QuadUneven-v0``'s followed
-by the expert features (:mod:`agents.rl.expert_features`: the expert's plan now, the tracking error
-and its torques), or the env's alone with ``expert_features=False``.
+at every 2 ms physics step, with ``action`` in [-1, 1]^12 (joint order LF RF LH RH x HAA HFE KFE) held over
+the control step (``residual_basis="expert_torque"`` makes the residual a gain on the expert instead:
+``tau = clip(tau_expert * (1 + residual_scale * action), ...)``, per joint). With ``action = 0`` the env
+reproduces the expert exactly. Reward, termination and info are those of ``QuadUneven-v0``; the observation
+is ``QuadUneven-v0``'s followed by the expert features (:mod:`agents.rl.expert_features`: the expert's plan
+now, the tracking error and its torques), or the env's alone with ``expert_features=False``.
 
 ``residual_scale`` (default 0.1: up to 12 N m on top of the expert, with 120 N m motors) bounds how
 far the learned agent can move away from the expert. ``residual_legs="stance"`` applies the residual only

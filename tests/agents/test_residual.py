@@ -299,7 +299,11 @@ def test_expert_torque_basis_in_the_env_scales_the_experts_motor_commands():
     """In the env (extreme world, stance legs): the motors get the expert's torques scaled on the touching legs
     at that physics step."""
     env = make_residual_env(
-        residual_scale=0.5, terrain="rough", randomization="extreme", residual_legs="stance", residual_basis="expert_torque"
+        residual_scale=0.5,
+        terrain="rough",
+        randomization="extreme",
+        residual_legs="stance",
+        residual_basis="expert_torque",
     )
     seen = _spy_on_expert(env)
     env.reset(seed=3)
