@@ -68,7 +68,7 @@ from planners.gait import validate_durations
 from planners.pitch import pitch_of_quaternion, yaw_pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
 from planners.scenario import BODY_PITCH_MODES
-from planners.types import ReferenceGrid, ReferenceSample
+from planners.types import FootholdError, ReferenceGrid, ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env import physics
 from quad_uneven_env.fields import check_fields, param
@@ -181,6 +181,14 @@ class ExpertConfig:
     its footholds (``foothold_limits_for_friction``). The nominal floor's is 1.0; 0.5 keeps the planned
     forces inside the cones of floors down to about 0.4. With ``friction_adapt`` it is lowered when a
     stance foot slips. Unused by "oracle", which takes the simulator's."""
+    steep_friction: float = param(0.8, "-", lo=0.0, hi=2.0)
+    """-, in [0, 2]: the friction the nominal model may assume for one gait cycle whose footholds ``friction``
+    refuses as too steep (a ramp steeper than atan(friction / sqrt(2)), 19.5 deg at 0.5): such a stride is
+    planned again with the slope limit of this friction, and if that plan is feasible its cycle runs with
+    cones of this friction. The nominal floor's is 1.0, so 0.8 spends part of the margin only where the
+    ground leaves no choice (ramps to 28.6 deg, the foothold search's cap); 0 never does (the expert then
+    stands before such ramps). Scaled down with ``friction`` when slips lower it (``friction_adapt``). Unused
+    by "oracle"."""
     friction_adapt: bool = False
     """lower the assumed friction when a stance foot slips: a planned-stance foot in contact whose contact
     point moves faster than ``slip_speed`` horizontally for 8 ms (:mod:`agents.control.slip`: measured
@@ -317,6 +325,7 @@ class ExpertPolicy:
         self._log_dropped = 0
         self._last_controller_error = ""
         self._foothold_limits = FootholdLimits()
+        self._base_mu = self.config.friction  # the assumed friction outside steep cycles (lowered by slips)
         self._yaw = 0.0  # rad: the planned base yaw at the end of the current plan (0 until a command turns it)
         self._durations: tuple[float, ...] = self.config.durations  # s: the phases of the current cycle
 
@@ -362,7 +371,8 @@ class ExpertPolicy:
                 self._model, self._data = nominal.model, nominal.measure(data.qpos, data.qvel, data.time)
         self.controller.reset(self._model, self._data, terrain)
         self._slip.reset(self._model)
-        self._foothold_limits = foothold_limits_for_friction(self.controller.mu)
+        self._base_mu = float(self.controller.mu)
+        self._foothold_limits = foothold_limits_for_friction(self._base_mu)
         self._start_cycle(0.0, cog_start=None)
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
@@ -440,11 +450,12 @@ class ExpertPolicy:
         slipping = self._slip.update(self._model, d, planned, touch, self._commanded_loads)
         if slipping < 0 or t < self._slip_cooldown or self._stance_tilt_cos(planned) < SLIP_MIN_TILT_COS:
             return
-        cfg, old = self.config, float(self.controller.mu)
+        cfg, old = self.config, self._base_mu
         mu = max(cfg.friction_min, old * cfg.friction_decrease)
         if mu >= old:
             return
-        self.controller.set_friction(mu)
+        self._base_mu = mu
+        self.controller.set_friction(mu)  # a steep cycle's cones too: the floor is more slippery than assumed
         self._foothold_limits = foothold_limits_for_friction(mu)
         self._slip_cooldown = t + SLIP_COOLDOWN
         self._slip.slip_time[:] = 0.0
@@ -470,8 +481,17 @@ class ExpertPolicy:
     @property
     def assumed_friction(self) -> float:
         """-: the friction coefficient the controller's cones assume now (``ExpertConfig.friction``, lowered
-        by slips with ``friction_adapt``; the simulator's with ``model="oracle"``)."""
+        by slips with ``friction_adapt``, or the steep-ground friction in a cycle that needs it; the
+        simulator's with ``model="oracle"``)."""
         return float(self.controller.mu)
+
+    def _steep_mu(self) -> float | None:
+        """-: the friction a stride refused for steep footholds may be planned again with, or None."""
+        cfg = self.config
+        if self.nominal is None or cfg.steep_friction <= 0.0:
+            return None
+        mu = cfg.steep_friction * self._base_mu / cfg.friction  # slips scale it down with the base
+        return mu if mu > self._base_mu else None
 
     def _log(self, message: str) -> None:
         """Append to :attr:`failure_log` (at most ``MAX_FAILURE_LOG`` entries; the rest are counted)."""
@@ -651,6 +671,8 @@ class ExpertPolicy:
             measure_yaw()
         plan = None
         turn = 0.0
+        cycle_mu = self._base_mu
+        steep_mu = self._steep_mu()
         for fx, dy in STRIDE_FALLBACKS:
             turn = min(fx, 1.0) * full_turn  # a shorter stride turns less; a longer one no more than commanded
             sx, sy = self._stride_xy(d, turn)
@@ -679,21 +701,16 @@ class ExpertPolicy:
                 swing_order=order,
                 foothold_limits=self._foothold_limits,
             )
-            tic = time.perf_counter()
-            try:
-                # Small dense problems: multi-threaded BLAS only adds contention (much slower on
-                # a loaded 2-core machine), so the planner runs single-threaded.
-                with _blas_controller().limit(limits=1, user_api="blas"):
-                    plan = plan_gait_cycle(scenario)
-            except PlanningError as err:
-                self._log(f"t={t0:.2f} s, stride {_fmt(stride)} m: {err}")
-                continue
-            except Exception as err:  # a planner bug or numerical trouble: handled as a failed plan
-                self._log(f"t={t0:.2f} s, stride {_fmt(stride)} m: planner failed ({type(err).__name__}: {err})")
-                continue
-            finally:
-                self.planner_times_ms.append(1e3 * (time.perf_counter() - tic))
-            break
+            plan, too_steep = self._try_plan(scenario, t0, stride)
+            if plan is None and too_steep and steep_mu is not None:
+                steep = dataclasses.replace(scenario, foothold_limits=foothold_limits_for_friction(steep_mu))
+                plan, _ = self._try_plan(steep, t0, stride, f" (assuming friction {steep_mu:.2f})")
+                if plan is not None:
+                    cycle_mu = steep_mu
+            if plan is not None:
+                break
+        if cycle_mu != self.controller.mu:
+            self.controller.set_friction(cycle_mu)
         if plan is None:
             qpos = d.qpos.copy()
             hold = _HoldReference(qpos, float(sum(self._durations)))
@@ -708,6 +725,24 @@ class ExpertPolicy:
         self._grid = getattr(self._current_ref, "grid", None)
         self.plans.append((t0, self._current))
         self._t_start, self._t_end = t0, t0 + duration
+
+    def _try_plan(self, scenario: Scenario, t0: float, stride: tuple[float, float], note: str = "") -> tuple[Any, bool]:
+        """Plan one gait cycle: (the plan or None, whether a steeper foothold slope limit could give it
+        footholds); a failure is logged with the stride (m) and ``note``."""
+        tic = time.perf_counter()
+        try:
+            # Small dense problems: multi-threaded BLAS only adds contention (much slower on
+            # a loaded 2-core machine), so the planner runs single-threaded.
+            with _blas_controller().limit(limits=1, user_api="blas"):
+                return plan_gait_cycle(scenario), False
+        except PlanningError as err:
+            self._log(f"t={t0:.2f} s, stride {_fmt(stride)} m{note}: {err}")
+            return None, isinstance(err, FootholdError) and err.slope_blocked > 0
+        except Exception as err:  # a planner bug or numerical trouble: handled as a failed plan
+            self._log(f"t={t0:.2f} s, stride {_fmt(stride)} m{note}: planner failed ({type(err).__name__}: {err})")
+            return None, False
+        finally:
+            self.planner_times_ms.append(1e3 * (time.perf_counter() - tic))
 
 
 def _fmt(stride: tuple[float, float]) -> str:

@@ -41,7 +41,7 @@ import numpy as np
 from planners.gait import PAPER_DURATIONS, walk_cycle
 from planners.pitch import BodyPitch, planar_rotation, terrain_pitch
 from planners.terrain_query import capsule_clearance, max_height_in_disk
-from planners.types import HeightMap, PlanningError
+from planners.types import FootholdError, HeightMap
 from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
 from quad_uneven_env.fields import check_fields, param
@@ -231,6 +231,7 @@ class _LegSearch:
         self.best_cost = np.inf
         self.evaluated = 0
         self.passed = dict.fromkeys(FOOTHOLD_TESTS, 0)  # candidates passing every test up to this one
+        self.slope_blocked = 0  # candidates failing the slope test alone (of those before shank clearance)
 
     def shell(self, offsets: np.ndarray) -> None:
         """Evaluate one shell of grid ``offsets`` (K, 2) (m) and keep its cheapest acceptable candidate.
@@ -247,6 +248,10 @@ class _LegSearch:
         tests["reach"] = frac <= lim.reach
         cost = cost + lim.w_reach * np.maximum(frac - lim.reach_comfort, 0.0) ** 2
         self.evaluated += len(x)
+        ok = np.ones(len(x), dtype=bool)
+        for name in FOOTHOLD_TESTS[1:-1]:
+            ok &= tests[name]
+        self.slope_blocked += int(np.count_nonzero(ok & ~tests["slope"]))
         ok = np.ones(len(x), dtype=bool)
         for name in FOOTHOLD_TESTS[:-1]:
             ok &= tests[name]
@@ -277,11 +282,17 @@ class _LegSearch:
                 self.best_cost = float(full[j])
                 self.best = np.array([x[idx[j]], y[idx[j]], h[idx[j]]])
 
+    def failed_test(self) -> str:
+        """The first acceptance test that no candidate passed."""
+        return next((n for n in FOOTHOLD_TESTS if self.passed[n] == 0), FOOTHOLD_TESTS[-1])
+
     def failure(self) -> str:
         """Why no candidate is acceptable: the first test that none passed, and what each test kept."""
-        failed = next((n for n in FOOTHOLD_TESTS if self.passed[n] == 0), FOOTHOLD_TESTS[-1])
         kept = ", ".join(f"{self.passed[n]} {n}" for n in FOOTHOLD_TESTS)
-        return f"failed test: {failed}; of {self.evaluated} candidates, passing each test and all before it: {kept}"
+        return (
+            f"failed test: {self.failed_test()}; of {self.evaluated} candidates, passing each test and all before "
+            f"it: {kept}; {self.slope_blocked} fail the slope test alone"
+        )
 
 
 def choose_footholds(
@@ -309,7 +320,7 @@ def choose_footholds(
         nominal foothold is under its hip turned by ``yaw_end`` about the goal COG, and the reach and
         shank tests see the hips turning from ``yaw_start`` to ``yaw_end``; the pitch is the slope
         along the end heading.
-    :raises PlanningError: naming the leg and the first test no candidate within reach passes.
+    :raises FootholdError: (a PlanningError) naming the leg and the first test no candidate within reach passes.
     """
     lim = limits or FootholdLimits()
     hips = hip_positions_B(cfg)
@@ -349,9 +360,11 @@ def choose_footholds(
                 break  # the distance term alone makes every further candidate dearer
             search.shell(offsets)
         if search.best is None:
-            raise PlanningError(
+            raise FootholdError(
                 f"footholds: no acceptable foothold for {leg} within {lim.reach_window} m of the nominal "
-                f"{nominal[i].round(3).tolist()}: {search.failure()}"
+                f"{nominal[i].round(3).tolist()}: {search.failure()}",
+                search.failed_test(),
+                search.slope_blocked,
             )
         out[i] = search.best
     return out

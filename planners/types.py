@@ -26,6 +26,18 @@ class PlanningError(RuntimeError):
     """
 
 
+class FootholdError(PlanningError):
+    """No acceptable foothold for a leg; ``failed_test`` is the first acceptance test that no candidate
+    passed (one of ``planners.footholds.FOOTHOLD_TESTS``, e.g. ``"slope"``), ``slope_blocked`` the number of
+    candidates that pass every test but the slope limit (before the shank-clearance test): > 0 means a
+    steeper slope limit could give a foothold."""
+
+    def __init__(self, message: str, failed_test: str, slope_blocked: int = 0) -> None:
+        super().__init__(message)
+        self.failed_test = failed_test
+        self.slope_blocked = slope_blocked
+
+
 class HeightMap(Protocol):
     """Terrain surface ``z = height(x, y)`` in the world frame (m)."""
 

@@ -84,6 +84,8 @@ def test_bad_config_is_rejected():
         attach_expert(env, ExpertConfig(distribution="magic"))
     with pytest.raises(ValueError, match="body_pitch"):
         attach_expert(env, ExpertConfig(body_pitch="magic"))
+    with pytest.raises(ValueError, match=r"ExpertConfig.steep_friction must be a number in \[0, 2\]"):
+        ExpertConfig(steep_friction=-0.1)
 
 
 def test_stance_shanks_stay_off_the_stair_nosings():

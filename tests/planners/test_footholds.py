@@ -7,7 +7,7 @@ import pytest
 
 from planners.footholds import SHANK_RADIUS_SCALE, FootholdLimits, choose_footholds, foothold_costs, shank_clearance
 from planners.terrain_query import BlockTerrain, capsule_clearance
-from planners.types import PlanningError
+from planners.types import FootholdError, PlanningError
 from quad_uneven_env.robot.kinematics import hip_positions_B
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec
 
@@ -191,12 +191,22 @@ def test_cost_ordering_on_a_hand_made_height_map(robot_cfg):
 def test_failure_names_the_leg_and_the_first_failing_test(robot_cfg):
     flat = BlockTerrain(0.0)
     # Body 0.9 m above the ground: nothing within reach.
-    with pytest.raises(PlanningError, match=r"for LF within 0.25 m .*failed test: reach; of 2601 candidates"):
+    with pytest.raises(FootholdError, match=r"for LF within 0.25 m .*failed test: reach; of 2601 candidates") as err:
         choose_footholds(flat, robot_cfg, FEET, np.array([0, 0, 0.9]), np.array([0.2, 0.0]), 0.9)
+    assert err.value.failed_test == "reach" and isinstance(err.value, PlanningError)
+    assert err.value.slope_blocked == 0  # flat: no slope limit would help
     # A 45 deg plane: too steep everywhere.
     steep = BlockTerrain(0.0, slope=(1.0, 0.0))
-    with pytest.raises(PlanningError, match=r"for LF .*failed test: slope; of 2601 candidates, .*: 0 slope"):
+    with pytest.raises(FootholdError, match=r"for LF .*failed test: slope; of 2601 candidates, .*: 0 slope") as err:
         choose_footholds(steep, robot_cfg, FEET, np.array([0, 0, 0.33]), np.array([0.2, 0.0]), 0.33)
+    assert err.value.failed_test == "slope" and err.value.slope_blocked > 0  # reachable, only too steep
+    # A 20 deg plane under a 15 deg limit: refused for the slope alone; a 25 deg limit gives the footholds.
+    ramp = BlockTerrain(0.0, slope=(np.tan(np.deg2rad(20.0)), 0.0))
+    args = (ramp, robot_cfg, FEET, np.array([0, 0, 0.33]), np.array([0.2, 0.0]), 0.33)
+    with pytest.raises(FootholdError, match=r"failed test: slope; .*; [1-9]\d* fail the slope test alone") as err:
+        choose_footholds(*args, limits=FootholdLimits(max_slope=np.deg2rad(15.0)))
+    assert err.value.slope_blocked > 0
+    assert choose_footholds(*args, limits=FootholdLimits(max_slope=np.deg2rad(25.0))).shape == (4, 3)
 
 
 @pytest.mark.parametrize(
