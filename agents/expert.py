@@ -707,6 +707,7 @@ class ExpertPolicy:
                 plan, _ = self._try_plan(steep, t0, stride, f" (assuming friction {steep_mu:.2f})")
                 if plan is not None:
                     cycle_mu = steep_mu
+                    self._log(f"t={t0:.2f} s, stride {_fmt(stride)} m: planned assuming friction {steep_mu:.2f}")
             if plan is not None:
                 break
         if cycle_mu != self.controller.mu:

@@ -171,3 +171,29 @@ def test_a_foot_in_the_air_at_a_measured_replan_lands_at_the_nearest_terrain_poi
     down = u.data.sensordata[expert._foot_sensor_adr] > 0
     assert down.any()
     np.testing.assert_array_equal(expert._measured_footholds(mid_swing=True)[down], expert._measured_footholds()[down])
+
+
+@pytest.mark.parametrize("steep_friction", [0.8, 0.0])
+def test_a_ramp_too_steep_for_the_assumed_friction_is_walked_with_the_steep_ground_friction(steep_friction):
+    """A 25 deg ramp is steeper than the default cones hold (atan(0.5 / sqrt 2) = 19.5 deg). The default expert
+    plans the strides onto it again assuming friction 0.8 (logged), walks those cycles with cones of 0.8
+    and the level ones with 0.5, and climbs; with ``steep_friction=0`` it stands before the ramp."""
+    env = gym.make(
+        "QuadUneven-v0",
+        terrain={"kind": "slope", "params": {"angle_deg": 25, "ramp_length": 1.2, "plateau_length": 0.5}},
+        max_episode_steps=10**6,
+    )
+    expert = attach_expert(env, ExpertConfig(steep_friction=steep_friction))
+    env.reset(seed=0)
+    assumed = {expert.assumed_friction}
+    for _ in range(round(16.0 / env.unwrapped.dt)):
+        _, _, terminated, _, info = env.step(expert.predict(None)[0])
+        assert not terminated, info["termination_reason"]
+        assumed.add(expert.assumed_friction)
+    steep_tries = [line for line in expert.failure_log if "planned assuming friction 0.80" in line]
+    if steep_friction:
+        assert assumed == {0.5, 0.8} and steep_tries
+        assert info["distance"] > 1.0  # the ramp starts at ~0.3 m
+    else:
+        assert assumed == {0.5} and not steep_tries
+        assert info["distance"] < 0.6 and any("failed test: slope" in line for line in expert.failure_log)
