@@ -1,5 +1,5 @@
-"""The shipped models (models/ppo_residual_extreme, the baseline; models/ppo_residual_hard, its predecessor;
-models/ppo_scratch): load as data, run, match their configs."""
+"""The shipped models (models/ppo_residual_gain, the baseline; models/ppo_residual_extreme and
+models/ppo_residual_hard, its predecessors; models/ppo_scratch): load as data, run, match their configs."""
 
 from __future__ import annotations
 
@@ -19,36 +19,41 @@ from agents.rl.residual_env import ResidualController
 
 ROOT = Path(__file__).resolve().parents[2]
 RESIDUAL_MODELS = {
-    "extreme": (ROOT / "models" / "ppo_residual_extreme" / "model.zip", "stance"),
-    "hard": (ROOT / "models" / "ppo_residual_hard" / "model.zip", "all"),
+    "ppo_residual_gain": ("extreme", "stance", "expert_torque"),
+    "ppo_residual_extreme": ("extreme", "stance", "torque_limit"),
+    "ppo_residual_hard": ("hard", "all", "torque_limit"),
 }
-"""randomization preset -> (the model trained in it by configs/rl/ppo_residual_PRESET.yaml, its residual_legs)."""
+"""models/NAME (trained by configs/rl/NAME.yaml) -> (its randomization preset, residual_legs, residual_basis)."""
 
 
-@pytest.mark.parametrize("world", sorted(RESIDUAL_MODELS))
-def test_the_shipped_model_was_trained_with_the_shipped_config(world):
+@pytest.mark.parametrize("name", sorted(RESIDUAL_MODELS))
+def test_the_shipped_model_was_trained_with_the_shipped_config(name):
     """``make rl-baseline`` retrains it: its recorded config is the YAML's, field for field (fields added
     since the run was recorded take their defaults)."""
     from agents.rl.config import TrainConfig
 
-    model, legs = RESIDUAL_MODELS[world]
+    world, legs, basis = RESIDUAL_MODELS[name]
+    model = ROOT / "models" / name / "model.zip"
     recorded = json.loads((model.parent / "train_config.json").read_text())
-    shipped = json.loads(json.dumps(load_train_config(ROOT / f"configs/rl/ppo_residual_{world}.yaml").to_dict()))
+    shipped = json.loads(json.dumps(load_train_config(ROOT / f"configs/rl/{name}.yaml").to_dict()))
     defaults = json.loads(json.dumps(TrainConfig().to_dict()))
     assert {**{k: defaults[k] for k in shipped.keys() - recorded.keys()}, **recorded} == shipped
     meta = read_metadata(model)
     assert meta["residual"] and meta["expert_features"] and meta["randomization"] == world
     assert meta.get("residual_legs", "all") == legs
+    assert meta.get("residual_basis", "torque_limit") == basis
     assert not list(model.parent.glob("*.pkl"))
 
 
-@pytest.mark.parametrize("world", sorted(RESIDUAL_MODELS))
-def test_the_shipped_model_drives_the_expert_in_a_randomized_world(world):
-    model, legs = RESIDUAL_MODELS[world]
+@pytest.mark.parametrize("name", sorted(RESIDUAL_MODELS))
+def test_the_shipped_model_drives_the_expert_in_a_randomized_world(name):
+    world, legs, basis = RESIDUAL_MODELS[name]
+    model = ROOT / "models" / name / "model.zip"
     env = gym.make("QuadUneven-v0", terrain="rough", randomization=world, **policy_env_kwargs(str(model)))
     policy = make_policy(str(model), env)  # the safe loader: nothing unpickled
     assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
     assert env.unwrapped.controller.residual_legs == legs
+    assert env.unwrapped.controller.residual_basis == basis
     assert policy.model.observation_space.shape == (env.observation_space.shape[0] + EXPERT_FEATURE_SIZE,)
     obs, _ = env.reset(seed=100)
     x0 = env.unwrapped.data.qpos[0]
