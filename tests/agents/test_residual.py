@@ -160,12 +160,18 @@ def test_residual_env_accepts_randomization_and_passes_the_checkers():
 
 @pytest.mark.filterwarnings("ignore:.*different from the unwrapped")
 def test_the_shipped_training_world_passes_both_checkers():
-    """The residual wrapper itself, stance-gated, on stairs in the extreme world: Gymnasium's checker
-    (with its exact seeded-reset comparison) and SB3's."""
+    """The residual wrapper itself as run 6 trains it (stance-gated, a gain on the expert's torque), on stairs in
+    the extreme world: Gymnasium's checker (with its exact seeded-reset comparison) and SB3's."""
     from gymnasium.utils.env_checker import check_env
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-    env = make_residual_env(terrain="stairs", randomization="extreme", residual_legs="stance", residual_scale=0.2)
+    env = make_residual_env(
+        terrain="stairs",
+        randomization="extreme",
+        residual_legs="stance",
+        residual_scale=0.5,
+        residual_basis="expert_torque",
+    )
     assert env.unwrapped.randomization.motor_strength == (0.5, 1.3)
     check_env(env, skip_render_check=True)
     sb3_check_env(env, warn=True)
