@@ -127,6 +127,8 @@ class ResidualController:
             if foot_sensor_adr is None or len(foot_sensor_adr) != len(self.torque_limit) // 3:
                 raise ValueError("residual_legs='stance' needs the feet's contact sensor addresses, one per leg")
             self._foot_adr = np.asarray(foot_sensor_adr, dtype=np.intp)
+        # Per physics step only where the applied residual varies within a control step (gated, or a gain).
+        self._track_applied = self._foot_adr is not None or self.residual_basis == "expert_torque"
         self._applied_sum = 0.0  # mean |applied residual| (N m) summed over physics steps since the last query
         self._applied_n = 0
 
@@ -137,9 +139,10 @@ class ResidualController:
             self.expert.reset(model, data, terrain)
 
     def residual_torque(self, action: np.ndarray) -> float:
-        """N m: mean over the 12 joints of |residual torque| before the motor limit, averaged over the
-        physics steps since the previous call (with none, what ``action`` would command in the
-        ``torque_limit`` basis on every leg)."""
+        """N m: mean over the 12 joints of |residual torque| before the motor limit. With ``"all"`` legs in the
+        ``torque_limit`` basis it is what ``action`` (clipped to [-1, 1]) commands; otherwise the mean of what
+        was applied over the physics steps since the previous call (what ``action`` would command in the
+        ``torque_limit`` basis if there were none)."""
         if self._applied_n:
             value = self._applied_sum / self._applied_n
             self._applied_sum, self._applied_n = 0.0, 0
@@ -159,8 +162,9 @@ class ResidualController:
             np.multiply(action, self.gain, out=self._tau)
         if self._foot_adr is not None:
             self._tau *= np.repeat(data.sensordata[self._foot_adr] > 0.0, 3)
-        self._applied_sum += float(np.mean(np.abs(self._tau)))
-        self._applied_n += 1
+        if self._track_applied:
+            self._applied_sum += float(np.mean(np.abs(self._tau)))
+            self._applied_n += 1
         self._tau += tau_expert
         np.clip(self._tau, -self.torque_limit, self.torque_limit, out=self._tau)
         return self._tau

@@ -161,16 +161,19 @@ def test_onnx_export_of_a_residual_model_with_expert_features(tmp_path):
             p.add_(0.3 * torch.randn_like(p))
     model.save(tmp_path / "model.zip")
     write_metadata(tmp_path, {"algo": "ppo", "residual": True, "residual_scale": 0.1, "expert_features": True,
-                              "normalize_obs": False, "env_kwargs": {"terrain": "flat"}})  # fmt: skip
+                              "normalize_obs": False, "env_kwargs": {"terrain": "flat"},
+                              "residual_basis": "expert_torque"})  # fmt: skip
     path = tmp_path / "model.zip"
     export_onnx(path, tmp_path / "p.onnx")
     props = {p.key: p.value for p in onnx.load(str(tmp_path / "p.onnx")).metadata_props}
+    assert json.loads(props["residual_basis"]) == "expert_torque" and json.loads(props["residual_legs"]) == "all"
     layout = json.loads(props["observation_layout"])
     n_env = gym.make("QuadUneven-v0", terrain="flat").observation_space.shape[0]
     assert layout["expert_base_pos_error"][0] == n_env and layout["expert_torque"][1] == n_env + EXPERT_FEATURE_SIZE
 
     env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(str(path)), "terrain": "flat"})
     policy = make_policy(str(path), env)
+    assert env.unwrapped.controller.residual_basis == "expert_torque"
     obs, _ = env.reset(seed=0)
     session = ort.InferenceSession(str(tmp_path / "p.onnx"), providers=["CPUExecutionProvider"])
     for _ in range(20):
