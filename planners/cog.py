@@ -33,7 +33,7 @@ import scipy.linalg
 import scipy.optimize
 
 from planners import cog_kernels as CK
-from planners.cog_qp import WarmStartQP
+from planners.cog_qp import WarmStartQP, whitening
 from planners.polynomial import N_COEF, PiecewisePolynomial, accel_gram, basis_rows
 from planners.types import PlanningError
 from quad_uneven_env.spatial import cross
@@ -139,9 +139,10 @@ def _cost_structure(durations: tuple[float, ...]) -> tuple[np.ndarray, np.ndarra
 @lru_cache(maxsize=64)
 def _hessian(
     durations: tuple[float, ...], weights: tuple[float, float, float], smoothing: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """The cost's Hessian H (3m x 3m) in the null-space variables and its inverse (shared: never write to
-    them; they depend on the phase durations and the weights only, not on the footholds or the targets)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cost's Hessian H (3m x 3m) in the null-space variables, its inverse and its whitening ``L^-1``
+    (:func:`planners.cog_qp.whitening`) (shared: never write to them; they depend on the phase durations and
+    the weights only, not on the footholds or the targets)."""
     _, N, _ = _equality_structure(durations)
     R, G = _cost_structure(durations)
     RN, GN = R @ N, G @ N
@@ -153,7 +154,7 @@ def _hessian(
     H += 1e-12 * np.eye(H.shape[0])
     Hinv = np.linalg.inv(H)
     Hinv.setflags(write=False)  # H stays writable (the QP step copies it for the solver)
-    return H, Hinv
+    return H, Hinv, whitening(H)
 
 
 class _Reduced:
@@ -178,7 +179,7 @@ class _Reduced:
         for a in range(N_AXES):
             sl = slice(a * self.m, (a + 1) * self.m)
             g[sl] = 2.0 * (w[a] * RN.T @ (R @ self.x0[:, a] - prob.targets[:, a]) + lam * GN.T @ self.x0[:, a])
-        self.H, self.Hinv = _hessian(self.durations, tuple(float(v) for v in w), float(lam))
+        self.H, self.Hinv, self.Linv = _hessian(self.durations, tuple(float(v) for v in w), float(lam))
         self.g = g
         self.const = float(sum(w[a] * np.sum((R @ self.x0[:, a] - prob.targets[:, a]) ** 2) for a in range(N_AXES)))
         # Support polygon edges per phase (clockwise seen from above).
@@ -214,6 +215,21 @@ class _Reduced:
             self._reach_sites = [np.ascontiguousarray(r, dtype=float) for r in self.prob.reach_sites]
         legs = [len(e[0]) + (len(self._reach_sites[k]) if self.reach else 0) for k, e in enumerate(self.edges)]
         self.n_rows = sum(len(s) * n for s, n in zip(samples, legs, strict=True))
+        self.row_keys = self._row_keys()
+
+    def _row_keys(self) -> list[tuple[int, float, str]]:
+        """(phase, local sample time, constraint label) of every stacked row, in :meth:`constraints`' order."""
+        keys = []
+        for k, s in enumerate(self.samples):
+            times = [round(float(t), 9) for t in s]
+            keys += [(k, t, label) for t in times for label in self.edges[k][2]]
+            if self.reach:
+                keys += [(k, t, f"reach {leg}") for t in times for leg in self.prob.support_names[k]]
+        return keys
+
+    def rows_of(self, keys: frozenset[tuple[int, float, str]]) -> np.ndarray:
+        """bool (n_rows,): the rows named in ``keys`` (names of rows not in this layout are ignored)."""
+        return np.fromiter((key in keys for key in self.row_keys), dtype=bool, count=self.n_rows)
 
     def _world_offsets(self, k: int, s: np.ndarray) -> np.ndarray:
         """(S or 1, n_k, 3) hip-minus-COG offsets (m, world) of phase ``k`` at local times ``s``."""
@@ -281,19 +297,8 @@ class _Reduced:
 
     def locate(self, index: int) -> tuple[int, str]:
         """Phase and constraint label (support edge "LF->RF" or "reach LF") of stacked constraint ``index``."""
-        for k in range(self.K):
-            labels = list(self.edges[k][2])
-            n = len(self.samples[k]) * len(labels)
-            if index < n:
-                return k, labels[index % len(labels)]
-            index -= n
-            if self.reach:
-                legs = self.prob.support_names[k]
-                n = len(self.samples[k]) * len(legs)
-                if index < n:
-                    return k, f"reach {legs[index % len(legs)]}"
-                index -= n
-        raise IndexError(index)
+        k, _, label = self.row_keys[index]
+        return k, label
 
 
 def _sample_rows(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -357,7 +362,7 @@ def _least_violating(C: np.ndarray, lo: np.ndarray, z: np.ndarray) -> np.ndarray
     return res.x[:n] if res.status == 0 else z
 
 
-def _sqp(red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, max_iter: int = 30) -> np.ndarray:
+def _sqp(red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, qp: WarmStartQP, max_iter: int = 30) -> np.ndarray:
     h, J = red.constraints(z)
     if h.min() >= bound:  # the best unconstrained path is already stable
         return z
@@ -366,7 +371,6 @@ def _sqp(red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, max_iter: 
     fixed = np.abs(J).max(axis=1) < 1e-12
     if np.any(fixed & (h < red.prob.epsilon)):
         raise _infeasible(red, z, red.prob.epsilon, "the given start or end state itself", fixed)
-    qp = WarmStartQP(red.H, red.g, red.Hinv)
     for _ in range(max_iter):
         lo = np.where(fixed, -1e20, bound - h + J @ z)
         z_new = qp.solve(J, lo, z)
@@ -430,9 +434,13 @@ def plan_cog(
     samples = [np.linspace(0.0, 1.0, samples_per_phase) for _ in range(red.K)]
     red.set_samples(samples)
     z = np.linalg.solve(red.H, -red.g)  # best unconstrained path: the first linearisation point
+    qp = WarmStartQP(red.H, red.g, red.Hinv, red.Linv)
+    active: frozenset[tuple[int, float, str]] = frozenset()  # a refinement's QPs start from the rows active before it
     for it in range(max_refinements + 1):
         if method == "sqp":
-            z = _sqp(red, z, bound, stats)
+            qp.active = red.rows_of(active)
+            z = _sqp(red, z, bound, stats, qp)
+            active = frozenset(red.row_keys[i] for i in np.flatnonzero(qp.active))
         else:
             z = _slsqp(red, z, bound, stats, finite_difference=(method == "slsqp-fd"))
         dense = _dense_index(red, red.coef(z))

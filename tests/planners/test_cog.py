@@ -131,15 +131,19 @@ def _rot_z(t):
     return R
 
 
+def with_reach(base: CogProblem, rotation=None) -> CogProblem:
+    """``base`` with stance-leg reach rows (hips 0.25 m x 0.12 m from the COG, 0.42 m reach)."""
+    hips = np.array([[0.25, 0.12, 0.0], [0.25, -0.12, 0.0], [-0.25, 0.12, 0.0], [-0.25, -0.12, 0.0]])
+    offsets = [hips[[LEG_NAMES.index(n) for n in names]] for names in base.support_names]
+    sites = [s + np.array([0.0, 0.0, 0.02]) for s in base.supports]
+    return dataclasses.replace(base, reach_sites=sites, reach_offsets=offsets, max_reach=0.42, reach_rotation=rotation)
+
+
 @pytest.mark.parametrize("rotation", [None, _rot_z])
 def test_compiled_constraint_rows_equal_the_numpy_rows(rng, rotation):
     """Stability and reach rows (with and without a yawing body) from the kernels equal the numpy form, at
     random points far from any solution (edges crossed, legs over-stretched)."""
-    base = make_problem()
-    hips = np.array([[0.25, 0.12, 0.0], [0.25, -0.12, 0.0], [-0.25, 0.12, 0.0], [-0.25, -0.12, 0.0]])
-    offsets = [hips[[LEG_NAMES.index(n) for n in names]] for names in base.support_names]
-    sites = [s + np.array([0.0, 0.0, 0.02]) for s in base.supports]
-    prob = dataclasses.replace(base, reach_sites=sites, reach_offsets=offsets, max_reach=0.42, reach_rotation=rotation)
+    prob = with_reach(make_problem(), rotation)
     red = _Reduced(prob)
     red.bound = 0.3
     red.set_samples([np.sort(rng.uniform(0.0, 1.0, 4 + k)) for k in range(7)])
@@ -194,3 +198,57 @@ def test_warm_started_qps_equal_the_full_qp(rng):
     # an impossible margin: both infeasible
     assert solve_qp(red.H, red.g, J, lo + 1e3) is None
     assert qp.solve(J, lo + 1e3, z_far) is None
+
+
+def test_refinements_start_from_the_active_rows_and_give_the_cold_solvers_path(monkeypatch):
+    """With 4 samples per phase the dense check refines several times, each refinement's first QP starting
+    from the rows active before it, each later QP from the previous one's: fewer solver calls, and the path
+    of QPs that all start cold, to 1e-9 m."""
+    import planners.cog_qp as cog_qp
+
+    calls = []
+    solver = cog_qp.solve_qp_active
+    monkeypatch.setattr(cog_qp, "solve_qp_active", lambda *a: calls.append(1) or solver(*a))
+    prob = make_problem(40.0)
+    warm, stats = plan_cog(prob, samples_per_phase=4)
+    warm_calls = len(calls)
+    assert stats.refinements >= 2
+
+    original = cog_qp.WarmStartQP.solve
+
+    def cold(self, C, lo, z):
+        self.active = None
+        return original(self, C, lo, z)
+
+    monkeypatch.setattr(cog_qp.WarmStartQP, "solve", cold)
+    calls.clear()
+    cold_path, cold_stats = plan_cog(prob, samples_per_phase=4)
+    assert cold_stats.refinements == stats.refinements
+    assert warm_calls < len(calls)
+    t = np.linspace(0, prob.t_knots[-1], 301)
+    np.testing.assert_allclose(warm.position(t), cold_path.position(t), atol=1e-9)
+
+
+def test_active_rows_carried_into_a_refined_layout_are_the_same_constraints():
+    """Rows named (phase, sample time, edge or reach leg) in one sample layout are found in a refined layout
+    (samples added between them): each carried row has the old row's moment and Jacobian, stability and
+    reach rows of a yawing body alike."""
+    prob = with_reach(make_problem(40.0), _rot_z)
+    old = _Reduced(prob)
+    old.bound = 40.0
+    samples = [np.linspace(0, 1, 5)] * 7
+    old.set_samples(samples)
+    new = _Reduced(prob)
+    new.bound = 40.0
+    new.set_samples([np.unique(np.concatenate([s, [0.13, 0.61]])) for s in samples])
+    z = np.random.default_rng(3).normal(scale=0.02, size=3 * old.m)
+    h_old, J_old = old.constraints(z)
+    h_new, J_new = new.constraints(z)
+    chosen = np.zeros(old.n_rows, dtype=bool)
+    chosen[::7] = True
+    assert any(old.locate(i)[1].startswith("reach") for i in np.flatnonzero(chosen))
+    mapped = new.rows_of(frozenset(old.row_keys[i] for i in np.flatnonzero(chosen)))
+    assert mapped.sum() == chosen.sum() and new.n_rows > old.n_rows
+    np.testing.assert_array_equal(h_new[mapped], h_old[chosen])
+    np.testing.assert_array_equal(J_new[mapped], J_old[chosen])
+    assert [new.locate(i) for i in np.flatnonzero(mapped)] == [old.locate(i) for i in np.flatnonzero(chosen)]

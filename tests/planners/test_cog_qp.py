@@ -110,3 +110,61 @@ def test_a_qp_the_solver_gives_up_on_is_not_solved_and_does_not_block(monkeypatc
     assert cog_qp.solve_qp(H, g, C, lo) is not None
     monkeypatch.setattr(cog_qp, "ITER_LIMIT", 1)
     assert cog_qp.solve_qp(H, g, C, lo) is None
+
+
+def test_an_active_set_guess_off_by_a_row_is_repaired_to_quadprogs_optimum():
+    """A guess missing one active row, or with one inactive row too many, is repaired by single-row changes
+    (a shortcut, no solver call); a guess too far off for :data:`MAX_REPAIRS` changes goes to the solver.
+    Every answer is quadprog's optimum on all rows."""
+    import planners.cog_qp as cog_qp
+
+    d = np.load(QP)
+    H, g, C, lo = d["H"], d["g"], d["C"], d["lo"]
+    ref = _quadprog(H, g, C, lo)
+    qp = cog_qp.WarmStartQP(H, g)
+    qp.solve(C, lo, qp.x_free)
+    optimal = qp.active.copy()
+    assert optimal.sum() >= 3
+    norms = np.linalg.norm(C, axis=1)
+    live = norms > 0
+    slack = np.full(len(C), -np.inf)
+    slack[live] = (C[live] @ ref - lo[live]) / norms[live]
+    inactive = np.flatnonzero(~optimal & (slack > 1e-3))
+    missing, extra = optimal.copy(), optimal.copy()
+    missing[np.flatnonzero(optimal)[0]] = False
+    extra[inactive[0]] = True
+    for guess in (missing, extra):
+        qp.active = guess.copy()
+        before = qp.shortcuts
+        x = qp.solve(C, lo, ref)
+        assert qp.shortcuts == before + 1
+        np.testing.assert_array_equal(qp.active, optimal)
+        np.testing.assert_allclose(x, ref, atol=1e-7 * max(1.0, np.abs(ref).max()))
+    far = optimal.copy()
+    far[np.flatnonzero(optimal)[: cog_qp.MAX_REPAIRS + 1]] = False  # more rows missing than changes allowed
+    qp.active = far
+    before = qp.shortcuts
+    x = qp.solve(C, lo, ref)
+    assert qp.shortcuts == before
+    np.testing.assert_allclose(x, ref, atol=1e-7 * max(1.0, np.abs(ref).max()))
+
+
+def test_the_whitened_solve_equals_daqp_on_the_original_problem():
+    """The solve DAQP gets whitened (identity Hessian, rows times L^-T) has the optimum DAQP finds on H itself."""
+    import daqp
+
+    from planners.cog_qp import solve_qp, whitening
+
+    d = np.load(QP)
+    H, g, C, lo = d["H"], d["g"], d["C"], d["lo"]
+    live = np.linalg.norm(C, axis=1) > 0
+    n = np.linalg.norm(C[live], axis=1)
+    A = np.ascontiguousarray(C[live] / n[:, None])
+    x_ref, _, flag, _ = daqp.solve(
+        np.array(H), np.array(g), A, np.full(len(A), np.inf), lo[live] / n, np.zeros(len(A), dtype=np.int32),
+        primal_tol=1e-9,
+    )  # fmt: skip
+    assert flag == 1
+    Linv = whitening(H)
+    np.testing.assert_allclose(Linv @ H @ Linv.T, np.eye(len(H)), atol=1e-9)
+    np.testing.assert_allclose(solve_qp(H, g, C, lo), x_ref, atol=1e-9 * max(1.0, np.abs(x_ref).max()))
