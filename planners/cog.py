@@ -362,7 +362,9 @@ def _least_violating(C: np.ndarray, lo: np.ndarray, z: np.ndarray) -> np.ndarray
     return res.x[:n] if res.status == 0 else z
 
 
-def _sqp(red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, qp: WarmStartQP, max_iter: int = 30) -> np.ndarray:
+def _sqp(
+    red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, qp: WarmStartQP, max_iter: int = 30
+) -> np.ndarray:
     h, J = red.constraints(z)
     if h.min() >= bound:  # the best unconstrained path is already stable
         return z
