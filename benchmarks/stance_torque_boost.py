@@ -1,12 +1,14 @@
 """Diagnostic: can a torque residual help the expert in the extreme world at all?
 
 A fixed, hand-made residual: the expert's own torque times ``gain - 1`` on the legs whose foot touches the
-ground (the contact switches, every physics step), zero on swinging legs. Run on one terrain of the
+ground (the contact switches, every physics step), zero on swinging legs; ``--gain-hind`` gives the hind
+legs (LH, RH) their own gain. Run on one terrain of the
 ``robust_extreme`` suite with its held-out seeds, it tells whether the residual space holds a policy better
 than the expert (run 5's additive residual did not find one; run 6 starts from gain 1.3, docs/rl.md).
 ``--gain 1`` is the expert alone and reproduces the suite's episodes (same seeds, same worlds).
 
-Usage: ``python benchmarks/stance_torque_boost.py --gain 1.3 [--entry stairs_up] [--seeds 100-119]``, or on
+Usage: ``python benchmarks/stance_torque_boost.py --gain 1.3 [--gain-hind 1.15] [--entry stairs_up] [--seeds 100-119]``,
+or on
 another suite's entry (its world, goal and time limit): ``--suite targets --entry 5 --seeds 0-9``.
 """
 
@@ -30,22 +32,29 @@ ENTRIES = {
 
 
 class StanceTorqueBoost:
-    """Physics-rate controller: the expert's torques (N m) times ``gain`` on the legs whose foot touches."""
+    """Physics-rate controller: the expert's torques (N m) times ``gain`` on the legs whose foot touches
+    (``gain``: a number, or one per joint (12,))."""
 
-    def __init__(self, expert, foot_sensor_adr: np.ndarray, gain: float) -> None:
-        self.expert, self.adr, self.gain = expert, np.asarray(foot_sensor_adr), gain
+    def __init__(self, expert, foot_sensor_adr: np.ndarray, gain: float | np.ndarray) -> None:
+        self.expert, self.adr, self.gain = expert, np.asarray(foot_sensor_adr), np.broadcast_to(gain, (12,))
 
     def reset(self, model, data, terrain) -> None:
         self.expert.reset(model, data, terrain)
 
     def __call__(self, model, data, action) -> np.ndarray:
         tau = self.expert(model, data, action).copy()
-        tau[np.repeat(data.sensordata[self.adr] > 0.0, 3)] *= self.gain
+        stance = np.repeat(data.sensordata[self.adr] > 0.0, 3)
+        tau[stance] *= self.gain[stance]
         return tau  # the env clips to the motor limits
 
 
 def episode(
-    terrain: dict, seed: int, gain: float, goal: float = 3.0, time_limit: float = 90.0, randomization="extreme"
+    terrain: dict,
+    seed: int,
+    gain: float | np.ndarray,
+    goal: float = 3.0,
+    time_limit: float = 90.0,
+    randomization: str = "extreme",
 ) -> tuple[str, float]:
     """One episode (robust_extreme's world by default): ("goal" | "fall" | "stall", distance in m)."""
     env = gym.make("QuadUneven-v0", terrain=terrain, randomization=randomization, max_episode_steps=10**6)
@@ -67,6 +76,7 @@ def main() -> None:
     """Run every seed and print one line each, then the counts."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--gain", type=float, default=1.3, help="stance-leg torque factor (1: the expert alone)")
+    ap.add_argument("--gain-hind", type=float, default=None, help="the hind legs' factor (default: --gain)")
     ap.add_argument("--entry", default="stairs_up", help=f"one of {sorted(ENTRIES)}, or an entry index with --suite")
     ap.add_argument("--suite", default=None, help="a suite name: --entry is then the index of its terrain entry")
     ap.add_argument("--seeds", default="100-119", help="first-last (inclusive)")
@@ -84,12 +94,15 @@ def main() -> None:
             ap.error(f"--entry must be an index in 0..{len(suite.terrains) - 1} with --suite, got {args.entry!r}")
         terrain = {"kind": entry.kind, **entry.params}
         world = dict(goal=suite.goal_distance, time_limit=suite.time_limit, randomization=entry.randomization)
+    hind = args.gain if args.gain_hind is None else args.gain_hind
+    gain = np.repeat([args.gain, args.gain, hind, hind], 3)  # LF, RF, LH, RH
+    label = f"gain {args.gain:g}" + ("" if args.gain_hind is None else f" hind {hind:g}")
     counts = {"goal": 0, "fall": 0, "stall": 0}
     for seed in range(first, last + 1):
-        end, dist = episode(terrain, seed, args.gain, **world)
+        end, dist = episode(terrain, seed, gain, **world)
         counts[end] += 1
-        print(f"gain {args.gain:g} {args.entry} seed {seed}: {end} at {dist:.2f} m", flush=True)
-    print(f"gain {args.gain:g} {args.entry} seeds {args.seeds}: {counts}")
+        print(f"{label} {args.entry} seed {seed}: {end} at {dist:.2f} m", flush=True)
+    print(f"{label} {args.entry} seeds {args.seeds}: {counts}")
 
 
 if __name__ == "__main__":
