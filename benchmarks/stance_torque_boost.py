@@ -2,14 +2,14 @@
 
 A fixed, hand-made residual: the expert's own torque times ``gain - 1`` on the legs whose foot touches the
 ground (the contact switches, every physics step), zero on swinging legs; ``--gain-hind`` gives the hind
-legs (LH, RH) their own gain. Run on one terrain of the
-``robust_extreme`` suite with its held-out seeds, it tells whether the residual space holds a policy better
-than the expert (run 5's additive residual did not find one; run 6 starts from gain 1.3, docs/rl.md).
-``--gain 1`` is the expert alone and reproduces the suite's episodes (same seeds, same worlds).
+legs (LH, RH) their own gain. Run on one terrain of the ``robust_extreme`` suite with chosen seeds, it tells
+whether the residual space holds a policy better than the expert (run 5's additive residual did not find one;
+run 6 starts from gain 1.3; docs/rl.md compares fixed gains on validation seeds 200-219). ``--gain 1`` is the
+expert alone and reproduces the suite's episodes (same seeds, same worlds).
 
-Usage: ``python benchmarks/stance_torque_boost.py --gain 1.3 [--gain-hind 1.15] [--entry stairs_up] [--seeds 100-119]``,
-or on
-another suite's entry (its world, goal and time limit): ``--suite targets --entry 5 --seeds 0-9``.
+Usage: ``python benchmarks/stance_torque_boost.py --gain 1.3 [--gain-hind 1.15] [--entry stairs_up]
+[--seeds 100-119]``, or on another suite's entry (its world, goal and time limit): ``--suite targets --entry 5
+--seeds 0-9``.
 """
 
 from __future__ import annotations

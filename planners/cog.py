@@ -153,7 +153,7 @@ def _hessian(
         H[sl, sl] = 2.0 * (weights[a] * RN.T @ RN + smoothing * N.T @ GN)
     H += 1e-12 * np.eye(H.shape[0])
     Hinv = np.linalg.inv(H)
-    Hinv.setflags(write=False)  # H stays writable (the QP step copies it for the solver)
+    Hinv.setflags(write=False)  # H stays writable: quadprog (the tests' reference solver) refuses a read-only one
     return H, Hinv, whitening(H)
 
 
