@@ -306,6 +306,12 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         "(default: the config's)",
     )
     p.add_argument(
+        "--gain-adaptation",
+        choices=("none", "knee"),
+        default=None,
+        help="adaptive knee gains on the expert under the residual (default: the config's)",
+    )
+    p.add_argument(
         "--time-limit-min", type=float, default=None, help="stop (and save) after this many minutes of training"
     )
     p.add_argument("--config", default=None, help="training config YAML (default configs/rl/ALGO_residual.yaml)")
@@ -335,6 +341,7 @@ def run_train_command(args: argparse.Namespace) -> int:
         "residual_scale": args.residual_scale,
         "residual_legs": args.residual_legs,
         "residual_basis": args.residual_basis,
+        "gain_adaptation": args.gain_adaptation,
         "time_limit_min": args.time_limit_min,
     }
     cfg = load_train_config(args.config, overrides)

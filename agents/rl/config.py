@@ -28,6 +28,10 @@ RESIDUAL_BASES = ("torque_limit", "expert_torque")
 """What one unit of residual action is: a fraction of the motor's torque limit (additive), or of the expert's
 own torque at that physics step (a gain on the expert: ``tau = tau_expert x (1 + residual_scale x action)``)."""
 
+GAIN_ADAPTATIONS = ("none", "knee")
+"""What the residual acts on: the expert's torques, or those with adaptive knee gains
+(:mod:`agents.rl.gain_adaptation`)."""
+
 ALGOS = ("ppo", "sac")
 """Stable-Baselines3 algorithms ``quad-uneven train`` supports."""
 
@@ -82,6 +86,10 @@ class TrainConfig:
     residual_basis: str = param("torque_limit", kind="choice", choices=RESIDUAL_BASES)
     """``torque_limit``: residual torque = residual_scale x action x the motor limit; ``expert_torque``:
     residual_scale x action x the expert's own torque (per joint and physics step: a gain on the expert)."""
+    gain_adaptation: str = param("none", kind="choice", choices=GAIN_ADAPTATIONS)
+    """``none``: the residual acts on the expert's torques; ``knee``: on the expert's torques with adaptive knee
+    gains (:mod:`agents.rl.gain_adaptation`: each knee's gain follows the correlation of its tracking error
+    with its load)."""
     initial_action: float = param(0.0, "action units", lo=-1.0, hi=1.0)
     """the untrained policy's mean action, every joint (0: the expert exactly). With ``expert_torque`` and
     ``stance`` legs, ``initial_action x residual_scale`` is a hand-made prior: e.g. 0.6 x 0.5 = +30 % torque
@@ -149,13 +157,16 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         or cfg.residual_penalty
         or cfg.residual_legs != "all"
         or cfg.residual_basis != "torque_limit"
+        or cfg.gain_adaptation != "none"
         or cfg.initial_action
     ):
         raise TrainConfigError(
             "residual: false trains from scratch without the expert, so expert_features must be false, "
-            "residual_penalty 0, residual_legs 'all', residual_basis 'torque_limit' and initial_action 0, got "
+            "residual_penalty 0, residual_legs 'all', residual_basis 'torque_limit', gain_adaptation 'none' and "
+            "initial_action 0, got "
             f"expert_features={cfg.expert_features}, residual_penalty={cfg.residual_penalty}, "
             f"residual_legs={cfg.residual_legs!r}, residual_basis={cfg.residual_basis!r}, "
+            f"gain_adaptation={cfg.gain_adaptation!r}, "
             f"initial_action={cfg.initial_action}"
         )
     _mapping("hyperparams", cfg.hyperparams)

@@ -8,7 +8,9 @@ metadata travels in the ONNX ``metadata_props``: ``observation_layout`` (JSON na
 ``action_low``/``action_high``, ``residual``, ``residual_scale``, ``residual_legs`` and ``residual_basis`` (a
 residual action is added to the expert's torques as ``residual_scale x action x torque_limit``, or with
 ``residual_basis`` "expert_torque" as ``residual_scale x action x`` the expert's torque; with ``residual_legs``
-"stance" only on the legs whose foot touches the ground), ``torque_limit`` (N m), ``algo``,
+"stance" only on the legs whose foot touches the ground), ``gain_adaptation`` ("knee": the expert's knee
+torques are first multiplied by the adaptive gains of :mod:`agents.rl.gain_adaptation`, which a deployment must
+run too), ``torque_limit`` (N m), ``algo``,
 ``env_id``, ``env_kwargs``, ``observation_normalization`` ("folded" or "none").
 """
 
@@ -117,6 +119,7 @@ def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None
         "residual_scale": json.dumps(meta.get("residual_scale")),
         "residual_legs": json.dumps(meta.get("residual_legs", "all") if meta.get("residual") else None),
         "residual_basis": json.dumps(meta.get("residual_basis", "torque_limit") if meta.get("residual") else None),
+        "gain_adaptation": json.dumps(meta.get("gain_adaptation", "none") if meta.get("residual") else None),
         "torque_limit": json.dumps(torque_limit),
         "algo": algo,
         "env_id": str(meta.get("env_id", "QuadUneven-v0")),

@@ -56,7 +56,7 @@ def read_metadata(model_path: str | Path) -> dict[str, Any] | None:
 
 def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
     """``meta`` with the fields the evaluation uses checked (``algo``, ``residual``, ``residual_scale``, ...)."""
-    from agents.rl.config import ALGOS, RESIDUAL_BASES, RESIDUAL_LEGS
+    from agents.rl.config import ALGOS, GAIN_ADAPTATIONS, RESIDUAL_BASES, RESIDUAL_LEGS
 
     if meta.get("algo") not in (None, *ALGOS):
         raise ModelError(f"{path}: algo must be one of {list(ALGOS)}, got {meta.get('algo')!r}")
@@ -74,6 +74,9 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
         basis = meta.get("residual_basis", "torque_limit")  # absent in models trained before the option
         if basis not in RESIDUAL_BASES:
             raise ModelError(f"{path}: residual_basis must be one of {list(RESIDUAL_BASES)}, got {basis!r}")
+        adaptation = meta.get("gain_adaptation", "none")  # absent in models trained before the option
+        if adaptation not in GAIN_ADAPTATIONS:
+            raise ModelError(f"{path}: gain_adaptation must be one of {list(GAIN_ADAPTATIONS)}, got {adaptation!r}")
     env_kwargs = meta.get("env_kwargs")
     if env_kwargs is not None and not isinstance(env_kwargs, dict):
         raise ModelError(f"{path}: env_kwargs must be a mapping of QuadUneven-v0 arguments, got {env_kwargs!r}")
@@ -351,6 +354,7 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
             float(meta["residual_scale"]),
             residual_legs=meta.get("residual_legs", "all"),
             residual_basis=meta.get("residual_basis", "torque_limit"),
+            gain_adaptation=meta.get("gain_adaptation", "none"),
         )
     return SB3Policy(model, normalizer, expert, env.unwrapped if spaces_of.expert_features else None)
 

@@ -43,6 +43,7 @@ from gymnasium.envs.registration import register, registry
 from agents.expert import ExpertConfig, ExpertPolicy
 from agents.rl.config import RESIDUAL_BASES, RESIDUAL_LEGS
 from agents.rl.expert_features import augmented_space, expert_features
+from agents.rl.gain_adaptation import KneeGainAdaptation, check_gain_adaptation
 from quad_uneven_env.env import QuadUnevenEnv
 
 RESIDUAL_ENV_ID = "QuadUnevenResidual-v0"
@@ -103,6 +104,11 @@ class ResidualController:
         for ``"stance"``).
     :param residual_basis: ``"torque_limit"`` (residual = scale x action x ``torque_limit``) or
         ``"expert_torque"`` (residual = scale x action x the expert's torque, joint by joint).
+    :param gain_adaptation: ``"none"``, or ``"knee"``: the expert's knee torques are first multiplied by the
+        adaptive gains of :class:`~agents.rl.gain_adaptation.KneeGainAdaptation`, updated every
+        ``update_period`` from the expert's plan (``expert.planned_now``) and torques; the residual then acts
+        on the adapted torques. With ``"knee"`` action 0 is no longer the expert alone.
+    :param update_period: s between two updates of the adaptation (the env's control step).
     """
 
     def __init__(
@@ -113,8 +119,15 @@ class ResidualController:
         residual_legs: str = "all",
         foot_sensor_adr: Any = None,
         residual_basis: str = "torque_limit",
+        gain_adaptation: str = "none",
+        update_period: float = 0.02,
     ) -> None:
         self.expert = expert
+        self.gain_adaptation = check_gain_adaptation(gain_adaptation)
+        self.adaptation = KneeGainAdaptation(update_period) if self.gain_adaptation == "knee" else None
+        if self.adaptation is not None and not hasattr(expert, "planned_now"):
+            raise ValueError("gain_adaptation='knee' needs an expert with a plan (planned_now), like ExpertPolicy")
+        self._next_update = self._t_reset = 0.0
         self.residual_scale = check_residual_scale(residual_scale)
         self.residual_legs = check_residual_legs(residual_legs)
         self.residual_basis = check_residual_basis(residual_basis)
@@ -128,7 +141,9 @@ class ResidualController:
                 raise ValueError("residual_legs='stance' needs the feet's contact sensor addresses, one per leg")
             self._foot_adr = np.asarray(foot_sensor_adr, dtype=np.intp)
         # Per physics step only where the applied residual varies within a control step (gated, or a gain).
-        self._track_applied = self._foot_adr is not None or self.residual_basis == "expert_torque"
+        self._track_applied = (
+            self._foot_adr is not None or self.residual_basis == "expert_torque" or self.adaptation is not None
+        )
         self._applied_sum = 0.0  # mean |applied residual| (N m) summed over physics steps since the last query
         self._applied_n = 0
 
@@ -137,6 +152,10 @@ class ResidualController:
         self._applied_sum, self._applied_n = 0.0, 0
         if hasattr(self.expert, "reset"):
             self.expert.reset(model, data, terrain)
+        if self.adaptation is not None:
+            self.adaptation.reset()
+            self._t_reset = float(data.time)
+            self._next_update = self._t_reset + self.adaptation.period
 
     def residual_torque(self, action: np.ndarray) -> float:
         """N m: mean over the 12 joints of |residual torque| before the motor limit. With ``"all"`` legs in the
@@ -155,19 +174,32 @@ class ResidualController:
         :param action: (12,) residual action in [-1, 1] (the env has clipped it).
         """
         tau_expert = self.expert(model, data, action)
+        tau_base = tau_expert if self.adaptation is None else self._adapted(data, tau_expert)
         if self.residual_basis == "expert_torque":
-            np.multiply(action, tau_expert, out=self._tau)
+            np.multiply(action, tau_base, out=self._tau)
             self._tau *= self.residual_scale
         else:
             np.multiply(action, self.gain, out=self._tau)
         if self._foot_adr is not None:
             self._tau *= np.repeat(data.sensordata[self._foot_adr] > 0.0, 3)
+        self._tau += tau_base
         if self._track_applied:
-            self._applied_sum += float(np.mean(np.abs(self._tau)))
+            self._applied_sum += float(np.mean(np.abs(self._tau - tau_expert)))
             self._applied_n += 1
-        self._tau += tau_expert
         np.clip(self._tau, -self.torque_limit, self.torque_limit, out=self._tau)
         return self._tau
+
+    def _adapted(self, data: mujoco.MjData, tau_expert: np.ndarray) -> np.ndarray:
+        """The expert's torques times the adaptive gains, updated first if a control step has begun."""
+        adaptation = self.adaptation
+        t = float(data.time)
+        if t >= self._next_update - 1e-9:
+            ref, _ = self.expert.planned_now(t)
+            adaptation.update(ref.q_joints - data.qpos[7:], tau_expert / self.torque_limit, t - self._t_reset)
+            self._next_update += adaptation.period
+            if self._next_update <= t:  # a jump of the clock (never in a rollout): back on the control grid
+                self._next_update = t + adaptation.period
+        return tau_expert * adaptation.gain
 
 
 def install_residual_controller(
@@ -176,6 +208,7 @@ def install_residual_controller(
     expert_config: ExpertConfig | None = None,
     residual_legs: str = "all",
     residual_basis: str = "torque_limit",
+    gain_adaptation: str = "none",
 ) -> tuple[ExpertPolicy, ResidualController]:
     """Put the expert plus a residual on ``env.unwrapped``'s physics-rate hook (call before ``reset``).
 
@@ -183,6 +216,7 @@ def install_residual_controller(
     :param residual_scale: see :class:`ResidualController`.
     :param residual_legs: see :class:`ResidualController`.
     :param residual_basis: see :class:`ResidualController`.
+    :param gain_adaptation: see :class:`ResidualController` (updated once per control step of ``env``).
     :return: the expert (planner times, failure log) and the installed controller.
     :raises ValueError: on another action mode or a bad ``residual_scale``.
     """
@@ -197,7 +231,9 @@ def install_residual_controller(
     legs = check_residual_legs(residual_legs)
     basis = check_residual_basis(residual_basis)
     expert = ExpertPolicy(env, expert_config)
-    controller = ResidualController(expert, base.idx.torque_limit, scale, legs, base.idx.foot_sensor_adr, basis)
+    controller = ResidualController(
+        expert, base.idx.torque_limit, scale, legs, base.idx.foot_sensor_adr, basis, gain_adaptation, base.dt
+    )
     base.set_controller(controller)
     return expert, controller
 
@@ -218,6 +254,7 @@ class ResidualExpertEnv(gym.Wrapper):
         (``info["reward_terms"]["residual"]``); 0 keeps the env's reward.
     :param residual_legs: ``"all"`` or ``"stance"`` (see :class:`ResidualController`).
     :param residual_basis: ``"torque_limit"`` or ``"expert_torque"`` (see :class:`ResidualController`).
+    :param gain_adaptation: ``"none"`` or ``"knee"`` (see :class:`ResidualController`).
     """
 
     def __init__(
@@ -229,6 +266,7 @@ class ResidualExpertEnv(gym.Wrapper):
         residual_penalty: float = 0.0,
         residual_legs: str = "all",
         residual_basis: str = "torque_limit",
+        gain_adaptation: str = "none",
     ) -> None:
         super().__init__(env)
         if not isinstance(expert_features, bool):
@@ -241,7 +279,7 @@ class ResidualExpertEnv(gym.Wrapper):
             raise ValueError(f"residual_penalty must be a finite number >= 0, got {residual_penalty!r}")
         self.residual_penalty = penalty
         self.expert, self.controller = install_residual_controller(
-            env, residual_scale, expert_config, residual_legs, residual_basis
+            env, residual_scale, expert_config, residual_legs, residual_basis, gain_adaptation
         )
         self.residual_scale = self.controller.residual_scale
         self.expert_features = expert_features
@@ -282,6 +320,7 @@ def make_residual_env(
     residual_penalty: float = 0.0,
     residual_legs: str = "all",
     residual_basis: str = "torque_limit",
+    gain_adaptation: str = "none",
     **env_kwargs: Any,
 ) -> ResidualExpertEnv:
     """The residual env (entry point of ``QuadUnevenResidual-v0``).
@@ -293,6 +332,7 @@ def make_residual_env(
     :param residual_penalty: reward penalty per unit of mean(action^2) (see :class:`ResidualExpertEnv`).
     :param residual_legs: ``"all"`` or ``"stance"``: which legs take the residual (:class:`ResidualController`).
     :param residual_basis: ``"torque_limit"`` or ``"expert_torque"``: what a unit of action is.
+    :param gain_adaptation: ``"none"`` or ``"knee"``: adaptive knee gains on the expert under the residual.
     :param env_kwargs: ``QuadUnevenEnv`` arguments (``terrain``, ``reward_weights``, ...); ``action_mode`` must be
         ``"torque"`` and ``controller`` is not accepted.
     :raises ValueError: on a bad argument (named).
@@ -307,6 +347,7 @@ def make_residual_env(
         residual_penalty,
         residual_legs,
         residual_basis,
+        gain_adaptation,
     )
 
 

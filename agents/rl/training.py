@@ -199,6 +199,7 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
         "residual_scale": float(cfg.residual_scale),
         "residual_legs": cfg.residual_legs,
         "residual_basis": cfg.residual_basis,
+        "gain_adaptation": cfg.gain_adaptation,
         "initial_action": float(cfg.initial_action),
         "env_id": RESIDUAL_ENV_ID,
         "env_kwargs": dict(cfg.env_kwargs),

@@ -81,6 +81,7 @@ def make_train_env(
     residual: bool = True,
     residual_legs: str = "all",
     residual_basis: str = "torque_limit",
+    gain_adaptation: str = "none",
 ) -> gym.Env:
     """One residual env (expert in the loop) with a time limit and :class:`EpisodeStats`.
 
@@ -94,6 +95,7 @@ def make_train_env(
     :param residual_penalty: reward penalty per unit of mean(action^2).
     :param residual_legs: ``all`` or ``stance``: which legs take the residual.
     :param residual_basis: ``torque_limit`` or ``expert_torque``: what a unit of residual action is.
+    :param gain_adaptation: ``none`` or ``knee``: adaptive knee gains on the expert under the residual.
     :param residual: false: plain ``QuadUneven-v0`` in ``joint_pd`` mode instead (training from scratch).
     """
 
@@ -117,6 +119,7 @@ def make_train_env(
             residual_penalty=residual_penalty,
             residual_legs=residual_legs,
             residual_basis=residual_basis,
+            gain_adaptation=gain_adaptation,
             **(env_kwargs or {}),
         )
 
@@ -163,6 +166,7 @@ def build_vec_env(
         cfg.residual,
         cfg.residual_legs,
         cfg.residual_basis,
+        cfg.gain_adaptation,
     )
     if kind == "subproc":
         env_fn = functools.partial(_ignoring_interrupts, env_fn)
