@@ -148,8 +148,9 @@ def test_a_model_folder_brings_its_adaptation_to_evaluate_and_onnx(tmp_path):
     model = stable_baselines3.PPO("MlpPolicy", train_env, n_steps=64, batch_size=32, device="cpu", seed=0,
                                   policy_kwargs={"net_arch": [16]})  # fmt: skip
     model.save(tmp_path / "model.zip")
-    meta = {"algo": "ppo", "residual": True, "residual_scale": 0.5, "expert_features": True, "normalize_obs": False,
-            "env_kwargs": {"terrain": "flat"}, "residual_basis": "expert_torque", "gain_adaptation": "knee"}  # fmt: skip
+    meta = {"algo": "ppo", "residual": True, "residual_scale": 0.5, "expert_features": True,
+            "normalize_obs": False, "env_kwargs": {"terrain": "flat"}, "residual_basis": "expert_torque",
+            "gain_adaptation": "knee"}  # fmt: skip
     write_metadata(tmp_path, meta)
     path = tmp_path / "model.zip"
     env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(str(path)), "terrain": "flat"})
