@@ -9,7 +9,9 @@ expert alone and reproduces the suite's episodes (same seeds, same worlds).
 
 Usage: ``python benchmarks/stance_torque_boost.py --gain 1.3 [--gain-hind 1.15] [--entry stairs_up]
 [--seeds 100-119]``, or on another suite's entry (its world, goal and time limit): ``--suite targets --entry 5
---seeds 0-9``.
+--seeds 0-9``. ``--oracle all`` (or ``knee``) replaces the fixed gain by an oracle that knows the drawn world:
+every joint's (or every knee's) torque, on every leg, divided by the strength drawn for its motor, the
+correction a residual could at best learn for the motors (docs/rl.md, run 7).
 """
 
 from __future__ import annotations
@@ -48,6 +50,27 @@ class StanceTorqueBoost:
         return tau  # the env clips to the motor limits
 
 
+class InverseStrength:
+    """Physics-rate controller (an oracle): the expert's torques (N m) divided by the drawn strength of each motor
+    in ``joints`` (12 joint indices or fewer), on every leg; the strengths are read from the env at each reset."""
+
+    def __init__(self, expert, env, joints: np.ndarray) -> None:
+        self.expert, self.env, self.joints = expert, env, np.asarray(joints)
+        self.gain = np.ones(12)
+
+    def reset(self, model, data, terrain) -> None:
+        self.expert.reset(model, data, terrain)
+        self.gain = np.ones(12)
+        self.gain[self.joints] = 1.0 / self.env.episode_draw.motor_strength[self.joints]
+
+    def __call__(self, model, data, action) -> np.ndarray:
+        return self.expert(model, data, action) * self.gain
+
+
+ORACLE_JOINTS = {"all": np.arange(12), "knee": np.array([2, 5, 8, 11])}
+"""--oracle choices: the joints whose motor strength the oracle undoes."""
+
+
 def episode(
     terrain: dict,
     seed: int,
@@ -55,12 +78,19 @@ def episode(
     goal: float = 3.0,
     time_limit: float = 90.0,
     randomization: str = "extreme",
+    oracle: str | None = None,
 ) -> tuple[str, float]:
-    """One episode (robust_extreme's world by default): ("goal" | "fall" | "stall", distance in m)."""
+    """One episode (robust_extreme's world by default): ("goal" | "fall" | "stall", distance in m).
+
+    :param oracle: None (the fixed ``gain`` on stance legs), or a key of :data:`ORACLE_JOINTS`.
+    """
     env = gym.make("QuadUneven-v0", terrain=terrain, randomization=randomization, max_episode_steps=10**6)
     policy = attach_expert(env, ExpertConfig())
     base = env.unwrapped
-    base.set_controller(StanceTorqueBoost(policy, base.idx.foot_sensor_adr, gain))
+    if oracle is None:
+        base.set_controller(StanceTorqueBoost(policy, base.idx.foot_sensor_adr, gain))
+    else:
+        base.set_controller(InverseStrength(policy, base, ORACLE_JOINTS[oracle]))
     obs, _ = env.reset(seed=seed)
     info = {"distance": 0.0}
     for _ in range(round(time_limit / base.dt)):
@@ -80,6 +110,9 @@ def main() -> None:
     ap.add_argument("--entry", default="stairs_up", help=f"one of {sorted(ENTRIES)}, or an entry index with --suite")
     ap.add_argument("--suite", default=None, help="a suite name: --entry is then the index of its terrain entry")
     ap.add_argument("--seeds", default="100-119", help="first-last (inclusive)")
+    ap.add_argument(
+        "--oracle", choices=sorted(ORACLE_JOINTS), default=None, help="undo the drawn motor strengths instead of --gain"
+    )
     args = ap.parse_args()
     first, last = (int(v) for v in args.seeds.split("-"))
     if args.suite is None:
@@ -97,9 +130,11 @@ def main() -> None:
     hind = args.gain if args.gain_hind is None else args.gain_hind
     gain = np.repeat([args.gain, args.gain, hind, hind], 3)  # LF, RF, LH, RH
     label = f"gain {args.gain:g}" + ("" if args.gain_hind is None else f" hind {hind:g}")
+    if args.oracle is not None:
+        label = f"oracle {args.oracle}"
     counts = {"goal": 0, "fall": 0, "stall": 0}
     for seed in range(first, last + 1):
-        end, dist = episode(terrain, seed, gain, **world)
+        end, dist = episode(terrain, seed, gain, oracle=args.oracle, **world)
         counts[end] += 1
         print(f"{label} {args.entry} seed {seed}: {end} at {dist:.2f} m", flush=True)
     print(f"{label} {args.entry} seeds {args.seeds}: {counts}")
