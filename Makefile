@@ -41,26 +41,26 @@ bench: venv
 	$(PY) benchmarks/expert.py
 	$(PY) benchmarks/residual_exploration.py
 
-# The shipped residual baseline (docs/rl.md, models/ppo_residual_gain, run 6): PPO on the extreme world (motors
+# The shipped residual baseline (docs/rl.md, models/ppo_residual_adaptive, run 7): PPO on the extreme world (motors
 # down to half their torque, payloads to +50 %, the rest of robust_hard's randomization) over a mix of six
-# terrains, the residual a gain on the expert's torque of the stance legs, starting from +30 %; 75 min of
-# training on 2 cores, seeded; then the expert and expert + residual on held-out seeds of robust_extreme
-# (100-119) and robust_hard (100-109), and on targets, with their paired comparisons
-# (runs/compare_*/comparison.md). About 2 h in all.
-RL_RUN := runs/ppo_residual_gain
-RL_MODEL := models/ppo_residual_gain
+# terrains, on top of the expert with adaptive knee gains (agents/rl/gain_adaptation.py), the residual a gain on
+# the stance legs' torques; 75 min of training on 2 cores, seeded; then the expert and expert + residual on the
+# held-out seeds of robust_extreme (100-119 and 300-319) and robust_hard (100-109), and on targets, with their
+# paired comparisons (runs/compare_*/comparison.md). About 2 h 15 min in all.
+RL_RUN := runs/ppo_residual_adaptive
+RL_MODEL := models/ppo_residual_adaptive
 EVAL := $(PY) -m agents.cli evaluate --workers 2 --overwrite
 rl-baseline: venv
-	$(PY) -m agents.cli train --config configs/rl/ppo_residual_gain.yaml --out $(RL_RUN) --overwrite
+	$(PY) -m agents.cli train --config configs/rl/ppo_residual_adaptive.yaml --out $(RL_RUN) --overwrite
 	mkdir -p $(RL_MODEL)
 	for f in model.zip model_obs_norm.npz rl_meta.json train_config.json train_summary.json learning_curve.png; do \
 	  cp $(RL_RUN)/$$f $(RL_MODEL)/$$f; done
-	for s in robust_extreme robust_hard targets; do \
-	  seed=$$( [ $$s = targets ] && echo 0 || echo 100 ); \
-	  $(EVAL) --policy expert --suite $$s --seed $$seed --out runs/eval_$${s}_expert && \
-	  $(EVAL) --policy $(RL_MODEL)/model.zip --suite $$s --seed $$seed --out runs/eval_$${s}_residual && \
-	  $(PY) -m agents.cli compare --baseline runs/eval_$${s}_expert --candidate runs/eval_$${s}_residual \
-	    --out runs/compare_$$s || exit 1; done
+	for run in robust_extreme:100 robust_extreme:300 robust_hard:100 targets:0; do \
+	  s=$${run%%:*}; seed=$${run##*:}; name=$${s}_$$seed; \
+	  $(EVAL) --policy expert --suite $$s --seed $$seed --out runs/eval_$${name}_expert && \
+	  $(EVAL) --policy $(RL_MODEL)/model.zip --suite $$s --seed $$seed --out runs/eval_$${name}_residual && \
+	  $(PY) -m agents.cli compare --baseline runs/eval_$${name}_expert --candidate runs/eval_$${name}_residual \
+	    --out runs/compare_$$name || exit 1; done
 
 # The from-scratch PPO reference (docs/rl.md), about 40 min on 2 cores.
 rl-scratch: venv

@@ -10,8 +10,9 @@ in model-reference adaptive control),
 with ``u`` the expert's knee torque over the torque limit and ``e`` the knee's tracking error (rad), once per
 control step ``dt``. It stops moving where the knee's error no longer follows its load: a knee at strength s
 settles near g = 1/s (an overloaded knee higher). The gains multiply the expert's knee torques before any
-learned residual. Only the knees: their error follows their load on every terrain; the hip joints' errors
-did not (correlation with the drawn strength 0.1-0.4 against 0.65, docs/rl.md, run 7).
+learned residual. Only the knees: on the validation worlds an oracle that undoes the drawn strength of the
+four knee motors recovers most of what undoing all twelve does (docs/rl.md, run 7), and the knees' error
+follows their strength most closely (``benchmarks/knee_strength_signal.py``); adapting the hips is untried.
 """
 
 from __future__ import annotations
