@@ -33,6 +33,7 @@ def _rate(cfg, std: float, steps: int, seed: int) -> dict[str, float]:
         expert_features=True,
         residual_legs=cfg.residual_legs,
         residual_basis=cfg.residual_basis,
+        gain_adaptation=cfg.gain_adaptation,
     )
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)

@@ -158,10 +158,11 @@ class ResidualController:
             self._next_update = self._t_reset + self.adaptation.period
 
     def residual_torque(self, action: np.ndarray) -> float:
-        """N m: mean over the 12 joints of |residual torque| before the motor limit. With ``"all"`` legs in the
-        ``torque_limit`` basis it is what ``action`` (clipped to [-1, 1]) commands; otherwise the mean of what
-        was applied over the physics steps since the previous call (what ``action`` would command in the
-        ``torque_limit`` basis if there were none)."""
+        """N m: mean over the 12 joints of |residual torque| before the motor limit (with ``gain_adaptation``,
+        everything added to the expert's torque: the adapted gains' share included). With ``"all"`` legs in the
+        ``torque_limit`` basis and no adaptation it is what ``action`` (clipped to [-1, 1]) commands; otherwise
+        the mean of what was applied over the physics steps since the previous call (what ``action`` would
+        command in the ``torque_limit`` basis if there were none)."""
         if self._applied_n:
             value = self._applied_sum / self._applied_n
             self._applied_sum, self._applied_n = 0.0, 0
