@@ -12,7 +12,8 @@ control step ``dt``. It stops moving where the knee's error no longer follows it
 settles near g = 1/s (an overloaded knee higher). The gains multiply the expert's knee torques before any
 learned residual. Only the knees: on the validation worlds an oracle that undoes the drawn strength of the
 four knee motors recovers most of what undoing all twelve does (docs/rl.md, run 7), and the knees' error
-follows their strength most closely (``benchmarks/knee_strength_signal.py``); adapting the hips is untried.
+follows their strength most closely (``benchmarks/knee_strength_signal.py``); the same law on all twelve
+joints did no better on the validation worlds.
 """
 
 from __future__ import annotations
