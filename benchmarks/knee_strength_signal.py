@@ -21,10 +21,11 @@ from stance_torque_boost import ENTRIES
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.expert import ExpertConfig, attach_expert
 from agents.rl.expert_features import EXPERT_FEATURE_FIELDS, expert_features
+from quad_uneven_env import constants as C
 from quad_uneven_env.observations import observation_structure
 
 FEATURES = observation_structure(EXPERT_FEATURE_FIELDS)
-JOINT_TYPES = {"HAA": [0, 3, 6, 9], "HFE": [1, 4, 7, 10], "KFE (knee)": [2, 5, 8, 11]}
+JOINT_TYPES = {kind: list(range(i, C.N_JOINTS, len(C.JOINT_KINDS))) for i, kind in enumerate(C.JOINT_KINDS)}
 
 
 def slopes(entry: str, seed: int, seconds: float, window: float) -> tuple[np.ndarray, np.ndarray]:

@@ -24,6 +24,7 @@ import numpy as np
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.evaluation.suites import load_suite
 from agents.expert import ExpertConfig, attach_expert
+from agents.rl.gain_adaptation import KNEE_JOINTS
 
 ENTRIES = {
     "rough": {"kind": "rough", "amplitude": 0.05, "wavelength": 0.6},
@@ -67,7 +68,7 @@ class InverseStrength:
         return self.expert(model, data, action) * self.gain
 
 
-ORACLE_JOINTS = {"all": np.arange(12), "knee": np.array([2, 5, 8, 11])}
+ORACLE_JOINTS = {"all": np.arange(12), "knee": KNEE_JOINTS}
 """--oracle choices: the joints whose motor strength the oracle undoes."""
 
 

@@ -21,8 +21,9 @@ from __future__ import annotations
 import numpy as np
 
 from agents.rl.config import GAIN_ADAPTATIONS
+from quad_uneven_env import constants as C
 
-KNEE_JOINTS = np.array([2, 5, 8, 11])
+KNEE_JOINTS = np.arange(C.JOINT_KINDS.index("KFE"), C.N_JOINTS, len(C.JOINT_KINDS))
 """Indices of the knee (KFE) joints in the 12-joint order LF RF LH RH x HAA HFE KFE."""
 
 ADAPTATION_RATE = 0.5
