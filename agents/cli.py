@@ -529,11 +529,25 @@ def add_compare_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
         help="two evaluations of the same episodes side by side (e.g. the expert vs expert + residual)",
         description="Pair the episodes of two `quad-uneven evaluate` folders by (entry, seed) and write "
         "DIR/comparison.md, DIR/comparison.json and DIR/comparison.png: success, falls, divergences, stalls, "
-        "stability index and residual torque, overall, per entry and per randomization factor, and the episodes "
-        "whose outcome differs. Exit code 2 if the folders do not hold the same episodes.",
+        "stability index and residual torque, overall, per entry and per randomization factor, the episodes "
+        "whose outcome differs and McNemar's exact test of the paired successes. Several folder pairs (one suite, "
+        "other --seed offsets) pool into one comparison. Exit code 2 if the folders do not hold the same episodes.",
     )
-    p.add_argument("--baseline", type=Path, required=True, help="evaluation folder of the baseline (e.g. the expert)")
-    p.add_argument("--candidate", type=Path, required=True, help="evaluation folder of the candidate")
+    p.add_argument(
+        "--baseline",
+        type=Path,
+        nargs="+",
+        required=True,
+        help="evaluation folder(s) of the baseline (e.g. the expert); several folders of one suite (other --seed "
+        "offsets) are pooled",
+    )
+    p.add_argument(
+        "--candidate",
+        type=Path,
+        nargs="+",
+        required=True,
+        help="evaluation folder(s) of the candidate, one per baseline folder, in the same order",
+    )
     p.add_argument("--out", type=Path, required=True, help="output directory DIR (created; its files are replaced)")
     p.set_defaults(func=run_compare_command)
     return p
@@ -541,17 +555,23 @@ def add_compare_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
 
 def run_compare_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven compare``: 0 on success, 2 on folders that cannot be compared."""
-    from agents.evaluation.compare import compare_runs, write_comparison
+    from agents.evaluation.compare import compare_runs, policy_label, write_comparison
 
     comp = compare_runs(args.baseline, args.candidate)
     paths = write_comparison(comp, args.out)
     for who in ("baseline", "candidate"):
         g = comp["overall"][who]
         print(
-            f"{who:9s} {comp[who]['policy']}: success {g['successes']}/{g['episodes']}, falls {g['falls']}, "
-            f"divergences {g['divergences']}, stalls {g['stalls']}, "
+            f"{who:9s} {policy_label(comp[who]['policy'])}: success {g['successes']}/{g['episodes']}, "
+            f"falls {g['falls']}, divergences {g['divergences']}, stalls {g['stalls']}, "
             f"time index < 0 {g['mean_time_index_negative']:.3f} s"
         )
+    paired = comp["overall"]["paired"]
+    ratio = paired["failure_ratio"]
+    print(
+        f"paired: {paired['fixed']} baseline failures fixed, {paired['broken']} baseline successes lost "
+        f"(McNemar p = {paired['mcnemar_p']:.3g}); failures {'-' if ratio is None else f'{ratio:.2f}'} x the baseline's"
+    )
     print(f"comparison: {paths['md'].resolve()}")
     return 0
 

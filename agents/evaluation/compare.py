@@ -4,8 +4,10 @@
 refuses runs that do not hold the same episodes, and computes per policy: success and failure rates,
 falls, divergences and stalls, the stability index figures and the mean residual torque, overall, per
 terrain entry and per randomization factor (thirds of the drawn values, as in the report), plus the
-episodes whose outcome differs. :func:`write_comparison` writes ``comparison.md``, ``comparison.json``
-and ``comparison.png``.
+episodes whose outcome differs and the paired test of the success counts (McNemar's exact test: of the
+episodes where the two differ, how lopsided the split is). Several folder pairs (the same suite evaluated
+with different ``--seed`` offsets) pool into one comparison. :func:`write_comparison` writes
+``comparison.md``, ``comparison.json`` and ``comparison.png``.
 """
 
 from __future__ import annotations
@@ -98,6 +100,37 @@ def _paired(base: Mapping[str, Any], cand: Mapping[str, Any], names: tuple[str, 
     return [(a[k], b[k]) for k in sorted(a)]
 
 
+def mcnemar_exact_p(fixed: int, broken: int) -> float:
+    """Two-sided p-value of McNemar's exact test: the probability, if neither policy were better, of a split of
+    the ``fixed + broken`` discordant episodes at least as uneven as this one (binomial, p = 1/2).
+
+    :param fixed: episodes the baseline failed and the candidate succeeded in.
+    :param broken: episodes the baseline succeeded in and the candidate failed.
+    """
+    if fixed < 0 or broken < 0:
+        raise ValueError(f"fixed and broken must be counts >= 0, got {fixed!r} and {broken!r}")
+    n = fixed + broken
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, i) for i in range(min(fixed, broken) + 1))
+    return min(1.0, 2.0 * tail / 2**n)
+
+
+def paired_outcomes(pairs: Sequence[tuple[Mapping[str, Any], Mapping[str, Any]]]) -> dict[str, Any]:
+    """The paired success figures of (baseline, candidate) episode records: ``fixed`` (baseline failed,
+    candidate succeeded), ``broken`` (the reverse), ``mcnemar_p`` (:func:`mcnemar_exact_p`) and
+    ``failure_ratio`` (the candidate's failures over the baseline's; None if the baseline never failed)."""
+    fixed = sum(1 for a, b in pairs if not a["success"] and b["success"])
+    broken = sum(1 for a, b in pairs if a["success"] and not b["success"])
+    failures = [sum(1 for r in side if not r["success"]) for side in zip(*pairs, strict=True)] if pairs else [0, 0]
+    return {
+        "fixed": fixed,
+        "broken": broken,
+        "mcnemar_p": mcnemar_exact_p(fixed, broken),
+        "failure_ratio": failures[1] / failures[0] if failures[0] else None,
+    }
+
+
 def _factor_groups(pairs: Sequence[tuple[dict, dict]]) -> list[dict[str, Any]]:
     """Per factor, the paired episodes split into thirds of the drawn value (one group per value if <= 3)."""
     names = sorted({k for a, _ in pairs for k in (a.get("factors") or {})})
@@ -123,17 +156,57 @@ def _factor_groups(pairs: Sequence[tuple[dict, dict]]) -> list[dict[str, Any]]:
     return rows
 
 
-def compare_runs(baseline: str | Path, candidate: str | Path) -> dict[str, Any]:
-    """The comparison of two evaluation folders holding the same episodes.
+def _folders(value: str | Path | Sequence[str | Path], who: str) -> list[Path]:
+    folders = [Path(value)] if isinstance(value, str | Path) else [Path(v) for v in value]
+    if not folders:
+        raise ComparisonError(f"{who}: no evaluation folder given")
+    return folders
 
-    :return: ``{"baseline": {"dir", "policy"}, "candidate": {...}, "overall": {"baseline": figures, "candidate":
-        figures}, "by_entry": [...], "by_factor": [...], "changed": [episodes whose outcome differs]}``
-        (figures: :func:`group_figures`).
-    :raises ComparisonError: on a missing or unreadable results.json, or runs of different episodes.
+
+def _policies(runs: Sequence[Mapping[str, Any]]) -> Any:
+    """The policy of pooled runs: one name, or the distinct names in order (the same model copied elsewhere)."""
+    names = list(dict.fromkeys(run.get("policy") for run in runs))
+    return names[0] if len(names) == 1 else names
+
+
+def compare_runs(
+    baseline: str | Path | Sequence[str | Path], candidate: str | Path | Sequence[str | Path]
+) -> dict[str, Any]:
+    """The comparison of two evaluations holding the same episodes.
+
+    :param baseline: an evaluation folder, or several of the same suite (e.g. ``--seed 100`` and ``--seed 300``),
+        pooled.
+    :param candidate: one folder per baseline folder, in the same order, holding the same episodes as it.
+    :return: ``{"baseline": {"dir", "dirs", "policy", "suite"}, "candidate": {...}, "seed_offset", "overall":
+        {"baseline": figures, "candidate": figures, "paired": paired figures}, "by_entry": [...], "by_factor":
+        [...], "changed": [episodes whose outcome differs]}`` (figures: :func:`group_figures`; paired:
+        :func:`paired_outcomes`; ``dir`` and ``seed_offset`` are lists when several folders are pooled).
+    :raises ComparisonError: on a missing or unreadable results.json, runs of different episodes, an unequal
+        number of folders, folders of other suite entries, or the same episode in two pooled folders.
     """
-    base_dir, cand_dir = Path(baseline), Path(candidate)
-    base, cand = _load(base_dir), _load(cand_dir)
-    pairs = _paired(base, cand, (str(base_dir), str(cand_dir)))
+    base_dirs, cand_dirs = _folders(baseline, "baseline"), _folders(candidate, "candidate")
+    if len(base_dirs) != len(cand_dirs):
+        raise ComparisonError(
+            f"candidate: {len(cand_dirs)} folder(s) for {len(base_dirs)} baseline folder(s); give one candidate "
+            "folder per baseline folder, in the same order"
+        )
+    bases, cands = [_load(d) for d in base_dirs], [_load(d) for d in cand_dirs]
+    pairs: list[tuple[dict, dict]] = []
+    where: dict[tuple[int, int], Path] = {}
+    for base_dir, cand_dir, base, cand in zip(base_dirs, cand_dirs, bases, cands, strict=True):
+        if base["meta"].get("entries") != bases[0]["meta"].get("entries"):
+            raise ComparisonError(f"suite: {base_dir} and {base_dirs[0]} were run on different suite entries")
+        for a, b in _paired(base, cand, (str(base_dir), str(cand_dir))):
+            key = (int(a["entry"]), int(a["seed"]))
+            if key in where:
+                raise ComparisonError(
+                    f"episodes: {where[key]} and {base_dir} both hold entry {key[0]}, seed {key[1]}; pool "
+                    "evaluations of different seeds (--seed)"
+                )
+            where[key] = base_dir
+            pairs.append((a, b))
+    base, cand = bases[0], cands[0]
+    pooled = len(base_dirs) > 1
     labels = base["meta"].get("entries") or []
     by_entry = []
     for entry in sorted({a["entry"] for a, _ in pairs}):
@@ -157,13 +230,23 @@ def compare_runs(baseline: str | Path, candidate: str | Path) -> dict[str, Any]:
         for a, b in pairs
         if bool(a["success"]) != bool(b["success"]) or failure_kind(a) != failure_kind(b)
     ]
+    offsets = [run["meta"].get("seed_offset") for run in bases]
     return {
-        "baseline": {"dir": str(base_dir), "policy": base.get("policy"), "suite": base.get("suite")},
-        "candidate": {"dir": str(cand_dir), "policy": cand.get("policy"), "suite": cand.get("suite")},
-        "seed_offset": base["meta"].get("seed_offset"),
+        "baseline": {
+            "dir": [str(d) for d in base_dirs] if pooled else str(base_dirs[0]),
+            "policy": _policies(bases),
+            "suite": base.get("suite"),
+        },
+        "candidate": {
+            "dir": [str(d) for d in cand_dirs] if pooled else str(cand_dirs[0]),
+            "policy": _policies(cands),
+            "suite": cand.get("suite"),
+        },
+        "seed_offset": offsets if pooled else offsets[0],
         "overall": {
             "baseline": group_figures([a for a, _ in pairs]),
             "candidate": group_figures([b for _, b in pairs]),
+            "paired": paired_outcomes(pairs),
         },
         "by_entry": by_entry,
         "by_factor": _factor_groups(pairs),
@@ -190,6 +273,11 @@ _COLUMNS = (
 )
 
 
+def policy_label(policy: Any, quote: str = "") -> str:
+    """A comparison's policy as text: its name, or the pooled runs' names joined (each within ``quote``)."""
+    return ", ".join(f"{quote}{p}{quote}" for p in (policy if isinstance(policy, list) else [policy]))
+
+
 def _rows(label: str, row: Mapping[str, Any]) -> list[str]:
     out = []
     for who in ("baseline", "candidate"):
@@ -203,11 +291,15 @@ def comparison_markdown(comp: Mapping[str, Any]) -> str:
     head = "| group | policy | " + " | ".join(c for c, _ in _COLUMNS) + " |"
     sep = "|---" * (len(_COLUMNS) + 2) + "|"
     b, c = comp["baseline"], comp["candidate"]
+    pooled = isinstance(comp["seed_offset"], list)
+    offsets = ", ".join(map(str, comp["seed_offset"])) if pooled else comp["seed_offset"]
+    paired = comp["overall"]["paired"]
+    ratio = paired["failure_ratio"]
     lines = [
-        f"# Comparison on `{b['suite']}` (seed offset {comp['seed_offset']})",
+        f"# Comparison on `{b['suite']}` (seed offset{'s' if pooled else ''} {offsets})",
         "",
-        f"- baseline: `{b['policy']}` ({b['dir']})",
-        f"- candidate: `{c['policy']}` ({c['dir']})",
+        f"- baseline: {policy_label(b['policy'], '`')} ({', '.join(b['dir']) if pooled else b['dir']})",
+        f"- candidate: {policy_label(c['policy'], '`')} ({', '.join(c['dir']) if pooled else c['dir']})",
         "",
         "The same episodes (entry, seed: the same terrain and the same drawn world) for both. Failures: falls "
         "(and leaving the terrain), divergences, stalls (time limit short of the goal), errors. Index figures are "
@@ -218,6 +310,10 @@ def comparison_markdown(comp: Mapping[str, Any]) -> str:
         head,
         sep,
         *_rows("all", comp["overall"]),
+        "",
+        f"Paired: the candidate succeeds in {paired['fixed']} episodes the baseline fails and fails in "
+        f"{paired['broken']} the baseline succeeds in (McNemar's exact test, two-sided: p = "
+        f"{paired['mcnemar_p']:.3g}); its failures are {_f(ratio, '.2f')} x the baseline's.",
         "",
         "## By terrain entry",
         "",
@@ -252,7 +348,7 @@ def plot_comparison(comp: Mapping[str, Any], path: Path) -> Path:
     ):
         for k, who in enumerate(("baseline", "candidate")):
             vals = [r[who][key] if r[who][key] is not None else np.nan for r in rows]
-            ax.bar(x + (k - 0.5) * 0.38, vals, width=0.38, label=f"{who}: {comp[who]['policy']}")
+            ax.bar(x + (k - 0.5) * 0.38, vals, width=0.38, label=f"{who}: {policy_label(comp[who]['policy'])}")
         ax.set_xticks(x, [f"[{r['entry']}]" for r in rows])
         ax.set_ylabel(ylabel)
         ax.grid(axis="y", alpha=0.3)
@@ -280,6 +376,9 @@ __all__ = [
     "comparison_markdown",
     "failure_kind",
     "group_figures",
+    "mcnemar_exact_p",
+    "paired_outcomes",
     "plot_comparison",
+    "policy_label",
     "write_comparison",
 ]

@@ -88,3 +88,66 @@ def test_failure_kinds():
     assert failure_kind({"success": False, "end_reason": "left_terrain"}) == "fall"
     assert failure_kind({"success": False, "end_reason": "wall_time_limit"}) == "stall"
     assert failure_kind({"success": False, "end_reason": "error"}) == "error"
+
+
+def test_mcnemar_exact_p_against_scipy_and_by_hand():
+    from scipy.stats import binomtest
+
+    from agents.evaluation.compare import mcnemar_exact_p
+
+    assert mcnemar_exact_p(0, 0) == 1.0
+    assert mcnemar_exact_p(3, 0) == pytest.approx(2 * 1 / 8)  # by hand: 2 x P(0 of 3)
+    assert mcnemar_exact_p(1, 1) == 1.0  # capped: the doubled tail of an even split exceeds 1
+    for fixed, broken in [(25, 9), (23, 10), (37, 12), (0, 7), (12, 12), (1, 30)]:
+        expected = binomtest(min(fixed, broken), fixed + broken, 0.5).pvalue
+        assert mcnemar_exact_p(fixed, broken) == pytest.approx(expected, rel=1e-12)
+        assert mcnemar_exact_p(fixed, broken) == mcnemar_exact_p(broken, fixed)
+    with pytest.raises(ValueError, match="fixed and broken"):
+        mcnemar_exact_p(-1, 2)
+
+
+def test_pooled_folders_pair_per_set_and_test_the_paired_successes(tmp_path, capsys):
+    """Two seed sets pooled: counts add up, fixed/broken and the failure ratio are over all episodes."""
+    base1 = _run(tmp_path / "e1", "expert", [_episode(0, 100, False, "fall"), _episode(1, 100, True)])
+    cand1 = _run(tmp_path / "r1", "m.zip", [_episode(0, 100, True), _episode(1, 100, True)])
+    base2 = _run(tmp_path / "e2", "expert", [_episode(0, 300, False, "fall"), _episode(1, 300, False, "fall")])
+    cand2 = _run(tmp_path / "r2", "m.zip", [_episode(0, 300, True), _episode(1, 300, False, "time_limit")])
+    for path, offset in ((base2, 300), (cand2, 300)):
+        results = json.loads((path / "results.json").read_text())
+        results["meta"]["seed_offset"] = offset
+        (path / "results.json").write_text(json.dumps(results))
+    comp = compare_runs([base1, base2], [cand1, cand2])
+    assert comp["overall"]["baseline"]["successes"] == 1 and comp["overall"]["candidate"]["successes"] == 3
+    assert comp["overall"]["paired"] == {"fixed": 2, "broken": 0, "mcnemar_p": 0.5, "failure_ratio": 1 / 3}
+    assert comp["seed_offset"] == [100, 300] and comp["baseline"]["dir"] == [str(base1), str(base2)]
+    assert [(e["seed"], e["baseline"], e["candidate"]) for e in comp["changed"]] == [
+        (100, "fall", "success"),
+        (300, "fall", "success"),
+        (300, "fall", "stall"),
+    ]
+    single = compare_runs(base1, cand1)
+    assert single["overall"]["paired"]["fixed"] == 1 and single["seed_offset"] == 100
+    out = tmp_path / "c"
+    argv = ["compare", "--baseline", str(base1), str(base2), "--candidate", str(cand1), str(cand2), "--out", str(out)]
+    assert main(argv) == 0
+    assert "2 baseline failures fixed, 0 baseline successes lost (McNemar p = 0.5)" in capsys.readouterr().out
+    assert "seed offsets 100, 300" in (out / "comparison.md").read_text()
+
+
+def test_pooled_folders_that_cannot_be_pooled_are_refused_by_name(tmp_path, capsys):
+    base = _run(tmp_path / "e1", "expert", [_episode(0, 100, True)])
+    cand = _run(tmp_path / "r1", "m.zip", [_episode(0, 100, True)])
+    other = _run(tmp_path / "o", "other.zip", [_episode(0, 300, True)])
+    base_b = _run(tmp_path / "e2", "expert", [_episode(0, 300, True)])
+    stairs = _run(tmp_path / "s", "expert", [_episode(0, 300, True)], entries=("stairs",))
+    with pytest.raises(ComparisonError, match="1 folder\\(s\\) for 2 baseline"):
+        compare_runs([base, base_b], [cand])
+    with pytest.raises(ComparisonError, match="both hold entry 0, seed 100"):
+        compare_runs([base, base], [cand, cand])
+    assert compare_runs([base, base_b], [cand, other])["candidate"]["policy"] == ["m.zip", "other.zip"]
+    with pytest.raises(ComparisonError, match="different suite entries"):
+        compare_runs([base, stairs], [cand, stairs])
+    argv = ["compare", "--baseline", str(base), str(base_b), "--candidate", str(cand), "--out", str(tmp_path / "c")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "candidate: 1 folder(s) for 2 baseline folder(s)" in err and "Traceback" not in err
