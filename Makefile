@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out/demo
 
-.PHONY: venv demo test test-slow lint bench rl-baseline rl-scratch clean
+.PHONY: venv demo test test-slow lint bench rl-baseline rl-sac rl-scratch clean
 
 $(STAMP): pyproject.toml Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -45,8 +45,9 @@ bench: venv
 # down to half their torque, payloads to +50 %, the rest of robust_hard's randomization) over a mix of six
 # terrains, on top of the expert with adaptive knee gains (agents/rl/gain_adaptation.py), the residual a gain on
 # the stance legs' torques; 75 min of training on 2 cores, seeded; then the expert and expert + residual on the
-# held-out seeds of robust_extreme (100-119 and 300-319) and robust_hard (100-109), and on targets, with their
-# paired comparisons (runs/compare_*/comparison.md). About 2 h 15 min in all.
+# held-out seeds of robust_extreme (100-119, 300-319 and 400-419) and robust_hard (100-109), and on targets, with
+# their paired comparisons (runs/compare_*/comparison.md; runs/compare_robust_extreme_pooled pools the three
+# robust_extreme sets). About 2 h 30 min in all.
 RL_RUN := runs/ppo_residual_adaptive
 RL_MODEL := models/ppo_residual_adaptive
 EVAL := $(PY) -m agents.cli evaluate --workers 2 --overwrite
@@ -55,12 +56,34 @@ rl-baseline: venv
 	mkdir -p $(RL_MODEL)
 	for f in model.zip model_obs_norm.npz rl_meta.json train_config.json train_summary.json learning_curve.png; do \
 	  cp $(RL_RUN)/$$f $(RL_MODEL)/$$f; done
-	for run in robust_extreme:100 robust_extreme:300 robust_hard:100 targets:0; do \
+	for run in robust_extreme:100 robust_extreme:300 robust_extreme:400 robust_hard:100 targets:0; do \
 	  s=$${run%%:*}; seed=$${run##*:}; name=$${s}_$$seed; \
 	  $(EVAL) --policy expert --suite $$s --seed $$seed --out runs/eval_$${name}_expert && \
 	  $(EVAL) --policy $(RL_MODEL)/model.zip --suite $$s --seed $$seed --out runs/eval_$${name}_residual && \
 	  $(PY) -m agents.cli compare --baseline runs/eval_$${name}_expert --candidate runs/eval_$${name}_residual \
 	    --out runs/compare_$$name || exit 1; done
+	$(PY) -m agents.cli compare --baseline $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_expert) \
+	  --candidate $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_residual) --out runs/compare_robust_extreme_pooled
+
+# Run 8 (docs/rl.md, models/sac_residual_adaptive): SAC in run 7's setup and budget, for comparison; then the
+# three held-out robust_extreme sets, robust_hard and targets (the expert's runs are rl-baseline's, made here if
+# missing). About 2 h 30 min on 2 cores.
+SAC_RUN := runs/sac_residual_adaptive
+SAC_MODEL := models/sac_residual_adaptive
+rl-sac: venv
+	$(PY) -m agents.cli train --config configs/rl/sac_residual_adaptive.yaml --out $(SAC_RUN) --overwrite
+	mkdir -p $(SAC_MODEL)
+	for f in model.zip model_obs_norm.npz rl_meta.json train_config.json train_summary.json learning_curve.png; do \
+	  cp $(SAC_RUN)/$$f $(SAC_MODEL)/$$f; done
+	for run in robust_extreme:100 robust_extreme:300 robust_extreme:400 robust_hard:100 targets:0; do \
+	  s=$${run%%:*}; seed=$${run##*:}; name=$${s}_$$seed; \
+	  test -f runs/eval_$${name}_expert/results.json || \
+	    $(EVAL) --policy expert --suite $$s --seed $$seed --out runs/eval_$${name}_expert || exit 1; \
+	  $(EVAL) --policy $(SAC_MODEL)/model.zip --suite $$s --seed $$seed --out runs/eval_$${name}_sac && \
+	  $(PY) -m agents.cli compare --baseline runs/eval_$${name}_expert --candidate runs/eval_$${name}_sac \
+	    --out runs/compare_$${name}_sac || exit 1; done
+	$(PY) -m agents.cli compare --baseline $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_expert) \
+	  --candidate $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_sac) --out runs/compare_robust_extreme_pooled_sac
 
 # The from-scratch PPO reference (docs/rl.md), about 40 min on 2 cores.
 rl-scratch: venv

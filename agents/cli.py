@@ -148,7 +148,12 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         action="store_true",
         help="write an MP4 (DIR/videos/) for the first episode of each terrain entry only (MuJoCo offscreen)",
     )
-    p.add_argument("--algo", choices=SB3_ALGOS, default="ppo", help="SB3 class of a model .zip (default ppo)")
+    p.add_argument(
+        "--algo",
+        choices=SB3_ALGOS,
+        default=None,
+        help="SB3 class of a model .zip (default: the one its rl_meta.json records, else ppo)",
+    )
     p.add_argument(
         "--env-kwargs", default="{}", help="JSON object of extra QuadUneven-v0 arguments, e.g. '{\"frame_skip\": 5}'"
     )

@@ -72,9 +72,27 @@ def expert_model_of(policy: Any) -> str | None:
     return getattr(getattr(expert, "config", None), "model", None)
 
 
-def _sb3(path: str, env: gym.Env, algo: str, allow_pickle: bool) -> Policy:
+def model_algo(path: str | Path, algo: str | None = None) -> str:
+    """The SB3 class an SB3 model file is loaded with: ``algo``, or (None) the one its ``rl_meta.json`` records,
+    else ``"ppo"`` (a model folder without metadata).
+
+    :raises PolicyError: on an ``algo`` not in :data:`SB3_ALGOS`, or unreadable metadata.
+    """
+    if algo is None:
+        from agents.rl.model_io import ModelError, read_metadata
+
+        try:
+            meta = read_metadata(path)
+        except ModelError as err:
+            raise PolicyError(str(err)) from None
+        algo = (meta or {}).get("algo") or "ppo"
     if algo not in SB3_ALGOS:
         raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {algo!r}")
+    return algo
+
+
+def _sb3(path: str, env: gym.Env, algo: str | None, allow_pickle: bool) -> Policy:
+    algo = model_algo(path, algo)
     if not Path(path).is_file():
         raise PolicyError(f"policy: SB3 model file {path!r} does not exist")
     import torch
@@ -93,7 +111,7 @@ def _sb3(path: str, env: gym.Env, algo: str, allow_pickle: bool) -> Policy:
 def make_policy(
     name: str,
     env: gym.Env,
-    algo: str = "ppo",
+    algo: str | None = None,
     allow_pickle: bool = False,
     expert_config: Mapping[str, Any] | None = None,
 ) -> Policy:
@@ -102,7 +120,7 @@ def make_policy(
     :param name: ``"zero"`` (the zero action), ``"expert"`` (``agents.expert.ExpertPolicy(env)``, which installs
         its physics-rate controller into ``env.unwrapped``), or the path of an SB3 model ``.zip`` (a residual
         model, per its ``rl_meta.json``, installs the expert plus residual: :mod:`agents.rl.model_io`).
-    :param algo: ``"ppo"`` or ``"sac"``: the class an SB3 model file is loaded with.
+    :param algo: ``"ppo"`` or ``"sac"``: the class an SB3 model file is loaded with (None: :func:`model_algo`).
     :param allow_pickle: unpickle files of the model folder (trusted files only; default: refused).
     :param expert_config: fields of :class:`agents.expert.ExpertConfig` for ``"expert"`` (e.g.
         ``{"model": "oracle"}``); None: the defaults.

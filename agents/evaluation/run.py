@@ -29,7 +29,7 @@ from agents.evaluation.episode import (
     run_task,
 )
 from agents.evaluation.metrics import factor_summary, json_safe, summarize
-from agents.evaluation.policies import SB3_ALGOS, PolicyError, make_policy, policy_kind
+from agents.evaluation.policies import SB3_ALGOS, PolicyError, make_policy, model_algo, policy_kind
 from agents.evaluation.ray_backend import BACKENDS, import_ray, run_on_ray
 from agents.evaluation.report import write_report
 from agents.evaluation.store import (
@@ -148,7 +148,7 @@ def evaluate(
     seed: int = 0,
     workers: int = 1,
     video: bool = False,
-    algo: str = "ppo",
+    algo: str | None = None,
     env_kwargs: Mapping[str, Any] | None = None,
     progress: bool = True,
     resume: bool = False,
@@ -167,7 +167,8 @@ def evaluate(
     (docs/evaluation.md, "The output directory"). An interrupt keeps the finished episodes.
 
     :param suite: a :class:`Suite`, a shipped suite name or a suite YAML path.
-    :param policy: ``"zero"``, ``"expert"`` or the path of an SB3 model ``.zip`` (loaded with ``algo``).
+    :param policy: ``"zero"``, ``"expert"`` or the path of an SB3 model ``.zip`` (loaded with ``algo``; None: the
+        algorithm its ``rl_meta.json`` records, else ``"ppo"``).
     :param episodes: at most this many seeds per terrain entry (None: all).
     :param seed: offset added to every seed of the suite.
     :param workers: episodes run in this many spawned processes (1: in this process).
@@ -193,8 +194,12 @@ def evaluate(
     if not isinstance(suite, Suite):
         suite = load_suite(suite)
     kind = policy_kind(policy)
-    if algo not in SB3_ALGOS:
+    if kind == "sb3":
+        algo = model_algo(policy, algo)
+    elif algo is not None and algo not in SB3_ALGOS:
         raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {algo!r}")
+    else:
+        algo = "ppo"  # unused by a named policy
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     if isinstance(wall_time_limit, bool) or not (isinstance(wall_time_limit, int | float) and wall_time_limit > 0):

@@ -81,6 +81,21 @@ def test_onnx_export_matches_predict(tmp_path, algo):
     assert props["algo"] == algo and json.loads(props["action_low"]) == [-1.0] * 12
 
 
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_the_algorithm_is_read_from_the_model_folder(tmp_path, algo):
+    """``quad-uneven evaluate --policy DIR/model.zip`` without --algo loads the class rl_meta.json records."""
+    from agents.evaluation.policies import PolicyError, make_policy, model_algo
+
+    path, _, _ = _model_folder(tmp_path, algo, np.random.default_rng(2))
+    assert model_algo(path) == algo and model_algo(path, "ppo") == "ppo"
+    policy = make_policy(str(path), gym.make("QuadUneven-v0", terrain="flat"))
+    assert type(policy.model).__name__ == algo.upper()
+    (tmp_path / "rl_meta.json").unlink()
+    assert model_algo(path) == "ppo"  # a folder without metadata (an older run): PPO, as before
+    with pytest.raises(PolicyError, match="algo must be one of"):
+        model_algo(path, "dqn")
+
+
 def test_pickled_statistics_are_refused_unless_allowed(tmp_path):
     import builtins
 
