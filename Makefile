@@ -41,56 +41,52 @@ bench: venv
 	$(PY) benchmarks/expert.py
 	$(PY) benchmarks/residual_exploration.py
 
+MODEL_FILES := model.zip model_obs_norm.npz rl_meta.json train_config.json train_summary.json learning_curve.png
+HELD_OUT := robust_extreme:100 robust_extreme:300 robust_extreme:400 robust_hard:100 targets:0
+EVAL := $(PY) -m agents.cli evaluate --workers 2 --overwrite
+
+# $(call ship,RUN,MODEL): a training run's model files into the shipped folder MODEL.
+ship = mkdir -p $(2) && for f in $(MODEL_FILES); do cp $(1)/$$f $(2)/$$f; done
+
+# $(call against_expert,MODEL,TAG,REUSE): the expert and MODEL on every HELD_OUT suite:seed offset
+# (runs/eval_S_K_expert, runs/eval_S_K_TAG), their paired comparisons (runs/compare_S_K_TAG/comparison.md) and the
+# three robust_extreme sets pooled (runs/compare_robust_extreme_pooled_TAG); REUSE=reuse keeps expert runs found.
+define against_expert
+	for run in $(HELD_OUT); do \
+	  s=$${run%%:*}; seed=$${run##*:}; name=$${s}_$$seed; \
+	  { test "$(3)" = reuse && test -f runs/eval_$${name}_expert/results.json; } || \
+	    $(EVAL) --policy expert --suite $$s --seed $$seed --out runs/eval_$${name}_expert || exit 1; \
+	  $(EVAL) --policy $(1)/model.zip --suite $$s --seed $$seed --out runs/eval_$${name}_$(2) && \
+	  $(PY) -m agents.cli compare --baseline runs/eval_$${name}_expert --candidate runs/eval_$${name}_$(2) \
+	    --out runs/compare_$${name}_$(2) || exit 1; done
+	$(PY) -m agents.cli compare --baseline $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_expert) \
+	  --candidate $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_$(2)) \
+	  --out runs/compare_robust_extreme_pooled_$(2)
+endef
+
 # The shipped residual baseline (docs/rl.md, models/ppo_residual_adaptive, run 7): PPO on the extreme world (motors
 # down to half their torque, payloads to +50 %, the rest of robust_hard's randomization) over a mix of six
 # terrains, on top of the expert with adaptive knee gains (agents/rl/gain_adaptation.py), the residual a gain on
 # the stance legs' torques; 75 min of training on 2 cores, seeded; then the expert and expert + residual on the
 # held-out seeds of robust_extreme (100-119, 300-319 and 400-419) and robust_hard (100-109), and on targets, with
-# their paired comparisons (runs/compare_*/comparison.md; runs/compare_robust_extreme_pooled pools the three
+# their paired comparisons (runs/compare_*_residual; runs/compare_robust_extreme_pooled_residual pools the three
 # robust_extreme sets). About 2 h 30 min in all.
-RL_RUN := runs/ppo_residual_adaptive
-RL_MODEL := models/ppo_residual_adaptive
-EVAL := $(PY) -m agents.cli evaluate --workers 2 --overwrite
 rl-baseline: venv
-	$(PY) -m agents.cli train --config configs/rl/ppo_residual_adaptive.yaml --out $(RL_RUN) --overwrite
-	mkdir -p $(RL_MODEL)
-	for f in model.zip model_obs_norm.npz rl_meta.json train_config.json train_summary.json learning_curve.png; do \
-	  cp $(RL_RUN)/$$f $(RL_MODEL)/$$f; done
-	for run in robust_extreme:100 robust_extreme:300 robust_extreme:400 robust_hard:100 targets:0; do \
-	  s=$${run%%:*}; seed=$${run##*:}; name=$${s}_$$seed; \
-	  $(EVAL) --policy expert --suite $$s --seed $$seed --out runs/eval_$${name}_expert && \
-	  $(EVAL) --policy $(RL_MODEL)/model.zip --suite $$s --seed $$seed --out runs/eval_$${name}_residual && \
-	  $(PY) -m agents.cli compare --baseline runs/eval_$${name}_expert --candidate runs/eval_$${name}_residual \
-	    --out runs/compare_$$name || exit 1; done
-	$(PY) -m agents.cli compare --baseline $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_expert) \
-	  --candidate $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_residual) --out runs/compare_robust_extreme_pooled
+	$(PY) -m agents.cli train --config configs/rl/ppo_residual_adaptive.yaml --out runs/ppo_residual_adaptive --overwrite
+	$(call ship,runs/ppo_residual_adaptive,models/ppo_residual_adaptive)
+	$(call against_expert,models/ppo_residual_adaptive,residual)
 
 # Run 8 (docs/rl.md, models/sac_residual_adaptive): SAC in run 7's setup and budget, for comparison; then the
-# three held-out robust_extreme sets, robust_hard and targets (the expert's runs are rl-baseline's, made here if
-# missing). About 2 h 30 min on 2 cores.
-SAC_RUN := runs/sac_residual_adaptive
-SAC_MODEL := models/sac_residual_adaptive
+# same evaluations (the expert's runs are rl-baseline's when present). About 2 h on 2 cores.
 rl-sac: venv
-	$(PY) -m agents.cli train --config configs/rl/sac_residual_adaptive.yaml --out $(SAC_RUN) --overwrite
-	mkdir -p $(SAC_MODEL)
-	for f in model.zip model_obs_norm.npz rl_meta.json train_config.json train_summary.json learning_curve.png; do \
-	  cp $(SAC_RUN)/$$f $(SAC_MODEL)/$$f; done
-	for run in robust_extreme:100 robust_extreme:300 robust_extreme:400 robust_hard:100 targets:0; do \
-	  s=$${run%%:*}; seed=$${run##*:}; name=$${s}_$$seed; \
-	  test -f runs/eval_$${name}_expert/results.json || \
-	    $(EVAL) --policy expert --suite $$s --seed $$seed --out runs/eval_$${name}_expert || exit 1; \
-	  $(EVAL) --policy $(SAC_MODEL)/model.zip --suite $$s --seed $$seed --out runs/eval_$${name}_sac && \
-	  $(PY) -m agents.cli compare --baseline runs/eval_$${name}_expert --candidate runs/eval_$${name}_sac \
-	    --out runs/compare_$${name}_sac || exit 1; done
-	$(PY) -m agents.cli compare --baseline $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_expert) \
-	  --candidate $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_sac) --out runs/compare_robust_extreme_pooled_sac
+	$(PY) -m agents.cli train --config configs/rl/sac_residual_adaptive.yaml --out runs/sac_residual_adaptive --overwrite
+	$(call ship,runs/sac_residual_adaptive,models/sac_residual_adaptive)
+	$(call against_expert,models/sac_residual_adaptive,sac,reuse)
 
 # The from-scratch PPO reference (docs/rl.md), about 40 min on 2 cores.
 rl-scratch: venv
 	$(PY) -m agents.cli train --config configs/rl/ppo_scratch.yaml --out runs/ppo_scratch --overwrite --time-limit-min 35
-	mkdir -p models/ppo_scratch
-	for f in model.zip model_obs_norm.npz rl_meta.json train_config.json train_summary.json learning_curve.png; do \
-	  cp runs/ppo_scratch/$$f models/ppo_scratch/$$f; done
+	$(call ship,runs/ppo_scratch,models/ppo_scratch)
 	$(EVAL) --policy models/ppo_scratch/model.zip --suite rough --out runs/eval_scratch_rough
 
 clean:
