@@ -177,10 +177,11 @@ def compare_runs(
     :param baseline: an evaluation folder, or several of the same suite (e.g. ``--seed 100`` and ``--seed 300``),
         pooled.
     :param candidate: one folder per baseline folder, in the same order, holding the same episodes as it.
-    :return: ``{"baseline": {"dir", "dirs", "policy", "suite"}, "candidate": {...}, "seed_offset", "overall":
+    :return: ``{"baseline": {"dir", "policy", "suite"}, "candidate": {...}, "seed_offset", "overall":
         {"baseline": figures, "candidate": figures, "paired": paired figures}, "by_entry": [...], "by_factor":
         [...], "changed": [episodes whose outcome differs]}`` (figures: :func:`group_figures`; paired:
-        :func:`paired_outcomes`; ``dir`` and ``seed_offset`` are lists when several folders are pooled).
+        :func:`paired_outcomes`; ``dir`` and ``seed_offset`` are lists when several folders are pooled, and ``policy``
+        when the pooled runs name different policies).
     :raises ComparisonError: on a missing or unreadable results.json, runs of different episodes, an unequal
         number of folders, folders of other suite entries, or the same episode in two pooled folders.
     """
