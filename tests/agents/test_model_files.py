@@ -90,6 +90,18 @@ def test_the_algorithm_is_read_from_the_model_folder(tmp_path, algo):
     assert model_algo(path) == algo and model_algo(path, "ppo") == "ppo"
     policy = make_policy(str(path), gym.make("QuadUneven-v0", terrain="flat"))
     assert type(policy.model).__name__ == algo.upper()
+    if algo == "sac":  # evaluate() resolves it too, and records the class it used
+        from agents.evaluation.run import evaluate
+        from agents.evaluation.suites import suite_from_dict
+
+        suite = suite_from_dict(
+            {"name": "t", "goal_distance": 5.0, "time_limit": 0.1, "terrains": [{"kind": "flat", "seeds": [0]}]},
+            source="test",
+        )
+        meta = json.loads((tmp_path / "rl_meta.json").read_text())
+        (tmp_path / "rl_meta.json").write_text(json.dumps({**meta, "env_kwargs": {}}))  # the suite sets the terrain
+        res = evaluate(suite, str(path), tmp_path / "eval", progress=False)
+        assert res["meta"]["algo"] == "sac" and res["episodes"][0]["error"] is None
     (tmp_path / "rl_meta.json").unlink()
     assert model_algo(path) == "ppo"  # a folder without metadata (an older run): PPO, as before
     with pytest.raises(PolicyError, match="algo must be one of"):
