@@ -81,6 +81,7 @@ EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
 
 DISTURBANCE_CHECK_EVERY = 5
 """physics steps between two checks of the base against its plan (``ExpertConfig.recovery``)."""
+_NO_OFF_PLAN_CHECK = (-1.0, -1.0)  # ComputedTorqueController.grid_step_into's "no check"
 
 SIDE_STEP = 1e-3
 """m: a cycle's advance to the left beyond which the expert lifts its left legs first (the mirrored swing order)."""
@@ -328,6 +329,7 @@ class ExpertPolicy:
         self._base_mu = self.config.friction  # the assumed friction outside steep cycles (lowered by slips)
         self._yaw = 0.0  # rad: the planned base yaw at the end of the current plan (0 until a command turns it)
         self._durations: tuple[float, ...] = self.config.durations  # s: the phases of the current cycle
+        self._off_plan_tol2 = (self.config.recovery_position**2, self.config.recovery_velocity**2)
 
     # -------------------------------------------------------------- SB3 protocol
     def predict(
@@ -411,6 +413,32 @@ class ExpertPolicy:
             self._log(f"t={float(data.time):.3f} s: controller failed ({err}); keeping the last good torques")
         self._last_controller_error = err
         return self._tau_ok.copy()
+
+    def torques_into(self, model: mujoco.MjModel, data: mujoco.MjData, out: np.ndarray, limit: np.ndarray) -> bool:
+        """The hook's fast lane (:class:`~quad_uneven_env.env.PhysicsController`): the torques ``self(model,
+        data, action)`` returns, clipped to ``±limit`` (N m), written into ``out`` in one compiled call when the
+        step is a plain grid step; False (and no state changed) where the full call must run instead.
+
+        Taken in the nominal world only (the simulator's data shared), never on a slip-check step, and on a
+        disturbance-check step only while the base is on its plan (the check is compiled into the call).
+        """
+        grid = self._grid
+        if grid is None or not self.shares_simulator_data or data is not self._sim:
+            return False
+        steps = self._steps + 1
+        if self._adapt_friction and steps % SLIP_CHECK_EVERY == 0:
+            return False
+        ctrl = self.controller
+        off_plan = _NO_OFF_PLAN_CHECK
+        if self.config.recovery and steps % DISTURBANCE_CHECK_EVERY == 0 and data.time - ctrl.t0 >= self._calm_after:
+            off_plan = self._off_plan_tol2
+        done = ctrl.grid_step_into(
+            model, data, grid, self._t_start, self._t_end, data.sensordata, self._foot_sensor_adr, self._tau_ok,
+            limit, out, off_plan,
+        )  # fmt: skip
+        if done == 1:
+            self._steps = steps
+        return done == 1
 
     def _check_disturbance(self, d: mujoco.MjData) -> None:
         """Replan now from the measured state if the base is off its plan (``ExpertConfig.recovery_*``)."""

@@ -173,10 +173,13 @@ class ComputedTorqueController:
         self._bdd = np.empty(C.NV)
         self._stance_memo: dict = {}
         self._grid_cache: tuple | None = None  # (grid, touch, tau_ok, their GridArguments) of step_on_grid
+        self._grid_step: tuple | None = None  # (code, t, grid, workspace version) of the last grid step, unread
 
     @property
     def last(self) -> IDResult | None:
         """The inverse-dynamics result of the last call (diagnostics; read it before the next call)."""
+        if self._grid_step is not None:
+            self._settle_grid_step()
         last = self._last
         if isinstance(last, WorkspaceResult):  # fast path (pinv, or its QP): built on demand
             distribution = "qp" if self.distribution == "qp" and last.layout.n_stance else "pinv"
@@ -186,6 +189,8 @@ class ComputedTorqueController:
     @property
     def last_reference(self) -> ReferenceSample | None:
         """The reference sample of the last call (diagnostics)."""
+        if self._grid_step is not None:
+            self._settle_grid_step()
         last = self._last_reference
         if isinstance(last, PackedReference):  # fast path: unpacked on demand
             last = self._last_reference = last.unpack()
@@ -229,7 +234,7 @@ class ComputedTorqueController:
             np.empty(C.NV),
         )
         self._stance_memo.clear()
-        self._grid_cache = None
+        self._grid_cache = self._grid_step = None
         self._fast = None
         if self.backend == "mujoco":
             self._fast = FastControlStep(
@@ -242,7 +247,7 @@ class ComputedTorqueController:
         self._bind(model)
         self.t0 = float(data.time)
         self.terrain = terrain
-        self._last = None
+        self._last = self._grid_step = None
 
     def set_friction(self, mu: float) -> None:
         """Change the friction coefficient of the "qp" cones (-, > 0) from the next step on, until the next
@@ -266,6 +271,7 @@ class ComputedTorqueController:
         """
         if model is not self._model:
             self._bind(model)
+        self._grid_step = None
         t = float(data.time) - self.t0
         if self.reference_row is not None and self._fast is not None:
             packed = self.reference_row(t)
@@ -335,8 +341,75 @@ class ComputedTorqueController:
         :return: the torques (12, N m, clipped, finite; a copy of ``tau_ok``), or None.
         """
         t = float(data.time) - self.t0
+        args = None if t >= t_stop else self._grid_arguments(model, data, grid, touch, touch_adr, tau_ok)
+        if args is None:
+            return None
+        self.id.workspace_version += 1  # the compiled call rewrites the inverse-dynamics buffers
+        try:
+            code = FK.grid_control_step(
+                t - t_start, STANCE_MODES.index(self.stance_mode), data.contact.geom,
+                -1 if contacts is None else contacts, args[0], args[1],
+            )  # fmt: skip
+        except (TypeError, NumbaError):  # arrays the kernel does not take: the general path
+            return None
+        if code < 0:
+            return None
+        self._grid_step = (code, t, grid, self.id.workspace_version)
+        return tau_ok.copy()
+
+    def grid_step_into(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        grid: ReferenceGrid,
+        t_start: float,
+        t_stop: float,
+        touch: np.ndarray,
+        touch_adr: np.ndarray,
+        tau_ok: np.ndarray,
+        limit: np.ndarray,
+        out: np.ndarray,
+        off_plan: tuple[float, float] = (-1.0, -1.0),
+    ) -> int:
+        """:meth:`step_on_grid` (``contacts=None``) for a caller that needs only the torques: they go into
+        ``tau_ok`` and, clipped to ``±limit`` (N m), into ``out`` (the simulator's ``ctrl``), in one compiled
+        call (:func:`~agents.control.controller_kernels.lane_control_step`). 1 when it took the step;
+        0 where :meth:`step_on_grid` would return None (nothing but the inverse-dynamics buffers changed).
+
+        :param off_plan: (m^2, (m/s)^2) squared tolerances of the base's horizontal position and velocity
+            against the grid row, checked before the step (negative: no check); off the plan it returns
+            :data:`~agents.control.controller_kernels.OFF_PLAN` (-2) and writes nothing.
+        """
+        t = data.time - self.t0
+        args = None if t >= t_stop else self._grid_arguments(model, data, grid, touch, touch_adr, tau_ok)
+        if args is None:
+            return 0
+        self.id.workspace_version += 1
+        try:
+            code = FK.lane_control_step(
+                t - t_start, off_plan[0], off_plan[1], STANCE_MODES.index(self.stance_mode), data.contact.geom,
+                data.qpos, data.qvel, args[0], args[1], limit, out,
+            )  # fmt: skip
+        except (TypeError, NumbaError):
+            return 0
+        if code < 0:
+            return FK.OFF_PLAN if code == FK.OFF_PLAN else 0
+        self._grid_step = (code, t, grid, self.id.workspace_version)
+        return 1
+
+    def _grid_arguments(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        grid: ReferenceGrid,
+        touch: np.ndarray,
+        touch_adr: np.ndarray,
+        tau_ok: np.ndarray,
+    ) -> tuple[FK.StepArguments, FK.GridArguments] | None:
+        """The compiled grid step's two argument records (built when an input changes), or None where the
+        general path must run (no fast path, another model, no row reference, arguments the kernel refuses)."""
         fast = self._fast
-        if t >= t_stop or fast is None or model is not self._model or self.reference_row is None:
+        if fast is None or model is not self._model or self.reference_row is None:
             return None
         packed, _ = fast.arguments(data, self.terrain, self._gains)
         if packed is None:
@@ -346,22 +419,15 @@ class ComputedTorqueController:
             qp = self.distribution == "qp"
             g = FK.GridArguments(grid.t, grid.dt, grid.t_end, grid.packed, grid.masks, touch, touch_adr, tau_ok, qp)
             c = self._grid_cache = (grid, touch, tau_ok, g)
-        self.id.workspace_version += 1  # the compiled call rewrites the inverse-dynamics buffers
-        try:
-            code = FK.grid_control_step(
-                t - t_start, STANCE_MODES.index(self.stance_mode), data.contact.geom,
-                -1 if contacts is None else contacts, packed, c[3],
-            )  # fmt: skip
-        except (TypeError, NumbaError):  # arrays the kernel does not take: the general path
-            return None
-        if code < 0:
-            return None
+        return packed, c[3]
+
+    def _settle_grid_step(self) -> None:
+        """Turn the last grid step's code into :attr:`last`'s and :attr:`last_reference`'s records."""
+        code, t, grid, version = self._grid_step
+        self._grid_step = None
         planned = code >> FK.GRID_PLANNED_SHIFT & 15
-        self._last = WorkspaceResult(
-            code >> 4 & 15, fast.layouts[code & 15], self.id.workspace_version, bool(code & FK.QP_RELAXED)
-        )
+        self._last = WorkspaceResult(code >> 4 & 15, self._fast.layouts[code & 15], version, bool(code & FK.QP_RELAXED))
         self._last_reference = PackedReference(t, grid.rows[code >> FK.GRID_ROW_SHIFT], planned)
-        return tau_ok.copy()
 
     def select_stance(self, planned, measured: np.ndarray) -> tuple[bool, bool, bool, bool]:
         """Stance set from the plan and the measured contacts (rule in the module docstring)."""

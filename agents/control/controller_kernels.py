@@ -220,3 +220,33 @@ def grid_control_step(t, stance_mode, contact_geom, measured, a, g):  # pragma: 
     if not K.copy_if_finite(a.tau_out, g.tau_ok):
         return -1
     return code | planned << GRID_PLANNED_SHIFT | k << GRID_ROW_SHIFT
+
+
+OFF_PLAN = -2
+""":func:`lane_control_step`'s result when the base is off its plan (the caller's general path replans)."""
+
+
+@nb.njit(cache=False, nogil=True)
+def lane_control_step(  # pragma: no cover - compiled
+    t, position_tol2, velocity_tol2, stance_mode, contact_geom, qpos, qvel, a, g, limit, out
+):
+    """:func:`grid_control_step` for a caller that needs only the torques, written clipped to ``±limit`` (N m)
+    into ``out`` (the env's clip).
+
+    With ``position_tol2 >= 0`` the disturbance check comes first (``ExpertPolicy._check_disturbance``): if the
+    base's horizontal position (m) or velocity (m/s) is farther than the tolerances' square roots from the grid
+    row's, nothing is written and :data:`OFF_PLAN` is returned. Otherwise -1 where :func:`grid_control_step`
+    declines, else its code.
+    """
+    if position_tol2 >= 0.0:
+        k = grid_index(t, g.grid_t, g.grid_dt, g.t_end)
+        if k >= 0:
+            row = g.rows[k]
+            dv = (qvel[0] - row[7]) ** 2 + (qvel[1] - row[8]) ** 2
+            dp = (qpos[0] - row[0]) ** 2 + (qpos[1] - row[1]) ** 2
+            if not (dv <= velocity_tol2 and dp <= position_tol2):
+                return OFF_PLAN
+    code = grid_control_step(t, stance_mode, contact_geom, -1, a, g)
+    if code >= 0:
+        K.clip_into(g.tau_ok, limit, out)
+    return code

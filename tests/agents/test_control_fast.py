@@ -167,6 +167,7 @@ def test_the_grid_step_walks_exactly_as_the_controller_call_it_replaces(distribu
             return tau
 
         monkeypatch.setattr(type(ctrl), "step_on_grid", counted)
+        monkeypatch.setattr(type(policy), "torques_into", None)  # the hook's fast lane: tested below
         obs, _ = env.reset(seed=0)
         assert policy.shares_simulator_data is share
         qpos, torques = [], []
@@ -183,6 +184,82 @@ def test_the_grid_step_walks_exactly_as_the_controller_call_it_replaces(distribu
     np.testing.assert_array_equal(q_grid, q_call)
     assert log_grid == log_call
     assert 0.8 * len(taken) < sum(taken) < len(taken), "both branches must be taken"
+
+
+@pytest.mark.parametrize("terrain, share", [("rough", True), (STAIRS, True), ("rough", False)])
+def test_the_hooks_fast_lane_walks_exactly_as_the_call_it_replaces(terrain, share, monkeypatch):
+    """The env with the expert's fast lane (``ExpertPolicy.torques_into``: one compiled call per physics step,
+    the disturbance check inside it) against the same env with the lane removed (the hook's full call every
+    step): the same torques, trajectory, log and recoveries, bit for bit. The base is knocked off its plan
+    (0.3 m/s sideways) so that a check inside the lane finds it off and the full call replans. In the nominal
+    model's copy (``share=False``) the lane declines every step."""
+    runs = []
+    for lane in (True, False):
+        env = gym.make("QuadUneven-v0", terrain=terrain)
+        policy = attach_expert(env, ExpertConfig(share_nominal_world=share))
+        answers = []
+        real = type(policy).torques_into
+
+        def counted(self, *args, _real=real, _answers=answers, _on=lane):
+            done = _real(self, *args) if _on else False
+            _answers.append(done)
+            return done
+
+        monkeypatch.setattr(type(policy), "torques_into", counted)
+        obs, _ = env.reset(seed=0)
+        d = env.unwrapped.data
+        qpos, ctrl = [], []
+        for step in range(260):
+            if step == 150:
+                d.qvel[1] += 0.3
+            obs, _, fell, *_ = env.step(policy.predict(obs)[0])
+            qpos.append(d.qpos.copy())
+            ctrl.append(d.ctrl.copy())
+            assert not fell
+        runs.append((np.array(qpos), np.array(ctrl), answers, list(policy.failure_log), policy.recoveries))
+        monkeypatch.undo()
+    (q_lane, u_lane, answers, log_lane, rec_lane), (q_call, u_call, _, log_call, rec_call) = runs
+    np.testing.assert_array_equal(u_lane, u_call)
+    np.testing.assert_array_equal(q_lane, q_call)
+    assert log_lane == log_call and rec_lane == rec_call >= 1
+    if share:
+        assert 0.8 * len(answers) < sum(answers) < len(answers), "the lane and the full call must both run"
+    else:
+        assert not any(answers)
+
+
+def test_the_lane_declines_off_the_plan_and_leaves_the_controllers_diagnostics():
+    """``grid_step_into`` writes what ``step_on_grid`` returns (clipped to the limit it is given) and leaves
+    the same ``last``/``last_reference``; with the off-plan check it returns ``OFF_PLAN`` and writes nothing
+    when the base is farther than the tolerance from the row, as ``ExpertPolicy._check_disturbance`` decides."""
+    compared = off = 0
+    for policy, m, d in _expert_states("rough", ExpertConfig(), steps=200, every=5):
+        ctrl = policy.controller
+        grid_args = (policy._grid, policy._t_start, policy._t_end, d.sensordata, policy._foot_sensor_adr)
+        limit = np.full(12, 20.0)
+        tau_ok, out = np.zeros(12), np.full(12, np.nan)
+        done = ctrl.grid_step_into(m, d, *grid_args, tau_ok, limit, out)
+        if not done:
+            assert np.isnan(out).all()
+            continue
+        last, ref = ctrl.last, ctrl.last_reference
+        tau = ctrl.step_on_grid(m, d, *grid_args, np.zeros(12))
+        np.testing.assert_array_equal(out, np.clip(tau, -limit, limit))
+        np.testing.assert_array_equal(tau_ok, tau)
+        np.testing.assert_array_equal(last.tau, ctrl.last.tau)
+        np.testing.assert_array_equal(last.contact_forces, ctrl.last.contact_forces)
+        assert ref.t == ctrl.last_reference.t and ref.stance == ctrl.last_reference.stance
+        np.testing.assert_array_equal(ref.q_joints, ctrl.last_reference.q_joints)
+        compared += 1
+        row = policy._row_of(float(d.time) - ctrl.t0 - policy._t_start)[0]
+        dp2 = (d.qpos[0] - row[0]) ** 2 + (d.qpos[1] - row[1]) ** 2
+        for tol2, expected in ((dp2 * 1.01, 1), (dp2 * 0.99, FK.OFF_PLAN)):
+            out[:] = np.nan
+            got = ctrl.grid_step_into(m, d, *grid_args, np.zeros(12), limit, out, (tol2, 1e6))
+            assert got == expected
+            assert np.isnan(out).all() == (expected == FK.OFF_PLAN)
+            off += expected == FK.OFF_PLAN
+    assert compared >= 20 and off == compared
 
 
 def test_the_grid_step_leaves_the_controllers_diagnostics():

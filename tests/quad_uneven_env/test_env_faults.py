@@ -255,3 +255,49 @@ def test_human_rendering_without_a_display_raises_before_any_window_code():
     assert out.returncode == 0, out.stderr
     assert "ValueError: render_mode='human' needs a display" in out.stdout
     assert "rgb_array" in out.stdout and "glfw loaded: False" in out.stdout
+
+
+class _Laned:
+    """A PD hold with a fast lane: every other physics step the lane writes the torques, 50 N m beyond the
+    motors' limit so the env's clip shows; ``fail`` makes the lane raise or decline instead."""
+
+    def __init__(self, fail: str = ""):
+        self.fail, self.lane_steps, self.calls, self.seen = fail, 0, 0, 0
+
+    def __call__(self, model, data, action):
+        self.calls += 1
+        return hold(model, data, action)
+
+    def torques_into(self, model, data, out, limit):
+        self.seen += 1
+        if self.seen % 2 or self.fail == "decline":
+            return False
+        if self.fail == "raise":
+            raise RuntimeError("lane bug")
+        out[:] = np.clip(hold(model, data, None) + 50.0 * np.sign(hold(model, data, None)), -limit, limit)
+        self.lane_steps += 1
+        return True
+
+
+def test_a_fast_lane_replaces_the_call_only_where_it_answers():
+    """Where the lane returns True its torques are applied (clipped by it, as the protocol asks) and the call is
+    not made; where it declines or raises the call runs, and the step is the one the call alone would give."""
+    runs = {}
+    for fail in ("", "decline", "raise"):
+        ctrl = _Laned(fail)
+        env = make(terrain="rough", controller=ctrl)
+        env.reset(seed=0)
+        d = env.unwrapped.data
+        applied = []
+        for _ in range(3):
+            _, _, fell, _, info = env.step(np.zeros(12))
+            assert not fell and info["termination_reason"] is None
+            applied.append(d.ctrl.copy())
+        runs[fail] = (np.array(applied), snapshot(d), ctrl)
+    laned = runs[""][2]
+    assert laned.lane_steps == 15 and laned.calls == 15 and laned.seen == 30
+    assert np.abs(runs[""][0]).max() == pytest.approx(env.unwrapped.idx.torque_limit.max())
+    for fail in ("decline", "raise"):
+        assert runs[fail][2].calls == 30 and runs[fail][2].lane_steps == 0
+        np.testing.assert_array_equal(runs[fail][0], runs["decline"][0])
+    assert not np.array_equal(runs[""][0], runs["decline"][0])
