@@ -7,11 +7,14 @@ computed-torque controller at every 2 ms physics step, through QuadUneven-v0's h
 Targets (issue 13): expert >= 0.6 x the zero-torque rate and >= 25 x real time.
 
 Usage: ``python benchmarks/expert.py [--seconds 30] [--terrain rough] [--model nominal|oracle] [--copy] [--split]
-[--hook-cpu]`` (``--copy``: the nominal expert copies the measured state into its own model every physics step even
-in the nominal world, as it does whenever the simulated robot differs from the nominal one; ``--split``: also
-time ``mj_step1`` and ``mj_step2`` inside the env's loop and print where each physics step's time goes;
+[--hook-cpu] [--no-lane] [--alternate PAIRS]`` (``--copy``: the nominal expert copies the measured state into its own
+model every physics step even in the nominal world, as it does whenever the simulated robot differs from the nominal
+one; ``--split``: also time ``mj_step1`` and ``mj_step2`` inside the env's loop and print where each physics step's
+time goes;
 ``--hook-cpu``: the expert hook's CPU time (``time.thread_time_ns``, which a preempting process on a shared machine
-does not inflate the way it does wall time), split into planning, the plans' reference grids and the rest).
+does not inflate the way it does wall time), split into planning, the plans' reference grids and the rest;
+``--no-lane``: without the hook's fast lane, ``ExpertPolicy.torques_into``; ``--alternate PAIRS``: afterwards the
+same episode without and with the lane, alternated, the machine's noise being larger than the difference).
 """
 
 from __future__ import annotations
@@ -37,6 +40,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--copy", action="store_true", help="never share the simulator's data (nominal model)")
     parser.add_argument("--split", action="store_true", help="time mj_step1/mj_step2 in the env's loop too")
     parser.add_argument("--hook-cpu", action="store_true", help="CPU time of the expert's hook, split")
+    parser.add_argument("--no-lane", action="store_true", help="without the hook's fast lane (torques_into)")
+    parser.add_argument(
+        "--alternate", type=int, default=0, metavar="PAIRS",
+        help="then walk the same episode PAIRS times without and with the fast lane, alternated in this process",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     split = _StepTimer.install() if args.split else None
     hook_cpu = _HookCPU.install() if args.hook_cpu else None
@@ -46,6 +54,8 @@ def main(argv: list[str] | None = None) -> None:
     env = gym.make("QuadUneven-v0", terrain=args.terrain, max_episode_steps=10**7)
     config = ExpertConfig(distribution=args.distribution, model=args.model, share_nominal_world=not args.copy)
     policy = attach_expert(env, config)
+    if args.no_lane:
+        policy.torques_into = None  # the env then makes the hook's full call at every physics step
     # Warm-up: numba kernels compile on first use; keep that out of the timing.
     obs, _ = env.reset(seed=1)
     for _ in range(5):
@@ -117,6 +127,8 @@ def main(argv: list[str] | None = None) -> None:
             f"mj_step2 {split.step2 / n * 1e6:.0f} + planning {planner_s / n * 1e6:.0f} + controller and the "
             f"rest {rest / n * 1e6:.0f}"
         )
+    if args.alternate:
+        _alternate(env, policy, args.seconds, args.alternate)
     if hook_cpu is not None:
         n = round(sim_expert / u.model.opt.timestep)
         h = hook_cpu
@@ -125,6 +137,32 @@ def main(argv: list[str] | None = None) -> None:
             f"{h.plan / n / 1e3:.1f} + reference grids {h.grid / n / 1e3:.1f} + controller and the rest "
             f"{(h.hook - h.plan - h.grid) / n / 1e3:.1f}"
         )
+
+
+def _alternate(env: gym.Env, policy, seconds: float, pairs: int) -> None:
+    """Walk ``seconds`` from ``reset(seed=0)`` ``pairs`` times without and with the hook's fast lane, alternated
+    (the machine's drift then falls on both alike); print the wall time per physics step of each run."""
+    u = env.unwrapped
+    times: dict[bool, list[float]] = {False: [], True: []}
+    positions: dict[bool, np.ndarray] = {}
+    for _ in range(pairs):
+        for lane in (False, True):
+            policy.torques_into = type(policy).torques_into.__get__(policy) if lane else None
+            obs, _ = env.reset(seed=0)
+            n = int(seconds / u.dt)
+            t0 = time.perf_counter()
+            for _ in range(n):
+                obs, _, terminated, _, _ = env.step(policy.predict(obs)[0])
+                if terminated:
+                    break
+            times[lane].append((time.perf_counter() - t0) / round(u.data.time / u.model.opt.timestep) * 1e6)
+            positions[lane] = u.data.qpos.copy()
+    same = "the same" if np.array_equal(positions[False], positions[True]) else "DIFFERENT"
+    print(f"fast lane off/on, {pairs} alternated pairs of {seconds:g} s (end states {same}), us per physics step:")
+    for lane in (False, True):
+        t = np.array(times[lane])
+        runs = " ".join(f"{x:.0f}" for x in t)
+        print(f"  lane {'on ' if lane else 'off'}: min {t.min():.1f}, median {np.median(t):.1f} ({runs})")
 
 
 class _HookCPU:
