@@ -41,6 +41,7 @@ import numpy as np
 from gymnasium.envs.registration import register, registry
 
 from agents.expert import ExpertConfig, ExpertPolicy
+from agents.rl import residual_kernels as RK
 from agents.rl.config import RESIDUAL_BASES, RESIDUAL_LEGS
 from agents.rl.expert_features import augmented_space, expert_features
 from agents.rl.gain_adaptation import KneeGainAdaptation, check_gain_adaptation
@@ -140,6 +141,9 @@ class ResidualController:
             if foot_sensor_adr is None or len(foot_sensor_adr) != len(self.torque_limit) // 3:
                 raise ValueError("residual_legs='stance' needs the feet's contact sensor addresses, one per leg")
             self._foot_adr = np.asarray(foot_sensor_adr, dtype=np.intp)
+        self._foot_adr_or_none = self._foot_adr if self._foot_adr is not None else np.zeros(4, dtype=np.intp)
+        self._touch = np.zeros(1)  # stands in for the contact switches when no leg is gated
+        self._expert_gain = np.ones_like(self.torque_limit) if self.adaptation is None else self.adaptation.gain
         # Per physics step only where the applied residual varies within a control step (gated, or a gain).
         self._track_applied = (
             self._foot_adr is not None or self.residual_basis == "expert_torque" or self.adaptation is not None
@@ -170,28 +174,28 @@ class ResidualController:
         return float(np.mean(np.abs(np.clip(np.asarray(action, dtype=float), -1.0, 1.0) * self.gain)))
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
-        """Joint torques (12, N m): expert + residual, clipped to the motor limits.
+        """Joint torques (12, N m): expert + residual, clipped to the motor limits (in one compiled call,
+        :func:`~agents.rl.residual_kernels.residual_torques_into`, the twin of :func:`residual_torques`).
 
         :param action: (12,) residual action in [-1, 1] (the env has clipped it).
         """
-        tau_expert = self.expert(model, data, action)
-        tau_base = tau_expert if self.adaptation is None else self._adapted(data, tau_expert)
-        if self.residual_basis == "expert_torque":
-            np.multiply(action, tau_base, out=self._tau)
-            self._tau *= self.residual_scale
-        else:
-            np.multiply(action, self.gain, out=self._tau)
-        if self._foot_adr is not None:
-            self._tau *= np.repeat(data.sensordata[self._foot_adr] > 0.0, 3)
-        self._tau += tau_base
+        tau_expert = np.asarray(self.expert(model, data, action), dtype=np.float64)
+        action = np.asarray(action, dtype=np.float64)
+        if self.adaptation is not None:
+            self._update_adaptation(data, tau_expert)
+        applied = RK.residual_torques_into(
+            action, tau_expert, self._expert_gain, self.gain, self.residual_scale,
+            self.residual_basis == "expert_torque",
+            self._touch if self._foot_adr is None else data.sensordata, self._foot_adr_or_none,
+            self._foot_adr is not None, self.torque_limit, self._tau,
+        )  # fmt: skip
         if self._track_applied:
-            self._applied_sum += float(np.mean(np.abs(self._tau - tau_expert)))
+            self._applied_sum += applied
             self._applied_n += 1
-        np.clip(self._tau, -self.torque_limit, self.torque_limit, out=self._tau)
         return self._tau
 
-    def _adapted(self, data: mujoco.MjData, tau_expert: np.ndarray) -> np.ndarray:
-        """The expert's torques times the adaptive gains, updated first if a control step has begun."""
+    def _update_adaptation(self, data: mujoco.MjData, tau_expert: np.ndarray) -> None:
+        """Update the adaptive gains if a control step has begun (they multiply the expert's torques)."""
         adaptation = self.adaptation
         t = float(data.time)
         if t >= self._next_update - 1e-9:
@@ -200,7 +204,33 @@ class ResidualController:
             self._next_update += adaptation.period
             if self._next_update <= t:  # a jump of the clock (never in a rollout): back on the control grid
                 self._next_update = t + adaptation.period
-        return tau_expert * adaptation.gain
+
+
+def residual_torques(
+    action: np.ndarray,
+    tau_expert: np.ndarray,
+    expert_gain: np.ndarray,
+    per_unit: np.ndarray,
+    scale: float,
+    expert_basis: bool,
+    stance_legs: np.ndarray | None,
+    limit: np.ndarray,
+) -> tuple[np.ndarray, float]:
+    """The residual composition in numpy (the twin of the compiled
+    :func:`~agents.rl.residual_kernels.residual_torques_into`).
+
+    :param expert_gain: (12,) gains on the expert's torques (the adaptive knee gains, else ones).
+    :param per_unit: (12,) N m of residual per unit action in the ``torque_limit`` basis.
+    :param stance_legs: (4,) bool, the legs whose foot touches (None: every leg takes its residual).
+    :return: the torques (12, N m, clipped to ``±limit``) and mean |torque - tau_expert| before the clip.
+    """
+    tau_base = tau_expert * expert_gain
+    tau = action * tau_base * scale if expert_basis else action * per_unit
+    if stance_legs is not None:
+        tau = tau * np.repeat(stance_legs, 3)
+    tau = tau + tau_base
+    applied = float(np.mean(np.abs(tau - tau_expert)))
+    return np.clip(tau, -limit, limit), applied
 
 
 def install_residual_controller(
@@ -369,4 +399,5 @@ __all__ = [
     "check_residual_legs",
     "install_residual_controller",
     "make_residual_env",
+    "residual_torques",
 ]

@@ -325,3 +325,53 @@ def test_expert_torque_basis_in_the_env_scales_the_experts_motor_commands():
     expected = np.clip(tau * (1 + 0.5 * action.astype(np.float64) * gate), -lim, lim)
     # the env's motor model (strength, latency) acts after the controller: compare the controller's output
     np.testing.assert_allclose(env.unwrapped.controller._tau, expected, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("basis", ["torque_limit", "expert_torque"])
+@pytest.mark.parametrize("gated", [False, True])
+@pytest.mark.parametrize("adapted", [False, True])
+def test_the_compiled_composition_equals_its_numpy_twin(basis, gated, adapted):
+    """``residual_torques_into`` against ``residual_torques`` bit for bit, torques and the applied mean, on
+    random actions, expert torques past the limits, knee gains and touch switches (zero, positive, negative)."""
+    from agents.rl.residual_env import residual_torques
+    from agents.rl.residual_kernels import residual_torques_into
+
+    rng = np.random.default_rng(7)
+    limit = rng.uniform(40.0, 160.0, 12)
+    foot_adr = np.array([5, 2, 7, 0])
+    for _ in range(300):
+        action = rng.uniform(-1.0, 1.0, 12)
+        action[rng.random(12) < 0.1] = 0.0
+        tau_expert = rng.uniform(-1.3, 1.3, 12) * limit
+        gain = rng.uniform(0.5, 2.0, 12) if adapted else np.ones(12)
+        touch = rng.choice([0.0, 1.5, -0.5, 3.0], 8)
+        scale = float(rng.uniform(0.05, 1.0))
+        per_unit = scale * limit
+        stance = touch[foot_adr] > 0.0 if gated else None
+        want, want_applied = residual_torques(
+            action, tau_expert, gain, per_unit, scale, basis == "expert_torque", stance, limit
+        )
+        out = np.full(12, np.nan)
+        got_applied = residual_torques_into(
+            action, tau_expert, gain, per_unit, scale, basis == "expert_torque", touch, foot_adr, gated, limit, out
+        )
+        np.testing.assert_array_equal(out, want)
+        assert got_applied == want_applied
+
+
+@pytest.mark.parametrize("n", [1, 5, 8, 12, 13, 16, 17, 100, 128])
+def test_the_compiled_abs_sum_is_numpys_pairwise_sum(n):
+    """The applied mean's sum, in numpy's summation order: equal to ``np.abs(x - y).sum()`` to the last bit
+    (a sequential sum differs on these inputs)."""
+    from agents.rl.residual_kernels import pairwise_abs_diff_sum
+
+    rng = np.random.default_rng(n)
+    differs = 0
+    for _ in range(200):
+        x, y = rng.normal(0.0, 10.0, n) * 10.0 ** rng.integers(-3, 4, n), rng.normal(0.0, 1.0, n)
+        assert pairwise_abs_diff_sum(x, y) == np.abs(x - y).sum()
+        seq = 0.0
+        for v in np.abs(x - y):
+            seq += v
+        differs += seq != np.abs(x - y).sum()
+    assert differs > 0 or n < 9
