@@ -414,10 +414,13 @@ class ExpertPolicy:
         self._last_controller_error = err
         return self._tau_ok.copy()
 
-    def torques_into(self, model: mujoco.MjModel, data: mujoco.MjData, out: np.ndarray, limit: np.ndarray) -> bool:
+    def torques_into(
+        self, model: mujoco.MjModel, data: mujoco.MjData, action: Any, out: np.ndarray, limit: np.ndarray
+    ) -> bool:
         """The hook's fast lane (:class:`~quad_uneven_env.env.PhysicsController`): the torques ``self(model,
         data, action)`` returns, clipped to ``±limit`` (N m), written into ``out`` in one compiled call when the
-        step is a plain grid step; False (and no state changed) where the full call must run instead.
+        step is a plain grid step; False (and no state changed) where the full call must run instead. The
+        action is ignored, as by the call.
 
         Taken in the nominal world only (the simulator's data shared), never on a slip-check step, and on a
         disturbance-check step only while the base is on its plan (the check is compiled into the call).

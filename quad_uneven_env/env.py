@@ -135,7 +135,7 @@ class PhysicsController(Protocol):
     (the control step is undone). It needs ``action_mode="torque"``. An optional
     ``reset(model, data, terrain)`` method is called at the end of every reset.
 
-    An optional fast lane ``torques_into(model, data, out, limit) -> bool``, tried first at every physics
+    An optional fast lane ``torques_into(model, data, action, out, limit) -> bool``, tried first at every physics
     step: True when it wrote exactly the torques the call would return, clipped to ``±limit`` (N m), into
     ``out``; False (nothing written) to have the env make the call. It saves the call's Python where a
     controller can do the whole step in compiled code; an exception it raises counts as False.
@@ -692,7 +692,7 @@ class QuadUnevenEnv(gym.Env):
                 return None  # reported by the caller; the controller must not see a garbage state
             out = ctrl if k == 0 else ring[(n + j) % (k + 1)]
             try:
-                fast = lane is not None and lane(m, d, out, limit)
+                fast = lane is not None and lane(m, d, a, out, limit)
             except Exception:  # the lane declines; the call below decides
                 fast = False
             if not fast:

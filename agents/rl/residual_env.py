@@ -46,6 +46,7 @@ from agents.rl.config import RESIDUAL_BASES, RESIDUAL_LEGS
 from agents.rl.expert_features import augmented_space, expert_features
 from agents.rl.gain_adaptation import KneeGainAdaptation, check_gain_adaptation
 from quad_uneven_env.env import QuadUnevenEnv
+from quad_uneven_env.measurement_kernels import clip_finite_into
 
 RESIDUAL_ENV_ID = "QuadUnevenResidual-v0"
 """Gymnasium id of the residual env (registered when this module is imported)."""
@@ -143,6 +144,8 @@ class ResidualController:
             self._foot_adr = np.asarray(foot_sensor_adr, dtype=np.intp)
         self._foot_adr_or_none = self._foot_adr if self._foot_adr is not None else np.zeros(4, dtype=np.intp)
         self._touch = np.zeros(1)  # stands in for the contact switches when no leg is gated
+        self._tau_expert = np.zeros_like(self.torque_limit)  # the expert's lane writes here
+        self._no_limit = np.full_like(self.torque_limit, np.inf)  # its torques, unclipped as its call returns them
         self._expert_gain = np.ones_like(self.torque_limit) if self.adaptation is None else self.adaptation.gain
         # Per physics step only where the applied residual varies within a control step (gated, or a gain).
         self._track_applied = (
@@ -183,16 +186,39 @@ class ResidualController:
         action = np.asarray(action, dtype=np.float64)
         if self.adaptation is not None:
             self._update_adaptation(data, tau_expert)
-        applied = RK.residual_torques_into(
+        applied = self._compose(action, tau_expert, data)
+        if self._track_applied:
+            self._applied_sum += applied
+            self._applied_n += 1
+        return self._tau
+
+    def _compose(self, action: np.ndarray, tau_expert: np.ndarray, data: mujoco.MjData) -> float:
+        """Expert + residual into ``self._tau``, clipped to the motor limits; the applied mean (N m)."""
+        return RK.residual_torques_into(
             action, tau_expert, self._expert_gain, self.gain, self.residual_scale,
             self.residual_basis == "expert_torque",
             self._touch if self._foot_adr is None else data.sensordata, self._foot_adr_or_none,
             self._foot_adr is not None, self.torque_limit, self._tau,
         )  # fmt: skip
+
+    def torques_into(
+        self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray, out: np.ndarray, limit: np.ndarray
+    ) -> bool:
+        """The hook's fast lane (:class:`~quad_uneven_env.env.PhysicsController`): the call's torques, clipped to
+        ``±limit`` (N m), into ``out``, where the expert's own lane answers (``expert.torques_into``); False (and
+        no state changed) otherwise."""
+        lane = getattr(self.expert, "torques_into", None)
+        if lane is None or not lane(model, data, action, self._tau_expert, self._no_limit):
+            return False
+        tau_expert = self._tau_expert
+        action = np.asarray(action, dtype=np.float64)
+        if self.adaptation is not None:
+            self._update_adaptation(data, tau_expert)
+        applied = self._compose(action, tau_expert, data)
         if self._track_applied:
             self._applied_sum += applied
             self._applied_n += 1
-        return self._tau
+        return bool(clip_finite_into(self._tau, limit, out))  # finite: the expert's torques and the action are
 
     def _update_adaptation(self, data: mujoco.MjData, tau_expert: np.ndarray) -> None:
         """Update the adaptive gains if a control step has begun (they multiply the expert's torques)."""

@@ -375,3 +375,48 @@ def test_the_compiled_abs_sum_is_numpys_pairwise_sum(n):
             seq += v
         differs += seq != np.abs(x - y).sum()
     assert differs > 0 or n < 9
+
+
+@pytest.mark.parametrize("randomization", [None, "hard"])
+def test_the_residual_lane_walks_exactly_as_the_call_it_replaces(randomization, monkeypatch):
+    """The residual env with ``ResidualController.torques_into`` (through the expert's lane) against the same env
+    with it removed: the same torques, trajectory, observations and applied residual (``info["residual_torque"]``)
+    bit for bit, under random residual actions, with the adaptive knee gains and stance gating. In a randomized
+    world the expert's lane (its own model's copy) declines, and so does the residual's."""
+    runs = []
+    for lane in (True, False):
+        env = make_residual_env(
+            residual_scale=0.5, terrain="rough", residual_legs="stance", residual_basis="expert_torque",
+            gain_adaptation="knee", randomization=randomization,
+        )  # fmt: skip
+        answers = []
+        real = ResidualController.torques_into
+
+        def counted(self, *args, _real=real, _answers=answers, _on=lane):
+            done = _real(self, *args) if _on else False
+            _answers.append(done)
+            return done
+
+        monkeypatch.setattr(ResidualController, "torques_into", counted)
+        rng = np.random.default_rng(3)
+        obs, _ = env.reset(seed=2)
+        d = env.unwrapped.data
+        trace = []
+        for _ in range(120):
+            obs, _, terminated, truncated, info = env.step(rng.uniform(-0.4, 0.4, 12))
+            trace.append((d.qpos.copy(), d.ctrl.copy(), obs.copy(), info["residual_torque"]))
+            if terminated or truncated:
+                break
+        runs.append((trace, answers))
+        monkeypatch.undo()
+    (with_lane, answers), (without, _) = runs
+    assert len(with_lane) == len(without) >= 60
+    for (q1, u1, o1, r1), (q2, u2, o2, r2) in zip(with_lane, without, strict=True):
+        np.testing.assert_array_equal(q1, q2)
+        np.testing.assert_array_equal(u1, u2)
+        np.testing.assert_array_equal(o1, o2)
+        assert r1 == r2
+    if randomization is None:
+        assert 0.8 * len(answers) < sum(answers) < len(answers)
+    else:
+        assert not any(answers)

@@ -268,7 +268,7 @@ class _Laned:
         self.calls += 1
         return hold(model, data, action)
 
-    def torques_into(self, model, data, out, limit):
+    def torques_into(self, model, data, action, out, limit):
         self.seen += 1
         if self.seen % 2 or self.fail == "decline":
             return False
