@@ -39,7 +39,7 @@ from numba.core.errors import NumbaError
 from agents.control import controller_kernels as FK
 from agents.control import inverse_dynamics_kernels as K
 from agents.control.elimination import ProjectedDynamics, eliminate_constraints, stance_layout
-from agents.control.fast_path import FastControlStep, PackedReference
+from agents.control.fast_path import FastControlStep, PackedReference, contact_pairs
 from agents.control.inverse_dynamics import (
     DISTRIBUTIONS,
     QP_SOLVERS,
@@ -347,7 +347,7 @@ class ComputedTorqueController:
         self.id.workspace_version += 1  # the compiled call rewrites the inverse-dynamics buffers
         try:
             code = FK.grid_control_step(
-                t - t_start, STANCE_MODES.index(self.stance_mode), data.contact.geom,
+                t - t_start, STANCE_MODES.index(self.stance_mode), contact_pairs(data),
                 -1 if contacts is None else contacts, args[0], args[1],
             )  # fmt: skip
         except (TypeError, NumbaError):  # arrays the kernel does not take: the general path
@@ -387,8 +387,8 @@ class ComputedTorqueController:
         self.id.workspace_version += 1
         try:
             code = FK.lane_control_step(
-                t - t_start, off_plan[0], off_plan[1], STANCE_MODES.index(self.stance_mode), data.contact.geom,
-                data.qpos, data.qvel, args[0], args[1], limit, out,
+                t - t_start, off_plan[0], off_plan[1], STANCE_MODES.index(self.stance_mode), contact_pairs(data),
+                -1, data.qpos, data.qvel, args[0], args[1], limit, out,
             )  # fmt: skip
         except (TypeError, NumbaError):
             return 0

@@ -228,10 +228,10 @@ OFF_PLAN = -2
 
 @nb.njit(cache=False, nogil=True)
 def lane_control_step(  # pragma: no cover - compiled
-    t, position_tol2, velocity_tol2, stance_mode, contact_geom, qpos, qvel, a, g, limit, out
+    t, position_tol2, velocity_tol2, stance_mode, contact_geom, measured, qpos, qvel, a, g, limit, out
 ):
     """:func:`grid_control_step` for a caller that needs only the torques, written clipped to ``±limit`` (N m)
-    into ``out`` (the env's clip).
+    into ``out`` (the env's clip); ``measured`` as there (-1: from ``contact_geom``).
 
     With ``position_tol2 >= 0`` the disturbance check comes first (``ExpertPolicy._check_disturbance``): if the
     base's horizontal position (m) or velocity (m/s) is farther than the tolerances' square roots from the grid
@@ -246,7 +246,7 @@ def lane_control_step(  # pragma: no cover - compiled
             dp = (qpos[0] - row[0]) ** 2 + (qpos[1] - row[1]) ** 2
             if not (dv <= velocity_tol2 and dp <= position_tol2):
                 return OFF_PLAN
-    code = grid_control_step(t, stance_mode, contact_geom, -1, a, g)
+    code = grid_control_step(t, stance_mode, contact_geom, measured, a, g)  # a runtime -1: one compilation
     if code >= 0:
         K.clip_into(g.tau_ok, limit, out)
     return code

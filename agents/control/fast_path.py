@@ -29,6 +29,16 @@ _NO_TERRAIN = (np.empty(0), 0, 0, 0.0, 0.0, 0.0)
 """height-field kernel arguments that tell ``control_step`` to skip the normals."""
 
 
+def contact_pairs(data: mujoco.MjData) -> np.ndarray:
+    """(ncon, 2) int32: the geom pairs of ``data``'s contacts, C-contiguous whatever ``ncon``.
+
+    MuJoCo's own view (``data.contact.geom``) is strided for two contacts or more and contiguous for none or
+    one, which numba types as two array layouts: every compiled control kernel would compile twice, the second
+    time in the middle of a rollout (the first airborne step), for seconds.
+    """
+    return np.ascontiguousarray(data.contact.geom)
+
+
 class PackedReference(NamedTuple):
     """A reference sample as the fast path received it: a packed row (:data:`PACKED_FIELDS`) and a stance mask."""
 
@@ -103,7 +113,7 @@ class FastControlStep:
             packed, normals = self.arguments(data, terrain, gains)
             if packed is None:
                 return None
-            code = FK.packed_control_step(row, planned, stance_mode, data.contact.geom, measured, packed)
+            code = FK.packed_control_step(row, planned, stance_mode, contact_pairs(data), measured, packed)
         except (TypeError, NumbaError):  # arrays the kernel does not take (numba dispatch): the readable path,
             # for these inputs from now on: a failed compilation is not retried every step
             self._cache = (data, getattr(terrain, "heightfield", None), gains, None, None)
