@@ -422,22 +422,28 @@ class ExpertPolicy:
         step is a plain grid step; False (and no state changed) where the full call must run instead. The
         action is ignored, as by the call.
 
-        Taken in the nominal world only (the simulator's data shared), never on a slip-check step, and on a
-        disturbance-check step only while the base is on its plan (the check is compiled into the call).
+        Never taken on a slip-check step, and on a disturbance-check step only while the base is on its plan (the
+        check is compiled into the call). Outside the nominal world the measured state is first copied into the
+        expert's own model, as the call does.
         """
         grid = self._grid
-        if grid is None or not self.shares_simulator_data or data is not self._sim:
+        if grid is None or data is not self._sim:
             return False
         steps = self._steps + 1
         if self._adapt_friction and steps % SLIP_CHECK_EVERY == 0:
             return False
         ctrl = self.controller
+        if self.shares_simulator_data:
+            own, contacts = data, -1
+        else:
+            own, model = self.nominal.measure(data.qpos, data.qvel, data.time), self._model  # type: ignore[union-attr]
+            contacts = IK.foot_contact_mask(data.contact.geom, ctrl.foot_of_geom, ctrl.terrain_geom) if data.ncon else 0
         off_plan = _NO_OFF_PLAN_CHECK
-        if self.config.recovery and steps % DISTURBANCE_CHECK_EVERY == 0 and data.time - ctrl.t0 >= self._calm_after:
+        if self.config.recovery and steps % DISTURBANCE_CHECK_EVERY == 0 and own.time - ctrl.t0 >= self._calm_after:
             off_plan = self._off_plan_tol2
         done = ctrl.grid_step_into(
-            model, data, grid, self._t_start, self._t_end, data.sensordata, self._foot_sensor_adr, self._tau_ok,
-            limit, out, off_plan,
+            model, own, grid, self._t_start, self._t_end, data.sensordata, self._foot_sensor_adr, self._tau_ok,
+            limit, out, off_plan, contacts,
         )  # fmt: skip
         if done == 1:
             self._steps = steps

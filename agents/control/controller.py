@@ -370,10 +370,11 @@ class ComputedTorqueController:
         limit: np.ndarray,
         out: np.ndarray,
         off_plan: tuple[float, float] = (-1.0, -1.0),
+        contacts: int = -1,
     ) -> int:
-        """:meth:`step_on_grid` (``contacts=None``) for a caller that needs only the torques: they go into
-        ``tau_ok`` and, clipped to ``±limit`` (N m), into ``out`` (the simulator's ``ctrl``), in one compiled
-        call (:func:`~agents.control.controller_kernels.lane_control_step`). 1 when it took the step;
+        """:meth:`step_on_grid` (``contacts`` as there, -1 for None) for a caller that needs only the torques:
+        they go into ``tau_ok`` and, clipped to ``±limit`` (N m), into ``out`` (the simulator's ``ctrl``), in one
+        compiled call (:func:`~agents.control.controller_kernels.lane_control_step`). 1 when it took the step;
         0 where :meth:`step_on_grid` would return None (nothing but the inverse-dynamics buffers changed).
 
         :param off_plan: (m^2, (m/s)^2) squared tolerances of the base's horizontal position and velocity
@@ -388,7 +389,7 @@ class ComputedTorqueController:
         try:
             code = FK.lane_control_step(
                 t - t_start, off_plan[0], off_plan[1], STANCE_MODES.index(self.stance_mode), contact_pairs(data),
-                -1, data.qpos, data.qvel, args[0], args[1], limit, out,
+                contacts, data.qpos, data.qvel, args[0], args[1], limit, out,
             )  # fmt: skip
         except (TypeError, NumbaError):
             return 0

@@ -381,8 +381,8 @@ def test_the_compiled_abs_sum_is_numpys_pairwise_sum(n):
 def test_the_residual_lane_walks_exactly_as_the_call_it_replaces(randomization, monkeypatch):
     """The residual env with ``ResidualController.torques_into`` (through the expert's lane) against the same env
     with it removed: the same torques, trajectory, observations and applied residual (``info["residual_torque"]``)
-    bit for bit, under random residual actions, with the adaptive knee gains and stance gating. In a randomized
-    world the expert's lane (its own model's copy) declines, and so does the residual's."""
+    bit for bit, under random residual actions, with the adaptive knee gains and stance gating, in the nominal
+    world and in a randomized one (where the expert steps its own model's copy)."""
     runs = []
     for lane in (True, False):
         env = make_residual_env(
@@ -416,7 +416,4 @@ def test_the_residual_lane_walks_exactly_as_the_call_it_replaces(randomization, 
         np.testing.assert_array_equal(u1, u2)
         np.testing.assert_array_equal(o1, o2)
         assert r1 == r2
-    if randomization is None:
-        assert 0.8 * len(answers) < sum(answers) < len(answers)
-    else:
-        assert not any(answers)
+    assert 0.8 * len(answers) < sum(answers) < len(answers)
