@@ -183,23 +183,7 @@ class ResidualController:
         :param action: (12,) residual action in [-1, 1] (the env has clipped it).
         """
         tau_expert = np.asarray(self.expert(model, data, action), dtype=np.float64)
-        action = np.asarray(action, dtype=np.float64)
-        if self.adaptation is not None:
-            self._update_adaptation(data, tau_expert)
-        applied = self._compose(action, tau_expert, data)
-        if self._track_applied:
-            self._applied_sum += applied
-            self._applied_n += 1
-        return self._tau
-
-    def _compose(self, action: np.ndarray, tau_expert: np.ndarray, data: mujoco.MjData) -> float:
-        """Expert + residual into ``self._tau``, clipped to the motor limits; the applied mean (N m)."""
-        return RK.residual_torques_into(
-            action, tau_expert, self._expert_gain, self.gain, self.residual_scale,
-            self.residual_basis == "expert_torque",
-            self._touch if self._foot_adr is None else data.sensordata, self._foot_adr_or_none,
-            self._foot_adr is not None, self.torque_limit, self._tau,
-        )  # fmt: skip
+        return self._add_residual(data, action, tau_expert)
 
     def torques_into(
         self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray, out: np.ndarray, limit: np.ndarray
@@ -210,15 +194,25 @@ class ResidualController:
         lane = getattr(self.expert, "torques_into", None)
         if lane is None or not lane(model, data, action, self._tau_expert, self._no_limit):
             return False
-        tau_expert = self._tau_expert
+        tau = self._add_residual(data, action, self._tau_expert)
+        return bool(clip_finite_into(tau, limit, out))  # finite: the expert's torques and the action are
+
+    def _add_residual(self, data: mujoco.MjData, action: np.ndarray, tau_expert: np.ndarray) -> np.ndarray:
+        """Expert + residual in ``self._tau`` (N m, clipped to the motor limits), the adaptive gains updated first
+        and the applied residual counted."""
         action = np.asarray(action, dtype=np.float64)
         if self.adaptation is not None:
             self._update_adaptation(data, tau_expert)
-        applied = self._compose(action, tau_expert, data)
+        applied = RK.residual_torques_into(
+            action, tau_expert, self._expert_gain, self.gain, self.residual_scale,
+            self.residual_basis == "expert_torque",
+            self._touch if self._foot_adr is None else data.sensordata, self._foot_adr_or_none,
+            self._foot_adr is not None, self.torque_limit, self._tau,
+        )  # fmt: skip
         if self._track_applied:
             self._applied_sum += applied
             self._applied_n += 1
-        return bool(clip_finite_into(self._tau, limit, out))  # finite: the expert's torques and the action are
+        return self._tau
 
     def _update_adaptation(self, data: mujoco.MjData, tau_expert: np.ndarray) -> None:
         """Update the adaptive gains if a control step has begun (they multiply the expert's torques)."""
