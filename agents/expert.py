@@ -419,8 +419,9 @@ class ExpertPolicy:
     ) -> bool:
         """The hook's fast lane (:class:`~quad_uneven_env.env.PhysicsController`): the torques ``self(model,
         data, action)`` returns, clipped to ``±limit`` (N m), written into ``out`` in one compiled call when the
-        step is a plain grid step; False (and no state changed) where the full call must run instead. The
-        action is ignored, as by the call.
+        step is a plain grid step; False where the full call must run instead (nothing it would not redo the
+        same way changed: the own model's copy of the measured state, the inverse-dynamics buffers). The action
+        is ignored, as by the call.
 
         Never taken on a slip-check step, and on a disturbance-check step only while the base is on its plan (the
         check is compiled into the call). Outside the nominal world the measured state is first copied into the

@@ -189,8 +189,8 @@ class ResidualController:
         self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray, out: np.ndarray, limit: np.ndarray
     ) -> bool:
         """The hook's fast lane (:class:`~quad_uneven_env.env.PhysicsController`): the call's torques, clipped to
-        ``±limit`` (N m), into ``out``, where the expert's own lane answers (``expert.torques_into``); False (and
-        no state changed) otherwise."""
+        ``±limit`` (N m), into ``out``, where the expert's own lane answers (``expert.torques_into``); False
+        otherwise (as the expert's lane: then the call runs)."""
         lane = getattr(self.expert, "torques_into", None)
         if lane is None or not lane(model, data, action, self._tau_expert, self._no_limit):
             return False
