@@ -393,9 +393,7 @@ class ExpertPolicy:
             if self.shares_simulator_data:
                 contacts = None
             else:
-                contacts = (
-                    IK.foot_contact_mask(data.contact.geom, ctrl.foot_of_geom, ctrl.terrain_geom) if data.ncon else 0
-                )
+                contacts = ctrl.foot_contact_bits(data)
             grid = self._grid
             if grid is not None:  # the controller's call below when it takes its fast path, in one compiled call
                 m = model if contacts is None else self._model
@@ -438,7 +436,7 @@ class ExpertPolicy:
             own, contacts = data, -1
         else:
             own, model = self.nominal.measure(data.qpos, data.qvel, data.time), self._model  # type: ignore[union-attr]
-            contacts = IK.foot_contact_mask(data.contact.geom, ctrl.foot_of_geom, ctrl.terrain_geom) if data.ncon else 0
+            contacts = ctrl.foot_contact_bits(data)
         off_plan = _NO_OFF_PLAN_CHECK
         if self.config.recovery and steps % DISTURBANCE_CHECK_EVERY == 0 and own.time - ctrl.t0 >= self._calm_after:
             off_plan = self._off_plan_tol2

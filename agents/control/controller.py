@@ -288,7 +288,7 @@ class ComputedTorqueController:
         if contacts is not None:
             meas = contacts
         else:
-            meas = K.foot_contact_mask(data.contact.geom, self.foot_of_geom, self.terrain_geom) if data.ncon else 0
+            meas = self.foot_contact_bits(data)
         try:
             stance = self._stance_memo[(ref.stance, meas, self.stance_mode)]
         except (KeyError, TypeError):
@@ -314,6 +314,10 @@ class ComputedTorqueController:
         tau = np.empty(C.N_JOINTS)
         K.clip_into(result.tau, self.torque_limit, tau)
         return tau
+
+    def foot_contact_bits(self, data: mujoco.MjData) -> int:
+        """Bitmask of the feet touching the terrain in ``data.contact`` (bit i: leg i; after ``mj_step1``)."""
+        return K.foot_contact_mask(contact_pairs(data), self.foot_of_geom, self.terrain_geom) if data.ncon else 0
 
     def step_on_grid(
         self,

@@ -286,3 +286,27 @@ def test_the_grid_step_leaves_the_controllers_diagnostics():
             np.testing.assert_array_equal(getattr(ref, name), getattr(ctrl.last_reference, name), err_msg=name)
         compared += 1
     assert compared >= 20
+
+
+def test_the_contact_pairs_have_one_numba_type_whatever_the_contact_count():
+    """``contact_pairs`` hands the compiled kernels one array type with no contact and with several, where
+    MuJoCo's own view changes layout (so each kernel would compile again at the first airborne step); the
+    pairs are MuJoCo's."""
+    import numba
+
+    from agents.control.fast_path import contact_pairs
+
+    env = gym.make("QuadUneven-v0", terrain="rough")
+    env.reset(seed=0)
+    u = env.unwrapped
+    standing = u.data
+    airborne = mujoco.MjData(u.model)
+    airborne.qpos[:] = standing.qpos
+    airborne.qpos[2] += 1.0
+    mujoco.mj_forward(u.model, standing)
+    mujoco.mj_forward(u.model, airborne)
+    assert standing.ncon >= 2 and airborne.ncon == 0
+    assert numba.typeof(standing.contact.geom) != numba.typeof(airborne.contact.geom)  # what it guards against
+    assert numba.typeof(contact_pairs(standing)) == numba.typeof(contact_pairs(airborne))
+    np.testing.assert_array_equal(contact_pairs(standing), standing.contact.geom)
+    assert contact_pairs(airborne).shape == (0, 2)
