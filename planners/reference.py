@@ -98,7 +98,7 @@ class Reference:
             sel = (t > sw.t_start) & (t < sw.t_end)
             if np.any(sel):
                 ts = t[sel]
-                x[sel, i], xd[sel, i], xdd[sel, i] = sw.position(ts), sw.velocity(ts), sw.acceleration(ts)
+                x[sel, i], xd[sel, i], xdd[sel, i] = sw.spline.evaluate(ts)  # position, velocity, acceleration
         return x, xd, xdd
 
     def evaluate(self, t: np.ndarray, newton_steps: int = 4, p_guess: np.ndarray | None = None):
