@@ -12,6 +12,7 @@ not from finite differences.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -62,8 +63,8 @@ class Reference:
         p, pd, pdd, q, qd, qdd, _ = self._grid
         quat, w, dw = self._orientation(self._grid_t)
         self._packed = np.concatenate([p, quat, pd, w, pdd, dw, q, qd, qdd], axis=1)
-        # Python lists: the controller looks one up every physics step, and list indexing is cheaper.
-        self._rows = list(self._packed)
+        # Row views made when asked for: the lane looks rows up in compiled code, the Python path a few times a cycle.
+        self._rows = PackedRows(self._packed)
         self._grid_t_list = self._grid_t.tolist()
         self.grid = ReferenceGrid(
             self._grid_t, self._grid_dt, self.t_end, self._packed, np.array(self._grid_mask, dtype=np.int64), self._rows
@@ -98,7 +99,7 @@ class Reference:
             sel = (t > sw.t_start) & (t < sw.t_end)
             if np.any(sel):
                 ts = t[sel]
-                x[sel, i], xd[sel, i], xdd[sel, i] = sw.position(ts), sw.velocity(ts), sw.acceleration(ts)
+                x[sel, i], xd[sel, i], xdd[sel, i] = sw.spline.evaluate(ts)  # position, velocity, acceleration
         return x, xd, xdd
 
     def evaluate(self, t: np.ndarray, newton_steps: int = 4, p_guess: np.ndarray | None = None):
@@ -163,6 +164,21 @@ class Reference:
             qdd_joints=qdd.copy(),
             stance=stance,  # type: ignore[arg-type]
         )
+
+
+class PackedRows(Sequence):
+    """The rows of a (T, 55) packed grid as a sequence of (55,) views (made at each lookup; not to be written)."""
+
+    def __init__(self, packed: np.ndarray) -> None:
+        self._packed = packed
+
+    def __len__(self) -> int:
+        """Number of grid rows."""
+        return self._packed.shape[0]
+
+    def __getitem__(self, k: int) -> np.ndarray:  # type: ignore[override]
+        """Row ``k`` (55,), a view."""
+        return self._packed[k]
 
 
 def aim_feet_below_footholds(

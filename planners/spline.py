@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import solve_banded
 
+from planners.spline_kernels import hermite_into
+
 
 class ClampedCubicSpline:
     """Piecewise cubic through ``points`` (N x D) at increasing ``tau`` (N,), zero velocity at both ends.
@@ -49,6 +51,15 @@ class ClampedCubicSpline:
             d = (12 * s - 6) * y0 + (6 * s - 4) * v0 + (-12 * s + 6) * y1 + (6 * s - 2) * v1
             return np.where(outside, 0.0, d / (h * h))
         raise ValueError(f"derivative must be 0, 1 or 2, got {derivative}")
+
+    def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Value, velocity and acceleration (each (T, D)) at times ``t`` (T,) (s) in one compiled pass: the floats
+        of ``self(t, 0)``, ``self(t, 1)`` and ``self(t, 2)``."""
+        t = np.ascontiguousarray(np.atleast_1d(np.asarray(t, dtype=float)))
+        shape = (t.shape[0], self.points.shape[1])
+        pos, vel, acc = np.empty(shape), np.empty(shape), np.empty(shape)
+        hermite_into(self.tau, self.points, self.slopes, t, pos, vel, acc)
+        return pos, vel, acc
 
 
 def _clamped_slopes(tau: np.ndarray, y: np.ndarray) -> np.ndarray:

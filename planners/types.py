@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from typing import NamedTuple, Protocol
 
 import numpy as np
@@ -114,5 +115,5 @@ class ReferenceGrid(NamedTuple):
     """(T, 55) the packed rows (:data:`PACKED_FIELDS`); not to be written."""
     masks: np.ndarray
     """(T,) int64 planned stance bitmask of each row (bit i: leg i)."""
-    rows: list
-    """the rows of ``packed`` as a list of (55,) views (cheaper to index from Python)."""
+    rows: Sequence[np.ndarray]
+    """the rows of ``packed`` as (55,) views (a sequence indexed like ``packed``)."""

@@ -44,11 +44,10 @@ def _point_jac(s1, c1, s2, c2, s23, c23, a, b, p, J):  # pragma: no cover - comp
 
 
 @nb.njit(cache=False, nogil=True)
-def _leg_jd(q1, q2, q3, d1, d2, d3, a, b, out):  # pragma: no cover - compiled
-    """(dJ/dt) qd of :func:`planners.wholebody.leg_point` into out (3,)."""
-    s1, c1 = math.sin(q1), math.cos(q1)
-    s2, c2 = math.sin(q2), math.cos(q2)
-    s23, c23 = math.sin(q2 + q3), math.cos(q2 + q3)
+def _leg_jd(trig, d1, d2, d3, a, b, out):  # pragma: no cover - compiled
+    """(dJ/dt) qd of :func:`planners.wholebody.leg_point` into out (3,); ``trig``: (6,) sin, cos of q1, q2 and
+    q2 + q3 (as :func:`_legs` stores them)."""
+    s1, c1, s2, c2, s23, c23 = trig[0], trig[1], trig[2], trig[3], trig[4], trig[5]
     w = -a * c2 - b * c23
     w2, w3 = a * s2 + b * s23, b * s23
     d23 = d2 + d3
@@ -61,8 +60,9 @@ def _leg_jd(q1, q2, q3, d1, d2, d3, a, b, out):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=False, nogil=True)
-def _legs(x, p, hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A):  # pragma: no cover - compiled
-    """IK of the four legs for base position p, then f, F (COM moment), J, J^-1 and A = F J^-1 per leg."""
+def _legs(x, p, hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A, trig):  # pragma: no cover - compiled
+    """IK of the four legs for base position p, then f, F (COM moment), J, J^-1 and A = F J^-1 per leg; ``trig``
+    (4, 6): sin, cos of q1, q2 and q2 + q3 per leg."""
     for leg in range(4):
         q1, q2, q3 = _ik(
             x[leg, 0] - p[0] - hips[leg, 0],
@@ -75,6 +75,8 @@ def _legs(x, p, hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A):  # pragma
         q[leg, 0], q[leg, 1], q[leg, 2] = q1, q2, q3
         s1, c1, s2, c2 = math.sin(q1), math.cos(q1), math.sin(q2), math.cos(q2)
         s23, c23 = math.sin(q2 + q3), math.cos(q2 + q3)
+        tr = trig[leg]
+        tr[0], tr[1], tr[2], tr[3], tr[4], tr[5] = s1, c1, s2, c2, s23, c23
         _point_jac(s1, c1, s2, c2, s23, c23, ma, mb, f[leg], F[leg])
         _point_jac(s1, c1, s2, c2, s23, c23, l1, l2, f[4], J[leg])  # f[4]: scratch for the foot point
         inv3_into(J[leg], Jinv[leg])
@@ -110,6 +112,7 @@ def place_base_grid(
     J = np.empty((4, 3, 3))
     Jinv = np.empty((4, 3, 3))
     A = np.empty((4, 3, 3))
+    trig = np.empty((4, 6))  # of the last _legs call: the final q's, reused by the acceleration terms
     K = np.empty((3, 3))
     Kinv = np.empty((3, 3))
     p = np.empty(3)
@@ -120,13 +123,13 @@ def place_base_grid(
     for t in range(T):
         if t == 0:
             # initial guess: the base where the COG is, corrected by the COM offset of that stance
-            _legs(x[t], c[t], hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A)
+            _legs(x[t], c[t], hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A, trig)
             for r in range(3):
                 p[r] = c[t, r] - (hip_moment[r] + f[0, r] + f[1, r] + f[2, r] + f[3, r]) / mass
         # later points start from the previous solution (grid points are close: Newton converges
         # quadratically from there, so fewer steps reach machine precision)
         for _ in range(newton_steps if t == 0 else max(newton_steps - 1, 1)):
-            _legs(x[t], p, hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A)
+            _legs(x[t], p, hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A, trig)
             for r in range(3):
                 res[r] = p[r] + (hip_moment[r] + f[0, r] + f[1, r] + f[2, r] + f[3, r]) / mass - c[t, r]
                 for s in range(3):
@@ -136,7 +139,7 @@ def place_base_grid(
                 v[r] = Kinv[r, 0] * res[0] + Kinv[r, 1] * res[1] + Kinv[r, 2] * res[2]
             for r in range(3):
                 p[r] -= v[r]
-        _legs(x[t], p, hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A)
+        _legs(x[t], p, hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A, trig)
         for r in range(3):
             for s in range(3):
                 K[r, s] = (1.0 if r == s else 0.0) - (A[0, r, s] + A[1, r, s] + A[2, r, s] + A[3, r, s]) / mass
@@ -163,8 +166,8 @@ def place_base_grid(
             v[r] = 0.0
         for leg in range(4):
             d1, d2, d3 = qd_out[t, 3 * leg], qd_out[t, 3 * leg + 1], qd_out[t, 3 * leg + 2]
-            _leg_jd(q[leg, 0], q[leg, 1], q[leg, 2], d1, d2, d3, l1, l2, jd[leg])
-            _leg_jd(q[leg, 0], q[leg, 1], q[leg, 2], d1, d2, d3, ma, mb, fd)
+            _leg_jd(trig[leg], d1, d2, d3, l1, l2, jd[leg])
+            _leg_jd(trig[leg], d1, d2, d3, ma, mb, fd)
             for r in range(3):
                 acc = fd[r]
                 for s in range(3):

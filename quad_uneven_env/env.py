@@ -34,7 +34,7 @@ from quad_uneven_env.observations import (
     observation_structure,
     observation_table,
 )
-from quad_uneven_env.physics import RobotIndex, instability_warnings
+from quad_uneven_env.physics import BAD_WARNINGS, RobotIndex, instability_warnings
 from quad_uneven_env.randomization import (
     EpisodeDraw,
     ModelRandomizer,
@@ -97,6 +97,9 @@ ENV_ARGS: tuple[Param, ...] = (
     ),
 )
 """The env's scalar arguments: their checks at make time, their error messages and the Arguments table."""
+
+_INF_MOMENTS = np.full(C.N_LEGS, np.inf)
+"""the padding of ``info["edge_moments"]`` (copied, never written)."""
 
 _STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 """What a failed control step restores: time, qpos, qvel, act, warm start, ctrl, applied forces, ..."""
@@ -338,6 +341,9 @@ class QuadUnevenEnv(gym.Env):
         self.data = mujoco.MjData(self.model)
         self._saved_state = np.empty(mujoco.mj_stateSize(self.model, _STATE))
         self._warning_counts = self.data.warning.number  # live view of MuJoCo's warning counters
+        # the same counters as Python ints at a fraction of numpy's indexing cost (read every physics step)
+        self._warning_view = memoryview(self._warning_counts)
+        self._qvel_joints = self.data.qvel[6:]  # MuJoCo never reallocates data's buffers
         self._dt = float(self.model.opt.timestep) * self.frame_skip
         self.idx = RobotIndex.from_model(self.model)
         self._mass = self.idx.total_mass
@@ -365,6 +371,9 @@ class QuadUnevenEnv(gym.Env):
         self._renderer = None
 
         self._prev_action = np.zeros(C.N_JOINTS)
+        self._unit_bounds = np.ones(C.N_JOINTS)
+        self._tau_frac = np.zeros(C.N_JOINTS)  # the reward's scratch buffers
+        self._joint_power = np.zeros(C.N_JOINTS)
         self._meas = StepMeasurement(
             self.model,
             self.data,
@@ -535,11 +544,12 @@ class QuadUnevenEnv(gym.Env):
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (C.N_JOINTS,):
             raise ValueError(f"action must have shape ({C.N_JOINTS},), got {a.shape}")
-        if not np.isfinite(a).all():
+        clipped = np.empty(C.N_JOINTS)
+        if not clip_finite_into(a, self._unit_bounds, clipped):  # = np.clip to [-1, 1], compiled
             raise ValueError(
                 f"action must be finite, got NaN/Inf at indices {np.flatnonzero(~np.isfinite(a)).tolist()}"
             )
-        a = np.minimum(np.maximum(a, -1.0), 1.0)  # = np.clip, without its Python-level overhead
+        a = clipped
         m, d = self.model, self.data
         x_before = float(self._meas.cog[0])
 
@@ -582,9 +592,14 @@ class QuadUnevenEnv(gym.Env):
 
         cog_x = float(meas.cog[0])
         cog_vel_x = 0.0 if diverged else (cog_x - x_before) / self.dt
-        torque = d.actuator_force
-        tau_frac = np.zeros(C.N_JOINTS) if diverged else torque / self.idx.torque_limit
-        power = 0.0 if diverged else float(np.abs(torque * d.qvel[6:]).sum())
+        torque, tau_frac = d.actuator_force, self._tau_frac
+        if diverged:
+            tau_frac[:] = 0.0
+            power = 0.0
+        else:
+            np.divide(torque, self.idx.torque_limit, out=tau_frac)
+            joint_power = np.multiply(torque, self._qvel_joints, out=self._joint_power)
+            power = float(np.abs(joint_power, out=joint_power).sum())
         terms = reward_terms(self.reward_weights, cog_vel_x, index_norm, tau_frac, power, self._mass * self._g, fell)
         if command is not None:
             terms.update(self._command_terms(meas, command, diverged))
@@ -680,15 +695,18 @@ class QuadUnevenEnv(gym.Env):
         (a ring of k + 1 commands); pushes set the trunk's ``xfrc_applied`` per step.
         """
         m, d = self.model, self.data
-        ctrl, warnings = d.ctrl, self._warning_counts
+        ctrl = d.ctrl
         k, ring, n = self._latency, self._ctrl_ring, self._physics_step
         forces = None if segments is None else [f for length, f in segments for _ in range(length)]
         lane, limit = getattr(self._controller, "torques_into", None), self.idx.torque_limit
+        counts, at_reset = self._warning_view, self._warnings_at_reset
+        w0, w1, w2 = BAD_WARNINGS
+        step1, step2 = mujoco.mj_step1, mujoco.mj_step2
         for j in range(self.frame_skip):
             if forces is not None and (j == 0 or forces[j] is not forces[j - 1]):
                 self._set_push(forces[j])
-            mujoco.mj_step1(m, d)
-            if instability_warnings(warnings) > self._warnings_at_reset:
+            step1(m, d)
+            if counts[w0] + counts[w1] + counts[w2] > at_reset:  # instability_warnings(data)
                 return None  # reported by the caller; the controller must not see a garbage state
             out = ctrl if k == 0 else ring[(n + j) % (k + 1)]
             try:
@@ -701,7 +719,7 @@ class QuadUnevenEnv(gym.Env):
                     return reason
             if k:
                 ctrl[:] = ring[(n + j + 1) % (k + 1)]  # the command of k steps ago
-            mujoco.mj_step2(m, d)  # a bad qacc here is caught by the next check (or the caller's)
+            step2(m, d)  # a bad qacc here is caught by the next check (or the caller's)
         return None
 
     def _step_open_loop(self, a: np.ndarray, segments: list | None) -> None:
@@ -852,7 +870,7 @@ class QuadUnevenEnv(gym.Env):
     @staticmethod
     def _padded_moments(meas: StepMeasurement) -> np.ndarray:
         """(4,) edge moments (N m) of the clockwise support edges, +inf beyond the number of stance feet."""
-        out = np.full(C.N_LEGS, np.inf)
+        out = _INF_MOMENTS.copy()
         m = meas.moments
         out[: m.shape[0]] = m
         return out

@@ -264,7 +264,9 @@ def state_is_finite(data: mujoco.MjData) -> bool:
 
 
 _W = mujoco.mjtWarning
-_BAD_WARNINGS = (int(_W.mjWARN_BADQPOS), int(_W.mjWARN_BADQVEL), int(_W.mjWARN_BADQACC))
+BAD_WARNINGS: tuple[int, int, int] = (int(_W.mjWARN_BADQPOS), int(_W.mjWARN_BADQVEL), int(_W.mjWARN_BADQACC))
+"""indices of MuJoCo's bad-qpos, bad-qvel and bad-qacc warnings in ``data.warning``."""
+_BAD_WARNINGS = BAD_WARNINGS
 
 
 def instability_warnings(data: mujoco.MjData | np.ndarray) -> int:

@@ -51,6 +51,7 @@ from agents.control.inverse_dynamics import (
 from agents.control.verify import IDCheck, verify_inverse_dynamics
 from planners.types import ReferenceGrid, ReferenceSample
 from quad_uneven_env import constants as C
+from quad_uneven_env.compiled_call import entry_point
 from quad_uneven_env.fields import check_fields, param
 from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
 from quad_uneven_env.robot.dynamics.base import DynamicsTerms, make_dynamics
@@ -174,6 +175,10 @@ class ComputedTorqueController:
         self._stance_memo: dict = {}
         self._grid_cache: tuple | None = None  # (grid, touch, tau_ok, their GridArguments) of step_on_grid
         self._grid_step: tuple | None = None  # (code, t, grid, workspace version) of the last grid step, unread
+        self._lane_call: tuple | None = None
+        """(lane_control_step's compiled entry point, then the objects that fix its argument types: StepArguments,
+        GridArguments, limit, out, the stance mode; its code) of :meth:`grid_step_into` (see
+        :mod:`quad_uneven_env.compiled_call`)."""
 
     @property
     def last(self) -> IDResult | None:
@@ -234,7 +239,7 @@ class ComputedTorqueController:
             np.empty(C.NV),
         )
         self._stance_memo.clear()
-        self._grid_cache = self._grid_step = None
+        self._grid_cache = self._grid_step = self._lane_call = None
         self._fast = None
         if self.backend == "mujoco":
             self._fast = FastControlStep(
@@ -390,11 +395,25 @@ class ComputedTorqueController:
         if args is None:
             return 0
         self.id.workspace_version += 1
+        a, g = args
+        lane = self._lane_call
         try:
-            code = FK.lane_control_step(
-                t - t_start, off_plan[0], off_plan[1], STANCE_MODES.index(self.stance_mode), contact_pairs(data),
-                contacts, data.qpos, data.qvel, args[0], args[1], limit, out,
-            )  # fmt: skip
+            if (
+                lane is not None and lane[1] is a and lane[2] is g and lane[3] is limit and lane[4] is out
+                and lane[5] is self.stance_mode
+            ):  # fmt: skip
+                code = lane[0](
+                    t - t_start, off_plan[0], off_plan[1], lane[6], contact_pairs(data), contacts, data.qpos,
+                    data.qvel, a, g, limit, out,
+                )  # fmt: skip
+            else:
+                call = (
+                    t - t_start, float(off_plan[0]), float(off_plan[1]), STANCE_MODES.index(self.stance_mode),
+                    contact_pairs(data), int(contacts), data.qpos, data.qvel, a, g, limit, out,
+                )  # fmt: skip
+                code = FK.lane_control_step(*call)
+                entry = entry_point(FK.lane_control_step, call)
+                self._lane_call = None if entry is None else (entry, a, g, limit, out, self.stance_mode, call[3])
         except (TypeError, NumbaError):
             return 0
         if code < 0:

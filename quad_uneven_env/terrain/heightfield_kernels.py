@@ -105,16 +105,26 @@ def patch_stats_into(flat, nrow, ncol, ox, oy, cell, k, radius, xs, ys, out):  #
         b = (s_xx * (b_y * s_1 - b_1 * s_y) - b_x * (s_xy * s_1 - s_y * s_x) + s_x * (s_xy * b_1 - b_y * s_x)) / det
         c = (s_xx * (s_yy * b_1 - s_y * b_y) - s_xy * (s_xy * b_1 - b_y * s_x) + b_x * (s_xy * s_y - s_yy * s_x)) / det
         rough = 0.0
-        steep = 0.0
+        # The steepest triangle: the largest hypot (x / cell is monotone, so max(hypot) / cell = max(hypot / cell)).
+        # A hypot is evaluated only where its squared length could reach the largest so far (a 1e-9 relative
+        # margin over rounding): the others cannot change the maximum, which stays the same float.
+        steep_h = 0.0
+        below = 0.0
         for i in range(p):
             for j in range(p):
                 if mask[i, j]:
                     rough = max(rough, abs(hp[i, j] - (a * dxs[j] + b * dys[i] + c)))
                 if i < p - 1 and j < p - 1 and (mask[i, j] or mask[i, j + 1] or mask[i + 1, j] or mask[i + 1, j + 1]):
                     h00, h01, h10, h11 = hp[i, j], hp[i, j + 1], hp[i + 1, j], hp[i + 1, j + 1]
-                    lo = math.hypot(h01 - h00, h11 - h01) / cell
-                    up = math.hypot(h11 - h10, h10 - h00) / cell
-                    steep = max(steep, lo, up)
+                    u, v = h01 - h00, h11 - h01
+                    if u * u + v * v >= below:
+                        steep_h = max(steep_h, math.hypot(u, v))
+                        below = steep_h * steep_h * (1.0 - 1e-9)
+                    u, v = h11 - h10, h10 - h00
+                    if u * u + v * v >= below:
+                        steep_h = max(steep_h, math.hypot(u, v))
+                        below = steep_h * steep_h * (1.0 - 1e-9)
+        steep = steep_h / cell
         norm = math.sqrt(a * a + b * b + 1.0)
         out[n, 0] = math.atan(math.hypot(a, b))
         out[n, 1] = -a / norm

@@ -190,7 +190,8 @@ def test_the_grid_step_walks_exactly_as_the_controller_call_it_replaces(distribu
 def test_the_hooks_fast_lane_walks_exactly_as_the_call_it_replaces(terrain, share, monkeypatch):
     """The env with the expert's fast lane (``ExpertPolicy.torques_into``: one compiled call per physics step,
     the disturbance check inside it) against the same env with the lane removed (the hook's full call every
-    step): the same torques, trajectory, log and recoveries, bit for bit. The base is knocked off its plan
+    step): the same torques, trajectory, log and recoveries, bit for bit (the lane calling its kernel's compiled
+    entry point from its second step on, :mod:`quad_uneven_env.compiled_call`). The base is knocked off its plan
     (0.3 m/s sideways) so that a check inside the lane finds it off and the full call replans. With
     ``share=False`` both copy the measured state into the nominal model's own data and hand in the contacts."""
     runs = []
@@ -216,6 +217,8 @@ def test_the_hooks_fast_lane_walks_exactly_as_the_call_it_replaces(terrain, shar
             qpos.append(d.qpos.copy())
             ctrl.append(d.ctrl.copy())
             assert not fell
+        if lane:  # the lane's later calls went to the kernel's compiled entry point, past numba's dispatcher
+            assert policy.controller._lane_call is not None
         runs.append((np.array(qpos), np.array(ctrl), answers, list(policy.failure_log), policy.recoveries))
         monkeypatch.undo()
     (q_lane, u_lane, answers, log_lane, rec_lane), (q_call, u_call, _, log_call, rec_call) = runs

@@ -91,3 +91,20 @@ def test_swing_workspace_violation_names_leg():
             hip_position=lambda t: np.tile([0.1, 0.0, 1.0], (len(t), 1)),
             reach=(0.1, 0.42),
         )
+
+
+@pytest.mark.parametrize("n_knots", [2, 3, 5])
+def test_spline_evaluate_gives_the_floats_of_each_derivative_call(n_knots):
+    """``ClampedCubicSpline.evaluate`` (one compiled pass) against ``spline(t, d)`` (numpy), bit for bit: inside,
+    at the knots, at and beyond both ends."""
+    rng = np.random.default_rng(n_knots)
+    tau = np.cumsum(rng.uniform(0.05, 0.4, n_knots)) + 1.3
+    spline = ClampedCubicSpline(tau, rng.normal(0.0, 0.2, (n_knots, 3)))
+    t = np.concatenate([rng.uniform(tau[0] - 0.2, tau[-1] + 0.2, 400), tau, [tau[0] - 1e-12, tau[-1] + 1e-12]])
+    pos, vel, acc = spline.evaluate(t)
+    for d, got in enumerate((pos, vel, acc)):
+        want = spline(t, d)
+        assert got.shape == want.shape
+        assert got.tobytes() == want.tobytes(), f"derivative {d}"
+    one = spline.evaluate(float(tau[0]) + 0.01)
+    assert [a.shape for a in one] == [(1, 3)] * 3

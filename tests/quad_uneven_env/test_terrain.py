@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 import pytest
@@ -143,6 +145,45 @@ def test_patch_stats_compiled_matches_numpy_twin(radius):
     for name, a, b in zip(ref._fields, fast, ref, strict=True):
         assert a.shape == b.shape, name
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12, err_msg=name)
+
+
+def _max_slope_every_triangle(hf: HeightField, x: float, y: float, radius: float) -> float:
+    """The compiled kernel's max slope (rad) before it skipped triangles: every hypot of the disc's triangles."""
+    nrow, ncol = hf._h.shape
+    cell, (ox, oy) = hf._cell, hf._origin
+    k = int(np.ceil(radius / cell))
+    p = 2 * k + 2
+    c0, r0 = math.floor((x - ox) / cell), math.floor((y - oy) / cell)
+    dxs = [(ox + (c0 - k + j) * cell) - x for j in range(p)]
+    dys = [(oy + (r0 - k + j) * cell) - y for j in range(p)]
+    hp = [[float(hf._flat[min(max(r0 - k + i, 0), nrow - 1) * ncol + min(max(c0 - k + j, 0), ncol - 1)])
+           for j in range(p)] for i in range(p)]  # fmt: skip
+    mask = [[dxs[j] ** 2 + dys[i] ** 2 <= radius * radius or (k <= i < k + 2 and k <= j < k + 2) for j in range(p)]
+            for i in range(p)]  # fmt: skip
+    steep = 0.0
+    for i in range(p - 1):
+        for j in range(p - 1):
+            if mask[i][j] or mask[i][j + 1] or mask[i + 1][j] or mask[i + 1][j + 1]:
+                h00, h01, h10, h11 = hp[i][j], hp[i][j + 1], hp[i + 1][j], hp[i + 1][j + 1]
+                steep = max(steep, math.hypot(h01 - h00, h11 - h01) / cell, math.hypot(h11 - h10, h10 - h00) / cell)
+    return math.atan(steep)
+
+
+@pytest.mark.parametrize("radius", [0.013, 0.05, 0.11])
+def test_patch_stats_max_slope_is_the_float_of_every_triangle(radius):
+    """The kernel evaluates a triangle's hypot only where it could beat the steepest so far: the same float."""
+    rng = np.random.default_rng(5)
+    heights = np.cumsum(rng.normal(0.0, 0.01, (35, 50)), axis=1)
+    heights[:, 25:] += 0.08
+    heights[10:12, 5:8] = 0.02  # equal heights: ties
+    hf = HeightField(heights, 0.02, origin=(-0.3, 0.1))
+    (x0, x1), (y0, y1) = hf.extent
+    x, y = rng.uniform(x0 - 0.1, x1 + 0.1, 60), rng.uniform(y0 - 0.1, y1 + 0.1, 60)
+    got = hf.patch_stats(x, y, radius).max_slope
+    want = [_max_slope_every_triangle(hf, float(a), float(b), radius) for a, b in zip(x, y, strict=True)]
+    assert got.tolist() == want
+    flat = HeightField(np.zeros((20, 20)), 0.02)
+    assert flat.patch_stats([0.1, 0.2], [0.1, 0.2], radius).max_slope.tolist() == [0.0, 0.0]
 
 
 @pytest.mark.parametrize(
