@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 
 from quad_uneven_env import constants as C
-from quad_uneven_env.compiled_call import entry_point
+from quad_uneven_env.compiled_call import argument_type, entry_point
 from quad_uneven_env.measurement_kernels import measure_observe_into
 from quad_uneven_env.observations import ObsField, observation_structure
 from quad_uneven_env.physics import ContactMeasurement, RobotIndex
@@ -131,8 +131,9 @@ class StepMeasurement:
         self.obs = np.zeros(self._obs_low.shape[0])
         """float64 observation, clipped to its bounds."""
         self._call: tuple | None = None
-        # (the kernel's compiled entry point, the height field, action and gravity arrays it was resolved with):
-        # every other array argument is a buffer of this object (see quad_uneven_env.compiled_call)
+        # (the kernel's compiled entry point, the height field, action and gravity arrays it was resolved with, the
+        # height field's numba type): every other array argument is a buffer of this object; a new terrain's heights
+        # of the same type keep the entry point (see quad_uneven_env.compiled_call)
 
     # ------------------------------------------------------------------ outputs
     @property
@@ -195,8 +196,12 @@ class StepMeasurement:
         flat, nrow, ncol, ox, oy, inv_cell = heightfield.kernel_args
         call = self._call
         kernel = None
-        if call is not None and call[1] is flat and call[2] is prev_action and call[3] is self.gravity:
-            kernel = call[0]
+        if call is not None and call[2] is prev_action and call[3] is self.gravity:
+            if call[1] is flat:
+                kernel = call[0]
+            elif argument_type(measure_observe_into, flat) == call[4]:  # a new terrain (every reset), same type
+                kernel = call[0]
+                self._call = (kernel, flat, prev_action, self.gravity, call[4])
         args = (
             self._sensordata,
             self._site_xpos,
@@ -240,7 +245,8 @@ class StepMeasurement:
         else:
             measure_observe_into(*args)
             entry = entry_point(measure_observe_into, args)
-            self._call = None if entry is None else (entry, flat, prev_action, self.gravity)
+            flat_type = argument_type(measure_observe_into, flat)
+            self._call = None if entry is None else (entry, flat, prev_action, self.gravity, flat_type)
         sl = self._command
         if sl is not None:
             np.clip(command, self._obs_low[sl], self._obs_high[sl], out=self.obs[sl])
