@@ -34,9 +34,10 @@ def entry_point(kernel: Any, args: Sequence[Any]) -> Callable[..., Any] | None:
 
 
 def argument_type(kernel: Any, value: Any) -> Any:
-    """The numba type ``kernel``'s dispatcher gives ``value`` as an argument (~6 µs for an array; numba's
-    ``pyobject`` for a value it cannot type), or None when ``kernel`` is not a numba dispatcher: to check that a new
-    object (e.g. a new terrain's array) fits an entry point resolved before."""
+    """The numba type ``kernel``'s dispatcher gives ``value`` as an argument (numba's ``pyobject`` for a value it
+    cannot type), or None when ``kernel`` is not a numba dispatcher: to check that a new object (e.g. a new terrain's
+    array) fits an entry point resolved before. Python-level typing, ~6 µs for an array (the dispatcher's own call
+    types an array in C, ~0.04 µs): for a cache miss, not for every call."""
     typeof = getattr(kernel, "typeof_pyval", None)
     if typeof is None:
         return None
