@@ -321,6 +321,12 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     )
     p.add_argument("--config", default=None, help="training config YAML (default configs/rl/ALGO_residual.yaml)")
     p.add_argument(
+        "--init-from",
+        default=None,
+        help="continue from a saved model (a run's folder or .zip): its weights, optimizers and observation "
+        "statistics; trained for the same env (default: the config's, else a new model)",
+    )
+    p.add_argument(
         "--overwrite",
         action="store_true",
         help="DIR may hold an earlier run: delete its outputs first (other files are kept); without it a "
@@ -348,6 +354,7 @@ def run_train_command(args: argparse.Namespace) -> int:
         "residual_basis": args.residual_basis,
         "gain_adaptation": args.gain_adaptation,
         "time_limit_min": args.time_limit_min,
+        "init_from": args.init_from,
     }
     cfg = load_train_config(args.config, overrides)
     if args.randomization is not None:

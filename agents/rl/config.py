@@ -112,6 +112,11 @@ class TrainConfig:
     """keyword arguments of the SB3 algorithm class (``learning_rate``, ``n_steps``, ...)."""
     policy_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
     """SB3 ``policy_kwargs`` (``net_arch``, ``log_std_init``, ...)."""
+    init_from: str | None = None
+    """a warm start: a saved model (a training run's folder or its ``.zip``) whose weights, optimizer states and
+    observation statistics this run starts from (:mod:`agents.rl.warm_start`); it must have been trained for the
+    same env (``algo``, ``residual_*``, ``gain_adaptation``, ``expert_features``, ``normalize_obs``,
+    ``env_kwargs``). None: a new model."""
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-serialisable copy."""
@@ -168,6 +173,10 @@ def validate(cfg: TrainConfig) -> TrainConfig:
             f"residual_legs={cfg.residual_legs!r}, residual_basis={cfg.residual_basis!r}, "
             f"gain_adaptation={cfg.gain_adaptation!r}, "
             f"initial_action={cfg.initial_action}"
+        )
+    if cfg.init_from is not None and (not isinstance(cfg.init_from, str) or not cfg.init_from):
+        raise TrainConfigError(
+            f"init_from must be a path to a saved model (folder or .zip) or null, got {cfg.init_from!r}"
         )
     _mapping("hyperparams", cfg.hyperparams)
     _mapping("policy_kwargs", cfg.policy_kwargs)

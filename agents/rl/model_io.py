@@ -197,7 +197,7 @@ _BUFFER_KEYS = ("ep_info_buffer", "ep_success_buffer")
 """Pickled episode-statistics deques: empty on a safe load."""
 
 
-def _zip_data(path: Path) -> dict[str, Any]:
+def zip_data(path: Path) -> dict[str, Any]:
     """The ``data`` JSON of an SB3 model zip, without deserialising anything."""
     try:
         with zipfile.ZipFile(path) as z:
@@ -217,7 +217,7 @@ def _safe_custom_objects(path: Path, cls: Any, env: gym.Env) -> dict[str, Any]:
     from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
     from stable_baselines3.common.utils import ConstantSchedule
 
-    data = _zip_data(path)
+    data = zip_data(path)
     custom: dict[str, Any] = {}
     for key, entry in data.items():
         if not (isinstance(entry, dict) and ":serialized:" in entry):
@@ -372,4 +372,5 @@ __all__ = [
     "metadata_env_kwargs",
     "read_metadata",
     "write_metadata",
+    "zip_data",
 ]

@@ -33,6 +33,7 @@ from agents.rl.model_io import write_metadata
 from agents.rl.normalization import ObsNormalization, norm_path
 from agents.rl.residual_env import RESIDUAL_ENV_ID
 from agents.rl.vec_env import EVAL_SEED_OFFSET, SCRATCH_ENV_KWARGS, build_vec_env, normalize
+from agents.rl.warm_start import check_init_model, warm_start
 
 __all__ = [
     "TRAIN_OUTPUTS",
@@ -184,6 +185,7 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
         "normalize_obs": cfg.normalize_obs,
         "seed": cfg.seed,
         "stable_baselines3": stable_baselines3.__version__,
+        **({} if cfg.init_from is None else {"init_from": cfg.init_from}),
     }
     if not cfg.residual:
         return {
@@ -307,11 +309,17 @@ def train(
     :return: the ``train_summary.json`` content: ``timesteps`` done, ``wall_time`` (s), ``steps_per_s``,
         ``episodes``, ``mean_return``, ``mean_stability_index`` (N m), ``mean_distance`` (m), ``fall_rate``
         (last 20 training episodes), ``interrupted``, ``time_limit_reached``, ``model`` path.
-    :raises TrainConfigError: on hyperparameters the algorithm does not accept.
+    :raises TrainConfigError: on hyperparameters the algorithm does not accept, or an ``init_from`` model that
+        does not fit the config (:mod:`agents.rl.warm_start`) or lies in ``out``.
     :raises OutputError: if ``out`` is a file, cannot be created, or is not empty without ``overwrite``.
     """
     import torch
 
+    init = None
+    if cfg.init_from is not None:
+        init = check_init_model(cfg)
+        if init[0].resolve().is_relative_to(Path(out).resolve()):
+            raise TrainConfigError(f"init_from: {init[0]} lies in --out {str(out)!r}, whose outputs this run replaces")
     out = prepare_output_dir(out, TRAIN_OUTPUTS, overwrite=overwrite, field="--out")
     torch.set_num_threads(1)  # small networks: threads only contend with the env processes on 2 cores
     (out / "train_config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
@@ -323,6 +331,8 @@ def train(
     eval_env = None
     try:
         model = _make_model(cfg, venv, None if tensorboard is None else Path(tensorboard))
+        if init is not None:
+            warm_start(model, *init)
         callbacks, eval_env = _callbacks(cfg, out, progress)
         wall0, interrupted = time.perf_counter(), False
         with sigterm_as_keyboard_interrupt():
@@ -358,6 +368,7 @@ def train(
         **{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in curve.items()},
         "interrupted": interrupted,
         "time_limit_reached": any(getattr(c, "reached", False) for c in callbacks),
+        "init_timesteps": 0 if init is None else init[1],
         "model": str(out / "model.zip"),
     }
     (out / "train_summary.json").write_text(json.dumps(summary, indent=2))

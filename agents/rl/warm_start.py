@@ -1,0 +1,120 @@
+"""Continue training from a saved model (``quad-uneven train --init-from DIR``): a warm start.
+
+The new run builds its model from its own config, as any run does, and then takes the saved model's
+weights, optimizer states and learned variables (SAC's entropy temperature) through SB3's
+``load_from_zip_file``, which reads tensors only (``torch.load(weights_only=True)``): nothing in the
+file is unpickled. The observation statistics come from the ``.npz`` next to the model and keep their
+weight (the saved run's step count), so the first new rollouts do not reset them. The replay buffer of
+an off-policy model is not saved and starts empty.
+
+The saved model must have been trained for the same env: every field that changes the observation, the
+action or what an action does (:data:`ENV_FIELDS`) must be equal in its ``rl_meta.json`` and the config.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from agents.rl.config import TrainConfig, TrainConfigError
+from agents.rl.model_io import META_FILE, ModelError, read_metadata, zip_data
+from agents.rl.normalization import ObsNormalization, norm_path
+
+ENV_FIELDS = (
+    "algo",
+    "residual",
+    "residual_scale",
+    "residual_legs",
+    "residual_basis",
+    "gain_adaptation",
+    "expert_features",
+    "normalize_obs",
+    "env_kwargs",
+)
+"""Metadata fields a warm start must share with its config (what the policy's inputs and outputs mean)."""
+
+_META_DEFAULTS = {"residual_legs": "all", "residual_basis": "torque_limit", "gain_adaptation": "none", "env_kwargs": {}}
+"""Values of fields absent from older models' metadata (as :mod:`agents.rl.model_io` reads them)."""
+
+
+def init_model_path(init_from: str | Path) -> Path:
+    """The model zip of ``init_from``: a training run's folder (its ``model.zip``) or a ``.zip`` file.
+
+    :raises TrainConfigError: ``init_from: ...`` if there is no such file.
+    """
+    path = Path(init_from)
+    if path.is_dir():
+        path = path / "model.zip"
+    if not path.is_file() or path.suffix != ".zip":
+        raise TrainConfigError(f"init_from: {str(init_from)!r} is neither a model .zip nor a folder with model.zip")
+    return path
+
+
+def check_init_model(cfg: TrainConfig, metadata_of: Any = None) -> tuple[Path, int]:
+    """The saved model ``cfg.init_from`` checked against ``cfg``; :return: its zip and its step count.
+
+    :raises TrainConfigError: ``init_from: ...`` naming the first field that differs (with both values), or
+        why the model cannot be used.
+    """
+    path = init_model_path(cfg.init_from)
+    try:
+        meta = (metadata_of or read_metadata)(path)
+        data = zip_data(path)
+    except ModelError as err:
+        raise TrainConfigError(f"init_from: {err}") from None
+    if meta is None:
+        raise TrainConfigError(f"init_from: {path} has no {META_FILE} next to it (a model of quad-uneven train?)")
+    ours = cfg.to_dict()
+    for name in ENV_FIELDS:
+        theirs = meta.get(name, _META_DEFAULTS.get(name))
+        mine = ours[name]
+        if name == "residual_scale":
+            theirs, mine = float(theirs), float(mine)
+        if theirs != mine:
+            raise TrainConfigError(
+                f"init_from: {path} was trained with {name}={theirs!r}, the config has {name}={mine!r}; "
+                f"a warm start needs the same {', '.join(ENV_FIELDS)}"
+            )
+    steps = data.get("num_timesteps", 0)
+    return path, int(steps) if isinstance(steps, int) and steps > 0 else 0
+
+
+def warm_start(model: Any, path: Path, steps: int) -> None:
+    """Give ``model`` (built from the config) the weights, optimizers and variables saved in ``path``.
+
+    :param model: a fresh SB3 algorithm on the training VecEnv.
+    :param path: the saved model zip (:func:`check_init_model`).
+    :param steps: the saved run's env steps: the weight of its observation statistics.
+    :raises TrainConfigError: ``init_from: ...`` if the networks differ (another ``net_arch``, observation or
+        action size), or the model was trained with observation statistics and they are missing.
+    """
+    from stable_baselines3.common.save_util import load_from_zip_file, recursive_setattr
+
+    try:
+        _, params, variables = load_from_zip_file(path, device="cpu", load_data=False)
+        model.set_parameters(params, exact_match=True, device="cpu")
+        for name, value in (variables or {}).items():
+            if value is not None:
+                recursive_setattr(model, f"{name}.data", value.data)
+    except (RuntimeError, ValueError, KeyError, AttributeError) as err:
+        reason = f"{type(err).__name__}: {err}"
+        raise TrainConfigError(f"init_from: {path} does not fit the config's model ({reason})") from None
+    vn = model.get_vec_normalize_env()
+    if vn is None or not vn.norm_obs:
+        return
+    stats_path = norm_path(path)
+    try:
+        stats = ObsNormalization.load(stats_path)
+    except ValueError as err:
+        raise TrainConfigError(f"init_from: {err}") from None
+    if stats.mean.shape != vn.obs_rms.mean.shape:
+        raise TrainConfigError(
+            f"init_from: {stats_path} holds statistics of shape {stats.mean.shape}, the env's observation is "
+            f"{vn.obs_rms.mean.shape}"
+        )
+    vn.obs_rms.mean = stats.mean.copy()
+    vn.obs_rms.var = stats.var.copy()
+    vn.obs_rms.count = float(max(steps, 1))
+
+
+__all__ = ["ENV_FIELDS", "check_init_model", "init_model_path", "warm_start"]

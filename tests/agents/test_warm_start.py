@@ -1,0 +1,129 @@
+"""quad-uneven train --init-from: a warm start takes the saved weights, optimizers, temperature and statistics."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from agents.cli import main
+from agents.rl.config import TrainConfigError, default_config_path, load_train_config
+
+TINY_SAC = {
+    "timesteps": 64,
+    "n_envs": 1,
+    "max_episode_steps": 40,
+    "eval_freq": 0,
+    "checkpoint_freq": 0,
+    "hyperparams": {"buffer_size": 1000, "batch_size": 16, "learning_starts": 0, "ent_coef": "auto_0.1"},
+    "policy_kwargs": {"net_arch": [16], "log_std_init": -2.3},
+}
+"""Overrides of the shipped SAC config for a run of a few seconds."""
+
+
+def write_config(path: Path, **changes) -> Path:
+    raw = yaml.safe_load(default_config_path("sac").read_text())
+    raw.update(TINY_SAC)
+    raw.update(changes)
+    path.write_text(yaml.safe_dump(raw))
+    return path
+
+
+@pytest.fixture(scope="module")
+def saved_run(tmp_path_factory) -> Path:
+    """A tiny SAC residual run of 64 steps (weights, temperature and statistics moved from their start)."""
+    from agents.rl.training import train
+
+    tmp = tmp_path_factory.mktemp("warm")
+    train(load_train_config(write_config(tmp / "c.yaml")), tmp / "saved", progress=False)
+    return tmp / "saved"
+
+
+def _state(model) -> dict[str, np.ndarray]:
+    return {
+        f"{module}.{name}": value.detach().numpy().copy()
+        for module, sd in model.get_parameters().items()
+        if module == "policy"
+        for name, value in sd.items()
+    }
+
+
+def test_warm_start_takes_the_saved_weights_temperature_optimizer_and_statistics(saved_run, tmp_path):
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    from agents.rl.normalization import ObsNormalization
+    from agents.rl.training import _make_model
+    from agents.rl.vec_env import build_vec_env, normalize
+    from agents.rl.warm_start import check_init_model, warm_start
+
+    cfg = load_train_config(write_config(tmp_path / "c.yaml", init_from=str(saved_run), seed=3))
+    path, steps = check_init_model(cfg)
+    assert path == saved_run / "model.zip" and steps == 64
+    _, params, variables = load_from_zip_file(path, device="cpu", load_data=False)
+    saved_stats = ObsNormalization.load(saved_run / "model_obs_norm.npz")
+    venv = normalize(build_vec_env(cfg, 1, cfg.seed, None, vec_env="dummy"), cfg, training=True)
+    try:
+        model = _make_model(cfg, venv)
+        fresh = _state(model)
+        saved = {f"policy.{k}": v.numpy() for k, v in params["policy"].items()}
+        assert fresh.keys() == saved.keys()
+        assert any(not np.array_equal(fresh[k], saved[k]) for k in saved)  # the test can fail
+        assert model.log_ent_coef.item() != pytest.approx(variables["log_ent_coef"].item(), abs=1e-9)
+
+        warm_start(model, path, steps)
+
+        for key, value in _state(model).items():
+            np.testing.assert_array_equal(value, saved[key], err_msg=key)
+        assert model.log_ent_coef.item() == variables["log_ent_coef"].item()
+        moments = model.actor.optimizer.state_dict()["state"]
+        saved_moments = params["actor.optimizer"]["state"]
+        assert moments.keys() == saved_moments.keys() and moments
+        for k in moments:
+            assert torch.equal(moments[k]["exp_avg"], saved_moments[k]["exp_avg"])
+        rms = model.get_vec_normalize_env().obs_rms
+        np.testing.assert_array_equal(rms.mean, saved_stats.mean)
+        np.testing.assert_array_equal(rms.var, saved_stats.var)
+        assert rms.count == 64.0
+    finally:
+        venv.close()
+
+
+def test_a_warm_started_run_trains_and_records_its_origin(saved_run, tmp_path):
+    out = tmp_path / "continued"
+    cfg = write_config(tmp_path / "c.yaml", timesteps=16, seed=3)
+    rc = main(["train", "--config", str(cfg), "--init-from", str(saved_run), "--out", str(out), "--no-progress"])
+    assert rc == 0
+    assert json.loads((out / "rl_meta.json").read_text())["init_from"] == str(saved_run)
+    summary = json.loads((out / "train_summary.json").read_text())
+    assert summary["init_timesteps"] == 64 and summary["timesteps"] == 16
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"residual_scale": 0.2}, "residual_scale"),
+        ({"gain_adaptation": "knee"}, "gain_adaptation"),
+        ({"expert_features": False}, "expert_features"),
+        ({"policy_kwargs": {"net_arch": [8]}}, "does not fit"),
+    ],
+)
+def test_a_model_of_another_env_or_network_is_refused_naming_the_field(saved_run, tmp_path, changes, message):
+    from agents.rl.training import train
+
+    cfg = load_train_config(write_config(tmp_path / "c.yaml", init_from=str(saved_run), **changes))
+    with pytest.raises(TrainConfigError, match=rf"^init_from: .*{message}"):
+        train(cfg, tmp_path / "out", progress=False)
+
+
+def test_bad_init_from_exits_2_with_one_line(saved_run, tmp_path, capsys):
+    cfg = str(write_config(tmp_path / "c.yaml"))
+    for init, out in ((tmp_path / "nothing", tmp_path / "a"), (saved_run, saved_run)):
+        argv = ["--config", cfg, "--init-from", str(init), "--out", str(out), "--overwrite", "--no-progress"]
+        rc = main(["train", *argv])
+        err = capsys.readouterr().err.strip()
+        assert rc == 2 and err.count("\n") == 0 and "init_from" in err, err
+    assert (saved_run / "model.zip").is_file()  # --out holding the model: refused before anything is deleted
