@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out/demo
 
-.PHONY: venv demo test test-slow lint bench rl-baseline rl-sac rl-scratch clean
+.PHONY: venv demo test test-slow lint bench rl-baseline rl-sac rl-sac-continued rl-scratch clean
 
 $(STAMP): pyproject.toml Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -82,6 +82,21 @@ rl-sac: venv
 	$(PY) -m agents.cli train --config configs/rl/sac_residual_adaptive.yaml --out runs/sac_residual_adaptive --overwrite
 	$(call ship,runs/sac_residual_adaptive,models/sac_residual_adaptive)
 	$(call against_expert,models/sac_residual_adaptive,sac,reuse)
+
+# Run 9 (docs/rl.md, models/sac_residual_adaptive_continued): run 8 trained for a second 75-min budget, a warm start
+# from models/sac_residual_adaptive (make rl-sac first to reproduce it from scratch); then the same evaluations, and
+# a fourth robust_extreme set (seeds 500-519) that no earlier model was evaluated on. About 2 h on 2 cores.
+rl-sac-continued: venv
+	$(PY) -m agents.cli train --config configs/rl/sac_residual_adaptive_continued.yaml \
+	  --out runs/sac_residual_adaptive_continued --overwrite
+	$(call ship,runs/sac_residual_adaptive_continued,models/sac_residual_adaptive_continued)
+	$(call against_expert,models/sac_residual_adaptive_continued,sac9,reuse)
+	test -f runs/eval_robust_extreme_500_expert/results.json || \
+	  $(EVAL) --policy expert --suite robust_extreme --seed 500 --out runs/eval_robust_extreme_500_expert
+	$(EVAL) --policy models/sac_residual_adaptive_continued/model.zip --suite robust_extreme --seed 500 \
+	  --out runs/eval_robust_extreme_500_sac9
+	$(PY) -m agents.cli compare --baseline runs/eval_robust_extreme_500_expert \
+	  --candidate runs/eval_robust_extreme_500_sac9 --out runs/compare_robust_extreme_500_sac9
 
 # The from-scratch PPO reference (docs/rl.md), about 40 min on 2 cores.
 rl-scratch: venv

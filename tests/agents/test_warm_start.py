@@ -26,10 +26,8 @@ TINY_SAC = {
 
 
 def write_config(path: Path, **changes) -> Path:
-    raw = yaml.safe_load(default_config_path("sac").read_text())
-    raw.update(TINY_SAC)
-    raw.update(changes)
-    path.write_text(yaml.safe_dump(raw))
+    """The shipped SAC config with :data:`TINY_SAC` and ``changes``, written to ``path``."""
+    path.write_text(yaml.safe_dump({**yaml.safe_load(default_config_path("sac").read_text()), **TINY_SAC, **changes}))
     return path
 
 
