@@ -90,6 +90,10 @@ class TrainConfig:
     """``none``: the residual acts on the expert's torques; ``knee``: on the expert's torques with adaptive knee
     gains (:mod:`agents.rl.gain_adaptation`: each knee's gain follows the correlation of its tracking error
     with its load)."""
+    adaptation_features: bool = param(False, kind="bool")
+    """append the adapted knee gains to the observation, after the expert features (needs ``gain_adaptation:
+    knee`` and ``expert_features``): what the adaptation has learned of the motors, which the policy cannot
+    reconstruct from one observation."""
     initial_action: float = param(0.0, "action units", lo=-1.0, hi=1.0)
     """the untrained policy's mean action, every joint (0: the expert exactly). With ``expert_torque`` and
     ``stance`` legs, ``initial_action x residual_scale`` is a hand-made prior: e.g. 0.6 x 0.5 = +30 % torque
@@ -177,6 +181,11 @@ def validate(cfg: TrainConfig) -> TrainConfig:
     if cfg.init_from is not None and (not isinstance(cfg.init_from, str) or not cfg.init_from):
         raise TrainConfigError(
             f"init_from must be a path to a saved model (folder or .zip) or null, got {cfg.init_from!r}"
+        )
+    if cfg.adaptation_features and not (cfg.residual and cfg.expert_features and cfg.gain_adaptation == "knee"):
+        raise TrainConfigError(
+            "adaptation_features: true needs residual: true, expert_features: true and gain_adaptation: knee, got "
+            f"residual={cfg.residual}, expert_features={cfg.expert_features}, gain_adaptation={cfg.gain_adaptation!r}"
         )
     _mapping("hyperparams", cfg.hyperparams)
     _mapping("policy_kwargs", cfg.policy_kwargs)

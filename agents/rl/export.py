@@ -120,6 +120,7 @@ def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None
         "residual_legs": json.dumps(meta.get("residual_legs", "all") if meta.get("residual") else None),
         "residual_basis": json.dumps(meta.get("residual_basis", "torque_limit") if meta.get("residual") else None),
         "gain_adaptation": json.dumps(meta.get("gain_adaptation", "none") if meta.get("residual") else None),
+        "adaptation_features": json.dumps(bool(meta.get("adaptation_features", False))),
         "torque_limit": json.dumps(torque_limit),
         "algo": algo,
         "env_id": str(meta.get("env_id", "QuadUneven-v0")),

@@ -77,6 +77,13 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
         adaptation = meta.get("gain_adaptation", "none")  # absent in models trained before the option
         if adaptation not in GAIN_ADAPTATIONS:
             raise ModelError(f"{path}: gain_adaptation must be one of {list(GAIN_ADAPTATIONS)}, got {adaptation!r}")
+        gains_seen = meta.get("adaptation_features", False)  # absent in models trained before the option
+        needs = adaptation == "knee" and meta.get("expert_features")
+        if not isinstance(gains_seen, bool) or (gains_seen and not needs):
+            raise ModelError(
+                f"{path}: adaptation_features must be false, or true with gain_adaptation 'knee' and expert_features, "
+                f"got {gains_seen!r}"
+            )
     env_kwargs = meta.get("env_kwargs")
     if env_kwargs is not None and not isinstance(env_kwargs, dict):
         raise ModelError(f"{path}: env_kwargs must be a mapping of QuadUneven-v0 arguments, got {env_kwargs!r}")
@@ -115,13 +122,23 @@ class SB3Policy:
     :param expert: the :class:`agents.expert.ExpertPolicy` in the loop of a residual model, or None.
     :param features_of: the env (unwrapped) whose simulator state the expert features are read from, for a
         model trained with them (:mod:`agents.rl.expert_features`); None: the observation is used as given.
+    :param adaptation: the :class:`agents.rl.gain_adaptation.KneeGainAdaptation` whose gains follow the expert
+        features, for a model trained with ``adaptation_features``; None: none.
     """
 
-    def __init__(self, model: Any, obs_normalizer: Any = None, expert: Any = None, features_of: Any = None) -> None:
+    def __init__(
+        self,
+        model: Any,
+        obs_normalizer: Any = None,
+        expert: Any = None,
+        features_of: Any = None,
+        adaptation: Any = None,
+    ) -> None:
         self.model = model
         self.obs_normalizer = obs_normalizer
         self.expert = expert
         self.features_of = features_of
+        self.adaptation = adaptation
 
     @property
     def planner_times_ms(self) -> list[float] | None:
@@ -142,12 +159,16 @@ class SB3Policy:
     ) -> tuple[np.ndarray, Any]:
         """SB3's predict on the (normalised) observation; :return: action in [-1, 1]^12 and the state.
 
-        For a model trained with the expert features, they are appended to ``observation`` (one env's) first.
+        For a model trained with the expert features, they are appended to ``observation`` (one env's) first
+        (and the adapted knee gains after them, for a model trained with those).
         """
         if self.features_of is not None:
-            from agents.rl.expert_features import expert_features
+            from agents.rl.expert_features import adaptation_features, expert_features
 
-            observation = np.concatenate([observation, expert_features(self.expert, self.features_of.data)])
+            parts = [observation, expert_features(self.expert, self.features_of.data)]
+            if self.adaptation is not None:
+                parts.append(adaptation_features(self.adaptation.gain))
+            observation = np.concatenate(parts)
         obs = observation if self.obs_normalizer is None else self.obs_normalizer.normalize(observation)
         return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
 
@@ -307,20 +328,22 @@ class ModelSpaces:
     """The observation and action spaces of a model trained on ``env`` (with ``meta``), and its layout.
 
     ``observation_space`` is ``env``'s, with the expert features appended when ``meta`` says
-    ``residual`` and ``expert_features``; ``observation_structure`` names the slices of both parts.
+    ``residual`` and ``expert_features`` (and the adapted knee gains after them with ``adaptation_features``);
+    ``observation_structure`` names the slices of every part.
     """
 
     def __init__(self, env: gym.Env, meta: dict[str, Any] | None) -> None:
         self.expert_features = bool(meta and meta.get("residual") and meta.get("expert_features", False))
+        self.adaptation_features = bool(self.expert_features and meta and meta.get("adaptation_features", False))
         self.action_space = env.action_space
         self.observation_space = env.observation_space
         self.observation_structure: dict[str, slice] = dict(env.unwrapped.observation_structure)
         if self.expert_features:
-            from agents.rl.expert_features import EXPERT_FEATURE_FIELDS, augmented_space
+            from agents.rl.expert_features import augmented_space, feature_fields
 
             offset = int(env.observation_space.shape[0])
-            self.observation_space = augmented_space(env.observation_space)
-            for f in EXPERT_FEATURE_FIELDS:
+            self.observation_space = augmented_space(env.observation_space, self.adaptation_features)
+            for f in feature_fields(self.adaptation_features):
                 self.observation_structure[f.name] = slice(offset, offset + f.size)
                 offset += f.size
 
@@ -345,18 +368,19 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
     normalizer = load_obs_normalization(path, meta, allow_pickle)
     model = load_sb3_model(path, algo, spaces_of, allow_pickle)  # type: ignore[arg-type]
     check_spaces(model, spaces_of, path)  # type: ignore[arg-type]
-    expert = None
+    expert = controller = None
     if meta is not None and meta.get("residual"):
         from agents.rl.residual_env import install_residual_controller
 
-        expert, _ = install_residual_controller(
+        expert, controller = install_residual_controller(
             env,
             float(meta["residual_scale"]),
             residual_legs=meta.get("residual_legs", "all"),
             residual_basis=meta.get("residual_basis", "torque_limit"),
             gain_adaptation=meta.get("gain_adaptation", "none"),
         )
-    return SB3Policy(model, normalizer, expert, env.unwrapped if spaces_of.expert_features else None)
+    adaptation = controller.adaptation if controller is not None and spaces_of.adaptation_features else None
+    return SB3Policy(model, normalizer, expert, env.unwrapped if spaces_of.expert_features else None, adaptation)
 
 
 __all__ = [

@@ -43,6 +43,7 @@ from gymnasium.envs.registration import register, registry
 from agents.expert import ExpertConfig, ExpertPolicy
 from agents.rl import residual_kernels as RK
 from agents.rl.config import RESIDUAL_BASES, RESIDUAL_LEGS
+from agents.rl.expert_features import adaptation_features as adaptation_feature_vector
 from agents.rl.expert_features import augmented_space, expert_features
 from agents.rl.gain_adaptation import KneeGainAdaptation, check_gain_adaptation
 from quad_uneven_env.env import QuadUnevenEnv
@@ -306,6 +307,9 @@ class ResidualExpertEnv(gym.Wrapper):
     :param residual_legs: ``"all"`` or ``"stance"`` (see :class:`ResidualController`).
     :param residual_basis: ``"torque_limit"`` or ``"expert_torque"`` (see :class:`ResidualController`).
     :param gain_adaptation: ``"none"`` or ``"knee"`` (see :class:`ResidualController`).
+    :param adaptation_features: append the adapted knee gains after the expert features
+        (:data:`agents.rl.expert_features.ADAPTATION_FEATURE_FIELDS`); needs ``gain_adaptation="knee"`` and
+        ``expert_features``.
     """
 
     def __init__(
@@ -318,10 +322,17 @@ class ResidualExpertEnv(gym.Wrapper):
         residual_legs: str = "all",
         residual_basis: str = "torque_limit",
         gain_adaptation: str = "none",
+        adaptation_features: bool = False,
     ) -> None:
         super().__init__(env)
-        if not isinstance(expert_features, bool):
-            raise ValueError(f"expert_features must be true or false, got {expert_features!r}")
+        for name, flag in (("expert_features", expert_features), ("adaptation_features", adaptation_features)):
+            if not isinstance(flag, bool):
+                raise ValueError(f"{name} must be true or false, got {flag!r}")
+        if adaptation_features and not (expert_features and gain_adaptation == "knee"):
+            raise ValueError(
+                "adaptation_features needs gain_adaptation='knee' and expert_features=True, got "
+                f"gain_adaptation={gain_adaptation!r}, expert_features={expert_features}"
+            )
         try:
             penalty = float("nan") if isinstance(residual_penalty, bool) else float(residual_penalty)
         except (TypeError, ValueError):
@@ -334,13 +345,17 @@ class ResidualExpertEnv(gym.Wrapper):
         )
         self.residual_scale = self.controller.residual_scale
         self.expert_features = expert_features
+        self.adaptation_features = adaptation_features
         if expert_features:
-            self.observation_space = augmented_space(env.observation_space)
+            self.observation_space = augmented_space(env.observation_space, adaptation_features)
 
     def _observation(self, obs: np.ndarray) -> np.ndarray:
         if not self.expert_features:
             return obs
-        return np.concatenate([obs, expert_features(self.expert, self.env.unwrapped.data)])
+        parts = [obs, expert_features(self.expert, self.env.unwrapped.data)]
+        if self.adaptation_features:
+            parts.append(adaptation_feature_vector(self.controller.adaptation.gain))
+        return np.concatenate(parts)
 
     def reset(self, **kwargs: Any):
         """Reset the env (the expert plans its first cycle); the info has the step's keys (residual zero)."""
@@ -372,6 +387,7 @@ def make_residual_env(
     residual_legs: str = "all",
     residual_basis: str = "torque_limit",
     gain_adaptation: str = "none",
+    adaptation_features: bool = False,
     **env_kwargs: Any,
 ) -> ResidualExpertEnv:
     """The residual env (entry point of ``QuadUnevenResidual-v0``).
@@ -384,6 +400,7 @@ def make_residual_env(
     :param residual_legs: ``"all"`` or ``"stance"``: which legs take the residual (:class:`ResidualController`).
     :param residual_basis: ``"torque_limit"`` or ``"expert_torque"``: what a unit of action is.
     :param gain_adaptation: ``"none"`` or ``"knee"``: adaptive knee gains on the expert under the residual.
+    :param adaptation_features: append the adapted knee gains to the observation (needs ``"knee"``).
     :param env_kwargs: ``QuadUnevenEnv`` arguments (``terrain``, ``reward_weights``, ...); ``action_mode`` must be
         ``"torque"`` and ``controller`` is not accepted.
     :raises ValueError: on a bad argument (named).
@@ -399,6 +416,7 @@ def make_residual_env(
         residual_legs,
         residual_basis,
         gain_adaptation,
+        adaptation_features,
     )
 
 

@@ -202,6 +202,7 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
         "residual_legs": cfg.residual_legs,
         "residual_basis": cfg.residual_basis,
         "gain_adaptation": cfg.gain_adaptation,
+        "adaptation_features": bool(cfg.adaptation_features),
         "initial_action": float(cfg.initial_action),
         "env_id": RESIDUAL_ENV_ID,
         "env_kwargs": dict(cfg.env_kwargs),

@@ -82,6 +82,7 @@ def make_train_env(
     residual_legs: str = "all",
     residual_basis: str = "torque_limit",
     gain_adaptation: str = "none",
+    adaptation_features: bool = False,
 ) -> gym.Env:
     """One residual env (expert in the loop) with a time limit and :class:`EpisodeStats`.
 
@@ -96,6 +97,7 @@ def make_train_env(
     :param residual_legs: ``all`` or ``stance``: which legs take the residual.
     :param residual_basis: ``torque_limit`` or ``expert_torque``: what a unit of residual action is.
     :param gain_adaptation: ``none`` or ``knee``: adaptive knee gains on the expert under the residual.
+    :param adaptation_features: append the adapted knee gains to the observation.
     :param residual: false: plain ``QuadUneven-v0`` in ``joint_pd`` mode instead (training from scratch).
     """
 
@@ -120,6 +122,7 @@ def make_train_env(
             residual_legs=residual_legs,
             residual_basis=residual_basis,
             gain_adaptation=gain_adaptation,
+            adaptation_features=adaptation_features,
             **(env_kwargs or {}),
         )
 
@@ -167,6 +170,7 @@ def build_vec_env(
         cfg.residual_legs,
         cfg.residual_basis,
         cfg.gain_adaptation,
+        cfg.adaptation_features,
     )
     if kind == "subproc":
         env_fn = functools.partial(_ignoring_interrupts, env_fn)

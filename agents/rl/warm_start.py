@@ -27,13 +27,20 @@ ENV_FIELDS = (
     "residual_legs",
     "residual_basis",
     "gain_adaptation",
+    "adaptation_features",
     "expert_features",
     "normalize_obs",
     "env_kwargs",
 )
 """Metadata fields a warm start must share with its config (what the policy's inputs and outputs mean)."""
 
-_META_DEFAULTS = {"residual_legs": "all", "residual_basis": "torque_limit", "gain_adaptation": "none", "env_kwargs": {}}
+_META_DEFAULTS = {
+    "residual_legs": "all",
+    "residual_basis": "torque_limit",
+    "gain_adaptation": "none",
+    "adaptation_features": False,
+    "env_kwargs": {},
+}
 """Values of fields absent from older models' metadata (as :mod:`agents.rl.model_io` reads them)."""
 
 

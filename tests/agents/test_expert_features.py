@@ -8,7 +8,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from agents.rl.expert_features import EXPERT_FEATURE_FIELDS, EXPERT_FEATURE_SIZE, expert_features
+from agents.rl.expert_features import (
+    ADAPTATION_FEATURE_FIELDS,
+    EXPERT_FEATURE_FIELDS,
+    EXPERT_FEATURE_SIZE,
+    expert_features,
+)
 from agents.rl.residual_env import RESIDUAL_ENV_ID
 from quad_uneven_env.observations import observation_structure
 
@@ -102,3 +107,4 @@ def test_the_documented_layout_is_the_code():
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "rl.md").read_text()
     assert observation_table(EXPERT_FEATURE_FIELDS) in doc
+    assert observation_table(ADAPTATION_FEATURE_FIELDS) in doc

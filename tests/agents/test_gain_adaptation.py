@@ -163,3 +163,103 @@ def test_a_model_folder_brings_its_adaptation_to_evaluate_and_onnx(tmp_path):
     write_metadata(tmp_path, {**meta, "gain_adaptation": "hip"})
     with pytest.raises(ModelError, match=r"gain_adaptation must be one of \['none', 'knee'\], got 'hip'"):
         read_metadata(path)
+
+
+@pytest.mark.filterwarnings("ignore:.*different from the unwrapped")
+def test_the_adapted_gains_in_the_observation_are_the_controllers_and_pass_both_checkers():
+    """``adaptation_features``: the observation ends with the four knee gains the controller applies."""
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    from agents.rl.expert_features import EXPERT_FEATURE_SIZE
+
+    kwargs = dict(terrain="rough", randomization="extreme", residual_scale=0.5, gain_adaptation="knee")
+    plain = make_residual_env(**kwargs)
+    env = make_residual_env(**kwargs, adaptation_features=True)
+    obs, _ = env.reset(seed=201)
+    plain_obs, _ = plain.reset(seed=201)
+    assert obs.shape == (plain_obs.shape[0] + 4,) and env.observation_space.shape == obs.shape
+    assert env.observation_space.shape[0] == env.unwrapped.observation_space.shape[0] + EXPERT_FEATURE_SIZE + 4
+    np.testing.assert_array_equal(obs[-4:], 1.0)
+    for _ in range(100):  # 2 s: the gains move from 1
+        obs, *_ = env.step(np.zeros(12, dtype=np.float32))
+        plain_obs, *_ = plain.step(np.zeros(12, dtype=np.float32))
+    gain = env.unwrapped.controller.adaptation.gain[KNEES]
+    assert np.abs(gain - 1.0).max() > 0.05
+    np.testing.assert_array_equal(obs[-4:], gain.astype(np.float32))
+    np.testing.assert_array_equal(obs[:-4], plain_obs)  # the rest is the observation without them
+    check_env(env, skip_render_check=True)
+    sb3_check_env(env, warn=True)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"gain_adaptation": "none", "adaptation_features": True}, "adaptation_features"),
+        ({"gain_adaptation": "knee", "expert_features": False, "adaptation_features": True}, "adaptation_features"),
+        ({"gain_adaptation": "knee", "adaptation_features": "yes"}, "adaptation_features"),
+    ],
+)
+def test_adaptation_features_without_the_adaptation_are_refused_by_name(kwargs, field):
+    with pytest.raises(ValueError, match=rf"^{field}"):
+        make_residual_env(terrain="flat", **kwargs)
+
+
+def test_adaptation_features_in_a_config_need_the_knee_adaptation(tmp_path):
+    import yaml
+
+    from agents.rl.config import default_config_path
+
+    raw = yaml.safe_load(default_config_path("ppo").read_text())
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump({**raw, "adaptation_features": True, "gain_adaptation": "none"}))
+    with pytest.raises(TrainConfigError, match=r"^adaptation_features: true needs .*gain_adaptation: knee"):
+        load_train_config(path)
+    path.write_text(yaml.safe_dump({**raw, "adaptation_features": True, "gain_adaptation": "knee"}))
+    assert load_train_config(path).adaptation_features is True
+
+
+@pytest.mark.filterwarnings("ignore:.*different from the unwrapped")
+def test_evaluate_builds_the_training_observation_with_the_adapted_gains(tmp_path):
+    """A model folder with ``adaptation_features``: the loaded policy sees, step for step, the observation the
+    training env gives (the adapted gains included), and the ONNX layout names the gains' slice."""
+    import json
+
+    import onnx
+    import stable_baselines3
+
+    from agents.evaluation.policies import make_policy, policy_env_kwargs
+    from agents.rl.export import export_onnx
+    from agents.rl.model_io import ModelError, read_metadata, write_metadata
+
+    kwargs = dict(terrain="flat", randomization="extreme", residual_scale=0.5, residual_basis="expert_torque")
+    train_env = make_residual_env(**kwargs, gain_adaptation="knee", adaptation_features=True)
+    model = stable_baselines3.PPO("MlpPolicy", train_env, n_steps=64, batch_size=32, device="cpu", seed=0,
+                                  policy_kwargs={"net_arch": [16]})  # fmt: skip
+    model.save(tmp_path / "model.zip")
+    meta = {"algo": "ppo", "residual": True, "residual_scale": 0.5, "expert_features": True,
+            "normalize_obs": False, "env_kwargs": {}, "residual_basis": "expert_torque",
+            "gain_adaptation": "knee", "adaptation_features": True}  # fmt: skip
+    write_metadata(tmp_path, meta)
+    path = tmp_path / "model.zip"
+    env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(str(path)), "terrain": "flat", "randomization": "extreme"})
+    policy = make_policy(str(path), env)
+    seen = []
+    predict = policy.model.predict
+    policy.model.predict = lambda obs, **kw: (seen.append(np.array(obs)), predict(obs, **kw))[1]
+    obs, _ = env.reset(seed=7)
+    train_obs, _ = train_env.reset(seed=7)
+    for _ in range(60):
+        action, _ = policy.predict(obs)
+        np.testing.assert_array_equal(seen[-1], train_obs)
+        obs, *_ = env.step(action)
+        train_obs, *_ = train_env.step(action)
+    assert np.abs(seen[-1][-4:] - 1.0).max() > 0  # the gains moved, and both sides saw the same
+    export_onnx(path, tmp_path / "p.onnx")
+    props = {p.key: p.value for p in onnx.load(str(tmp_path / "p.onnx")).metadata_props}
+    n = train_env.observation_space.shape[0]
+    assert json.loads(props["observation_layout"])["adapted_knee_gain"] == [n - 4, n]
+    assert json.loads(props["adaptation_features"]) is True
+    write_metadata(tmp_path, {**meta, "gain_adaptation": "none"})
+    with pytest.raises(ModelError, match=r"adaptation_features must be false, or true with gain_adaptation 'knee'"):
+        read_metadata(path)
