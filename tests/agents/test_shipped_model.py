@@ -1,6 +1,7 @@
 """The shipped models (models/ppo_residual_adaptive, the baseline; models/sac_residual_adaptive, its SAC
-comparison; models/ppo_residual_gain, models/ppo_residual_extreme and models/ppo_residual_hard, its predecessors;
-models/ppo_scratch): load as data, run, match their configs."""
+comparison, and models/sac_residual_adaptive_continued, that run trained further; models/ppo_residual_gain,
+models/ppo_residual_extreme and models/ppo_residual_hard, its predecessors; models/ppo_scratch): load as data,
+run, match their configs."""
 
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ ROOT = Path(__file__).resolve().parents[2]
 RESIDUAL_MODELS = {
     "ppo_residual_adaptive": ("extreme", "stance", "expert_torque"),
     "sac_residual_adaptive": ("extreme", "stance", "expert_torque"),
+    "sac_residual_adaptive_continued": ("extreme", "stance", "expert_torque"),
     "ppo_residual_gain": ("extreme", "stance", "expert_torque"),
     "ppo_residual_extreme": ("extreme", "stance", "torque_limit"),
     "ppo_residual_hard": ("hard", "all", "torque_limit"),
@@ -45,7 +47,7 @@ def test_the_shipped_model_was_trained_with_the_shipped_config(name):
     assert meta["residual"] and meta["expert_features"] and meta["randomization"] == world
     assert meta.get("residual_legs", "all") == legs
     assert meta.get("residual_basis", "torque_limit") == basis
-    assert meta.get("gain_adaptation", "none") == ("knee" if name.endswith("_adaptive") else "none")
+    assert meta.get("gain_adaptation", "none") == ("knee" if "_adaptive" in name else "none")
     assert meta["algo"] == name.split("_")[0]
     assert not list(model.parent.glob("*.pkl"))
 
@@ -59,7 +61,7 @@ def test_the_shipped_model_drives_the_expert_in_a_randomized_world(name):
     assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
     assert env.unwrapped.controller.residual_legs == legs
     assert env.unwrapped.controller.residual_basis == basis
-    assert (env.unwrapped.controller.adaptation is not None) == name.endswith("_adaptive")
+    assert (env.unwrapped.controller.adaptation is not None) == ("_adaptive" in name)
     assert type(policy.model).__name__ == name.split("_")[0].upper()  # the class rl_meta.json records
     assert policy.model.observation_space.shape == (env.observation_space.shape[0] + EXPERT_FEATURE_SIZE,)
     obs, _ = env.reset(seed=100)
