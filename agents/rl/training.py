@@ -316,15 +316,15 @@ def train(
     """
     import torch
 
+    meta = _metadata(cfg)
     init = None
     if cfg.init_from is not None:
-        init = check_init_model(cfg)
+        init = check_init_model(cfg.init_from, meta)
         if init[0].resolve().is_relative_to(Path(out).resolve()):
             raise TrainConfigError(f"init_from: {init[0]} lies in --out {str(out)!r}, whose outputs this run replaces")
     out = prepare_output_dir(out, TRAIN_OUTPUTS, overwrite=overwrite, field="--out")
     torch.set_num_threads(1)  # small networks: threads only contend with the env processes on 2 cores
     (out / "train_config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
-    meta = _metadata(cfg)
     for folder in (out, out / "checkpoints", out / "best"):
         write_metadata(folder, meta)
 

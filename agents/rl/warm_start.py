@@ -16,7 +16,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from agents.rl.config import TrainConfig, TrainConfigError
+from agents.rl.config import TrainConfigError
 from agents.rl.model_io import META_FILE, ModelError, read_metadata, zip_data
 from agents.rl.normalization import ObsNormalization, norm_path
 
@@ -57,25 +57,27 @@ def init_model_path(init_from: str | Path) -> Path:
     return path
 
 
-def check_init_model(cfg: TrainConfig, metadata_of: Any = None) -> tuple[Path, int]:
-    """The saved model ``cfg.init_from`` checked against ``cfg``; :return: its zip and its step count.
+def check_init_model(init_from: str | Path, expected: dict[str, Any]) -> tuple[Path, int]:
+    """The saved model ``init_from`` checked against the metadata a new run would write; :return: its zip and
+    its step count.
 
-    :raises TrainConfigError: ``init_from: ...`` naming the first field that differs (with both values), or
-        why the model cannot be used.
+    :param init_from: the config's ``init_from``.
+    :param expected: the ``rl_meta.json`` content of the new run (``agents.rl.training``'s metadata of its config).
+    :raises TrainConfigError: ``init_from: ...`` naming the first of :data:`ENV_FIELDS` that differs (with both
+        values), or why the model cannot be used.
     """
-    path = init_model_path(cfg.init_from)
+    path = init_model_path(init_from)
     try:
-        meta = (metadata_of or read_metadata)(path)
+        meta = read_metadata(path)
         data = zip_data(path)
     except ModelError as err:
         raise TrainConfigError(f"init_from: {err}") from None
     if meta is None:
         raise TrainConfigError(f"init_from: {path} has no {META_FILE} next to it (a model of quad-uneven train?)")
-    ours = cfg.to_dict()
     for name in ENV_FIELDS:
         theirs = meta.get(name, _META_DEFAULTS.get(name))
-        mine = ours[name]
-        if name == "residual_scale":
+        mine = expected.get(name, _META_DEFAULTS.get(name))
+        if name == "residual_scale" and theirs is not None and mine is not None:
             theirs, mine = float(theirs), float(mine)
         if theirs != mine:
             raise TrainConfigError(

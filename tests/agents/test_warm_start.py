@@ -54,12 +54,12 @@ def test_warm_start_takes_the_saved_weights_temperature_optimizer_and_statistics
     from stable_baselines3.common.save_util import load_from_zip_file
 
     from agents.rl.normalization import ObsNormalization
-    from agents.rl.training import _make_model
+    from agents.rl.training import _make_model, _metadata
     from agents.rl.vec_env import build_vec_env, normalize
     from agents.rl.warm_start import check_init_model, warm_start
 
     cfg = load_train_config(write_config(tmp_path / "c.yaml", init_from=str(saved_run), seed=3))
-    path, steps = check_init_model(cfg)
+    path, steps = check_init_model(cfg.init_from, _metadata(cfg))
     assert path == saved_run / "model.zip" and steps == 64
     _, params, variables = load_from_zip_file(path, device="cpu", load_data=False)
     saved_stats = ObsNormalization.load(saved_run / "model_obs_norm.npz")
@@ -125,3 +125,15 @@ def test_bad_init_from_exits_2_with_one_line(saved_run, tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert rc == 2 and err.count("\n") == 0 and "init_from" in err, err
     assert (saved_run / "model.zip").is_file()  # --out holding the model: refused before anything is deleted
+
+
+def test_a_from_scratch_model_continues_too(tmp_path):
+    """residual: false records env_kwargs with the joint_pd action mode: the check compares what a new run of
+    the same config would record, not the config's own env_kwargs."""
+    from agents.rl.training import train
+
+    scratch = {"residual": False, "expert_features": False, "timesteps": 16}
+    train(load_train_config(write_config(tmp_path / "a.yaml", **scratch)), tmp_path / "a", progress=False)
+    cfg = load_train_config(write_config(tmp_path / "b.yaml", **scratch, init_from=str(tmp_path / "a")))
+    summary = train(cfg, tmp_path / "b", progress=False)
+    assert summary["init_timesteps"] == 16 and summary["timesteps"] == 16
