@@ -8,7 +8,8 @@ weight (the saved run's step count), so the first new rollouts do not reset them
 an off-policy model is not saved and starts empty.
 
 The saved model must have been trained for the same env: every field that changes the observation, the
-action or what an action does (:data:`ENV_FIELDS`) must be equal in its ``rl_meta.json`` and the config.
+action or what an action does (:data:`ENV_FIELDS`) must be equal in its ``rl_meta.json`` and in the metadata a
+new run of the config would write.
 """
 
 from __future__ import annotations
