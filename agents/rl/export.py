@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from agents.rl.model_io import (
+    META_DEFAULTS,
     ModelError,
     ModelSpaces,
     load_obs_normalization,
@@ -117,10 +118,10 @@ def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None
         "action_high": json.dumps(np.asarray(space.high, float).tolist()),
         "residual": json.dumps(bool(meta.get("residual", False))),
         "residual_scale": json.dumps(meta.get("residual_scale")),
-        "residual_legs": json.dumps(meta.get("residual_legs", "all") if meta.get("residual") else None),
-        "residual_basis": json.dumps(meta.get("residual_basis", "torque_limit") if meta.get("residual") else None),
-        "gain_adaptation": json.dumps(meta.get("gain_adaptation", "none") if meta.get("residual") else None),
-        "adaptation_features": json.dumps(bool(meta.get("adaptation_features", False))),
+        **{  # the residual's settings (defaults for older models' metadata); None for a model from scratch
+            name: json.dumps(meta.get(name, META_DEFAULTS[name]) if meta.get("residual") else None)
+            for name in ("residual_legs", "residual_basis", "gain_adaptation", "adaptation_features")
+        },
         "torque_limit": json.dumps(torque_limit),
         "algo": algo,
         "env_id": str(meta.get("env_id", "QuadUneven-v0")),

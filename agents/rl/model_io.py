@@ -32,6 +32,15 @@ META_FILE = "rl_meta.json"
 META_FORMAT = "quad-uneven-rl/1"
 """Value of the metadata's ``format`` field."""
 
+META_DEFAULTS: dict[str, Any] = {
+    "residual_legs": "all",
+    "residual_basis": "torque_limit",
+    "gain_adaptation": "none",
+    "adaptation_features": False,
+    "env_kwargs": {},
+}
+"""Values of the fields absent from the metadata of models trained before the option existed."""
+
 
 class ModelError(ValueError):
     """A model file, its metadata or its normalisation statistics cannot be used."""
@@ -68,16 +77,16 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
             raise ModelError(f"{path}: residual_scale is missing (a residual model needs a number in (0, 1])")
         if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0.0 < scale <= 1.0:
             raise ModelError(f"{path}: residual_scale must be a number in (0, 1] (of the torque limit), got {scale!r}")
-        legs = meta.get("residual_legs", "all")  # absent in models trained before the option: every leg
+        legs = meta.get("residual_legs", META_DEFAULTS["residual_legs"])
         if legs not in RESIDUAL_LEGS:
             raise ModelError(f"{path}: residual_legs must be one of {list(RESIDUAL_LEGS)}, got {legs!r}")
-        basis = meta.get("residual_basis", "torque_limit")  # absent in models trained before the option
+        basis = meta.get("residual_basis", META_DEFAULTS["residual_basis"])
         if basis not in RESIDUAL_BASES:
             raise ModelError(f"{path}: residual_basis must be one of {list(RESIDUAL_BASES)}, got {basis!r}")
-        adaptation = meta.get("gain_adaptation", "none")  # absent in models trained before the option
+        adaptation = meta.get("gain_adaptation", META_DEFAULTS["gain_adaptation"])
         if adaptation not in GAIN_ADAPTATIONS:
             raise ModelError(f"{path}: gain_adaptation must be one of {list(GAIN_ADAPTATIONS)}, got {adaptation!r}")
-        gains_seen = meta.get("adaptation_features", False)  # absent in models trained before the option
+        gains_seen = meta.get("adaptation_features", META_DEFAULTS["adaptation_features"])
         needs = adaptation == "knee" and meta.get("expert_features")
         if not isinstance(gains_seen, bool) or (gains_seen and not needs):
             raise ModelError(
@@ -334,7 +343,9 @@ class ModelSpaces:
 
     def __init__(self, env: gym.Env, meta: dict[str, Any] | None) -> None:
         self.expert_features = bool(meta and meta.get("residual") and meta.get("expert_features", False))
-        self.adaptation_features = bool(self.expert_features and meta and meta.get("adaptation_features", False))
+        self.adaptation_features = bool(
+            self.expert_features and meta and meta.get("adaptation_features", META_DEFAULTS["adaptation_features"])
+        )
         self.action_space = env.action_space
         self.observation_space = env.observation_space
         self.observation_structure: dict[str, slice] = dict(env.unwrapped.observation_structure)
@@ -375,15 +386,16 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
         expert, controller = install_residual_controller(
             env,
             float(meta["residual_scale"]),
-            residual_legs=meta.get("residual_legs", "all"),
-            residual_basis=meta.get("residual_basis", "torque_limit"),
-            gain_adaptation=meta.get("gain_adaptation", "none"),
+            residual_legs=meta.get("residual_legs", META_DEFAULTS["residual_legs"]),
+            residual_basis=meta.get("residual_basis", META_DEFAULTS["residual_basis"]),
+            gain_adaptation=meta.get("gain_adaptation", META_DEFAULTS["gain_adaptation"]),
         )
     adaptation = controller.adaptation if controller is not None and spaces_of.adaptation_features else None
     return SB3Policy(model, normalizer, expert, env.unwrapped if spaces_of.expert_features else None, adaptation)
 
 
 __all__ = [
+    "META_DEFAULTS",
     "META_FILE",
     "META_FORMAT",
     "ModelError",

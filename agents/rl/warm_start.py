@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.rl.config import TrainConfigError
-from agents.rl.model_io import META_FILE, ModelError, read_metadata, zip_data
+from agents.rl.model_io import META_DEFAULTS, META_FILE, ModelError, read_metadata, zip_data
 from agents.rl.normalization import ObsNormalization, norm_path
 
 ENV_FIELDS = (
@@ -34,15 +34,6 @@ ENV_FIELDS = (
     "env_kwargs",
 )
 """Metadata fields a warm start must share with its config (what the policy's inputs and outputs mean)."""
-
-_META_DEFAULTS = {
-    "residual_legs": "all",
-    "residual_basis": "torque_limit",
-    "gain_adaptation": "none",
-    "adaptation_features": False,
-    "env_kwargs": {},
-}
-"""Values of fields absent from older models' metadata (as :mod:`agents.rl.model_io` reads them)."""
 
 
 def init_model_path(init_from: str | Path) -> Path:
@@ -76,8 +67,8 @@ def check_init_model(init_from: str | Path, expected: dict[str, Any]) -> tuple[P
     if meta is None:
         raise TrainConfigError(f"init_from: {path} has no {META_FILE} next to it (a model of quad-uneven train?)")
     for name in ENV_FIELDS:
-        theirs = meta.get(name, _META_DEFAULTS.get(name))
-        mine = expected.get(name, _META_DEFAULTS.get(name))
+        theirs = meta.get(name, META_DEFAULTS.get(name))
+        mine = expected.get(name, META_DEFAULTS.get(name))
         if name == "residual_scale" and theirs is not None and mine is not None:
             theirs, mine = float(theirs), float(mine)
         if theirs != mine:

@@ -263,3 +263,32 @@ def test_evaluate_builds_the_training_observation_with_the_adapted_gains(tmp_pat
     write_metadata(tmp_path, {**meta, "gain_adaptation": "none"})
     with pytest.raises(ModelError, match=r"adaptation_features must be false, or true with gain_adaptation 'knee'"):
         read_metadata(path)
+
+
+def test_a_training_run_with_adaptation_features_records_them_and_loads_for_evaluate(tmp_path):
+    """``quad-uneven train`` writes ``adaptation_features`` into rl_meta.json, so the loaded policy's observation
+    (env + expert features + the four gains) fits the trained network."""
+    import json
+
+    import yaml
+
+    from agents.evaluation.policies import make_policy, policy_env_kwargs
+    from agents.rl.config import default_config_path
+    from agents.rl.training import train
+
+    raw = yaml.safe_load(default_config_path("ppo").read_text())
+    raw.update(
+        timesteps=32, n_envs=1, max_episode_steps=16, eval_freq=0, checkpoint_freq=0, terrain="flat",
+        hyperparams={"n_steps": 32, "batch_size": 16, "n_epochs": 1}, policy_kwargs={"net_arch": [8]},
+        gain_adaptation="knee", adaptation_features=True,
+    )  # fmt: skip
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(raw))
+    train(load_train_config(tmp_path / "c.yaml"), tmp_path / "run", progress=False)
+    assert json.loads((tmp_path / "run" / "rl_meta.json").read_text())["adaptation_features"] is True
+    path = str(tmp_path / "run" / "model.zip")
+    env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(path), "terrain": "flat"})
+    policy = make_policy(path, env)
+    assert policy.adaptation is env.unwrapped.controller.adaptation
+    obs, _ = env.reset(seed=0)
+    action, _ = policy.predict(obs)
+    assert action.shape == (12,)
