@@ -588,6 +588,56 @@ def run_compare_command(args: argparse.Namespace) -> int:
     return 0
 
 
+# -------------------------------------------------------------------------------------------- select
+def add_select_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``select`` subcommand on ``sub``."""
+    p = sub.add_parser(
+        "select",
+        help="choose a training run's checkpoint on validation episodes; copy it to OUT/selected/",
+        description="Evaluate every checkpoint of a 'quad-uneven train' run (DIR/checkpoints/model_<N>_steps.zip) "
+        "and its final model on the same validation episodes; rank them by successes, then fewer falls, then more "
+        "training steps; copy the best with its statistics and metadata to OUT/selected/ and write "
+        "OUT/selection.md, selection.json and selection.png. Evaluations found in OUT are reused or resumed. Use "
+        "validation seeds, never the seeds the model will be reported on. Exit code 2 on a run without models or "
+        "a bad option.",
+    )
+    p.add_argument("--run", type=Path, required=True, help="the training run's output directory DIR")
+    p.add_argument("--suite", required=True, help=f"shipped suite name {suite_names()} or the path of a suite .yaml")
+    p.add_argument(
+        "--seed", type=int, required=True, help="offset added to every seed of the suite: the validation seeds"
+    )
+    p.add_argument("--out", type=Path, default=None, help="output directory OUT (default DIR/selection)")
+    p.add_argument("--episodes", type=int, default=None, help="at most N seeds per terrain entry (default: all)")
+    p.add_argument("--workers", type=int, default=1, help="parallel episode processes (default 1)")
+    p.add_argument("--overwrite", action="store_true", help="delete OUT's earlier evaluations and selection first")
+    p.add_argument("--no-progress", action="store_true", help="no progress output")
+    p.set_defaults(func=run_select_command)
+    return p
+
+
+def run_select_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven select``: 0 on success, 2 on a run without models or a bad option."""
+    from agents.rl.selection import select_checkpoint
+
+    if args.episodes is not None and args.episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    try:
+        suite = load_suite(args.suite)
+    except SuiteError as e:
+        raise SuiteError(f"invalid suite {args.suite!r}: {e}") from None
+    with sigterm_as_keyboard_interrupt():
+        result = select_checkpoint(
+            args.run, suite, args.seed, out=args.out, episodes=args.episodes, workers=args.workers,
+            overwrite=args.overwrite, progress=not args.no_progress,
+        )  # fmt: skip
+    for c in result["candidates"]:
+        print(f"{c['name']:24s} success {c['successes']}/{c['episodes']}  falls {c['falls']}  rank {c['rank']}")
+    print(f"selected: {result['selected_model']}")
+    return 0
+
+
 # --------------------------------------------------------------------------------------------- sweep
 def add_sweep_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register the ``sweep`` subcommand on ``sub``."""
@@ -661,7 +711,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     for add in (
         add_demo_parser, add_evaluate_parser, add_train_parser, add_export_parser, add_paper_parser,
-        add_plan_paper_parser, add_robustness_parser, add_compare_parser, add_sweep_parser,
+        add_plan_paper_parser, add_robustness_parser, add_compare_parser, add_select_parser, add_sweep_parser,
     ):  # fmt: skip
         add(sub)
     return parser
