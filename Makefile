@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out/demo
 
-.PHONY: venv demo test test-slow lint bench rl-baseline rl-sac rl-sac-continued rl-scratch clean
+.PHONY: venv demo test test-slow lint bench rl-baseline rl-sac rl-sac-continued rl-sac-features rl-scratch clean
 
 $(STAMP): pyproject.toml Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -42,7 +42,8 @@ bench: venv
 	$(PY) benchmarks/residual_exploration.py
 
 MODEL_FILES := model.zip model_obs_norm.npz rl_meta.json train_config.json train_summary.json learning_curve.png
-HELD_OUT := robust_extreme:100 robust_extreme:300 robust_extreme:400 robust_extreme:500 robust_hard:100 targets:0
+HELD_OUT := robust_extreme:100 robust_extreme:300 robust_extreme:400 robust_extreme:500 robust_extreme:600 \
+  robust_hard:100 targets:0
 EVAL := $(PY) -m agents.cli evaluate --workers 2 --overwrite
 
 # $(call ship,RUN,MODEL): a training run's model files into the shipped folder MODEL.
@@ -50,8 +51,8 @@ ship = mkdir -p $(2) && for f in $(MODEL_FILES); do cp $(1)/$$f $(2)/$$f; done
 
 # $(call against_expert,MODEL,TAG,REUSE): the expert and MODEL on every HELD_OUT suite:seed offset
 # (runs/eval_S_K_expert, runs/eval_S_K_TAG), their paired comparisons (runs/compare_S_K_TAG/comparison.md) and the
-# first three robust_extreme sets pooled (runs/compare_robust_extreme_pooled_TAG; the fourth, 500-519, is compared
-# on its own); REUSE=reuse keeps expert runs found.
+# first three robust_extreme sets pooled (runs/compare_robust_extreme_pooled_TAG; the fourth and fifth, 500-519 and
+# 600-619, are compared on their own); REUSE=reuse keeps expert runs found.
 define against_expert
 	for run in $(HELD_OUT); do \
 	  s=$${run%%:*}; seed=$${run##*:}; name=$${s}_$$seed; \
@@ -69,16 +70,16 @@ endef
 # down to half their torque, payloads to +50 %, the rest of robust_hard's randomization) over a mix of six
 # terrains, on top of the expert with adaptive knee gains (agents/rl/gain_adaptation.py), the residual a gain on
 # the stance legs' torques; 75 min of training on 2 cores, seeded; then the expert and expert + residual on the
-# held-out seeds of robust_extreme (100-119, 300-319, 400-419 and 500-519) and robust_hard (100-109), and on targets,
-# with their paired comparisons (runs/compare_*_residual; runs/compare_robust_extreme_pooled_residual pools the first
-# three robust_extreme sets). About 2 h 45 min in all.
+# held-out seeds of robust_extreme (100-119, 300-319, 400-419, 500-519 and 600-619) and robust_hard (100-109), and on
+# targets, with their paired comparisons (runs/compare_*_residual; runs/compare_robust_extreme_pooled_residual pools
+# the first three robust_extreme sets). About 3 h in all.
 rl-baseline: venv
 	$(PY) -m agents.cli train --config configs/rl/ppo_residual_adaptive.yaml --out runs/ppo_residual_adaptive --overwrite
 	$(call ship,runs/ppo_residual_adaptive,models/ppo_residual_adaptive)
 	$(call against_expert,models/ppo_residual_adaptive,residual)
 
 # Run 8 (docs/rl.md, models/sac_residual_adaptive): SAC in run 7's setup and budget, for comparison; then the
-# same evaluations (the expert's runs are rl-baseline's when present). About 2 h on 2 cores.
+# same evaluations (the expert's runs are rl-baseline's when present). About 2 h 10 min on 2 cores.
 rl-sac: venv
 	$(PY) -m agents.cli train --config configs/rl/sac_residual_adaptive.yaml --out runs/sac_residual_adaptive --overwrite
 	$(call ship,runs/sac_residual_adaptive,models/sac_residual_adaptive)
@@ -86,12 +87,24 @@ rl-sac: venv
 
 # Run 9 (docs/rl.md, models/sac_residual_adaptive_continued): run 8 trained for a second 75-min budget, a warm start
 # from models/sac_residual_adaptive (make rl-sac first to reproduce it from scratch); then the same evaluations.
-# About 2 h on 2 cores.
+# About 2 h 10 min on 2 cores.
 rl-sac-continued: venv
 	$(PY) -m agents.cli train --config configs/rl/sac_residual_adaptive_continued.yaml \
 	  --out runs/sac_residual_adaptive_continued --overwrite
 	$(call ship,runs/sac_residual_adaptive_continued,models/sac_residual_adaptive_continued)
 	$(call against_expert,models/sac_residual_adaptive_continued,sac9,reuse)
+
+# Run 10 (docs/rl.md, models/sac_residual_adaptive_features): run 8 with the adapted knee gains in the observation,
+# from scratch; its snapshot chosen on the validation seeds 200-219 of robust_extreme (quad-uneven select: every 50k
+# steps' checkpoint and the final model, 60 episodes each), then the same evaluations. About 3 h 30 min on 2 cores.
+RUN10 := runs/sac_residual_adaptive_features
+rl-sac-features: venv
+	$(PY) -m agents.cli train --config configs/rl/sac_residual_adaptive_features.yaml --out $(RUN10) --overwrite
+	$(PY) -m agents.cli select --run $(RUN10) --suite robust_extreme --seed 200 --workers 2 --overwrite
+	$(call ship,$(RUN10)/selection/selected,models/sac_residual_adaptive_features)
+	cp $(RUN10)/selection/selection.json $(RUN10)/selection/selection.md $(RUN10)/selection/selection.png \
+	  models/sac_residual_adaptive_features/
+	$(call against_expert,models/sac_residual_adaptive_features,sac10,reuse)
 
 # The from-scratch PPO reference (docs/rl.md), about 40 min on 2 cores.
 rl-scratch: venv
