@@ -21,7 +21,7 @@ from agents.evaluation.episode import DEFAULT_WALL_TIME_LIMIT
 from agents.evaluation.policies import SB3_ALGOS
 from agents.evaluation.ray_backend import BACKENDS, DEFAULT_LOCAL_CPUS
 from agents.evaluation.run import evaluate
-from agents.evaluation.suites import SuiteError, load_suite, suite_from_dict, suite_names
+from agents.evaluation.suites import Suite, SuiteError, load_suite, suite_from_dict, suite_names
 from agents.interrupts import sigterm_as_keyboard_interrupt
 from agents.outputs import prepare_output_dir
 from agents.paper.simulation import DISTRIBUTIONS as PAPER_DISTRIBUTIONS
@@ -211,6 +211,14 @@ def _json_object(text: str, option: str) -> dict:
     return value
 
 
+def _suite_option(name: str) -> Suite:
+    """The suite of a ``--suite`` option; :raises SuiteError: naming it."""
+    try:
+        return load_suite(name)
+    except SuiteError as e:
+        raise SuiteError(f"invalid suite {name!r}: {e}") from None
+
+
 def run_evaluate_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven evaluate``: 0 on success, 2 on an invalid suite, policy or argument."""
     env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
@@ -226,10 +234,7 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
     workers = args.workers if args.workers is not None else DEFAULT_LOCAL_CPUS if args.backend == "ray" else 1
     if not args.episode_wall_limit > 0:  # also refuses nan
         raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
-    try:
-        suite = load_suite(args.suite)
-    except SuiteError as e:
-        raise SuiteError(f"invalid suite {args.suite!r}: {e}") from None
+    suite = _suite_option(args.suite)
     with sigterm_as_keyboard_interrupt():
         results = evaluate(
             suite,
@@ -623,10 +628,7 @@ def run_select_command(args: argparse.Namespace) -> int:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
     if args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
-    try:
-        suite = load_suite(args.suite)
-    except SuiteError as e:
-        raise SuiteError(f"invalid suite {args.suite!r}: {e}") from None
+    suite = _suite_option(args.suite)
     with sigterm_as_keyboard_interrupt():
         result = select_checkpoint(
             args.run, suite, args.seed, out=args.out, episodes=args.episodes, workers=args.workers,
