@@ -589,6 +589,8 @@ def run_compare_command(args: argparse.Namespace) -> int:
         f"paired: {paired['fixed']} baseline failures fixed, {paired['broken']} baseline successes lost "
         f"(McNemar p = {paired['mcnemar_p']:.3g}); failures {'-' if ratio is None else f'{ratio:.2f}'} x the baseline's"
     )
+    if comp["machines_differ"]:
+        print(f"warning: the runs were made on different machines ({', '.join(comp['machines_differ'])}); see the page")
     print(f"comparison: {paths['md'].resolve()}")
     return 0
 

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.evaluation.machine import machines_differ
 from agents.evaluation.metrics import json_safe
 
 FAILURE_KINDS = ("fall", "diverged", "stall", "error")
@@ -252,6 +253,7 @@ def compare_runs(
         "by_entry": by_entry,
         "by_factor": _factor_groups(pairs),
         "changed": changed,
+        "machines_differ": machines_differ([a for a, _ in pairs], [b for _, b in pairs]),
     }
 
 
@@ -287,6 +289,20 @@ def _rows(label: str, row: Mapping[str, Any]) -> list[str]:
     return out
 
 
+def machine_note(differ: Sequence[str] | None) -> list[str]:
+    """Markdown lines saying whether the two runs were made on one machine kind (``differ``: the fields of
+    :func:`agents.evaluation.machine.machine_info` that differ; None: not recorded)."""
+    if differ is None:
+        return ["Machines: not recorded for one of the runs (made before the records had them).", ""]
+    if not differ:
+        return ["Machines: one machine kind and library versions for both runs.", ""]
+    return [
+        f"**Machines differ** ({', '.join(differ)}): floating-point results differ between machines, and an episode "
+        "near a fall can end the other way on another one. Re-run both on one machine for an exact pairing.",
+        "",
+    ]
+
+
 def comparison_markdown(comp: Mapping[str, Any]) -> str:
     """The comparison as a Markdown page."""
     head = "| group | policy | " + " | ".join(c for c, _ in _COLUMNS) + " |"
@@ -306,6 +322,7 @@ def comparison_markdown(comp: Mapping[str, Any]) -> str:
         "(and leaving the terrain), divergences, stalls (time limit short of the goal), errors. Index figures are "
         "the evaluation's (N m; fraction of the episode's time with index >= 0).",
         "",
+        *machine_note(comp.get("machines_differ")),
         "## Overall",
         "",
         head,

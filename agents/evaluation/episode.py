@@ -16,6 +16,7 @@ import gymnasium as gym
 import numpy as np
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.evaluation.machine import machine_info
 from agents.evaluation.metrics import (
     COMMAND_METRICS,
     command_metrics,
@@ -295,6 +296,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
         "waypoints_total": len(follower.config.points) if follower is not None else None,
         **_tracking(commands, cogs, yaws, dt),
         "error": error,
+        "machine": machine_info(),
         "randomization": drawn,
         "factors": _factors(drawn, pushes),
         "pushes": pushes if drawn is not None else None,

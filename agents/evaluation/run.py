@@ -28,6 +28,7 @@ from agents.evaluation.episode import (
     make_env,
     run_task,
 )
+from agents.evaluation.machine import distinct_machines
 from agents.evaluation.metrics import factor_summary, json_safe, summarize
 from agents.evaluation.policies import SB3_ALGOS, PolicyError, make_policy, model_algo, policy_kind
 from agents.evaluation.ray_backend import BACKENDS, import_ray, run_on_ray
@@ -266,6 +267,7 @@ def evaluate(
         "expert_model": sorted({str(r["expert_model"]) for r in records if r.get("expert_model")}) or None,
         "wall_time_limit": float(wall_time_limit),
         "resumed_episodes": len(tasks) - len(todo),
+        "machines": distinct_machines(records),
     }
     results = _results(suite, str(policy), records, meta)
     try:

@@ -151,3 +151,41 @@ def test_pooled_folders_that_cannot_be_pooled_are_refused_by_name(tmp_path, caps
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "candidate: 1 folder(s) for 2 baseline folder(s)" in err and "Traceback" not in err
+
+
+def test_the_comparison_says_when_the_runs_were_made_on_different_machines(tmp_path, capsys):
+    from agents.evaluation.machine import machine_info
+
+    here = machine_info()
+    there = {**here, "cpu": "another CPU", "mujoco": "0.0.1"}
+    eps = [_episode(0, 100, True), _episode(0, 101, False, "fall")]
+    same_a = _run(tmp_path / "a", "expert", [{**e, "machine": here} for e in eps])
+    same_b = _run(tmp_path / "b", "m.zip", [{**e, "machine": here} for e in eps])
+    other = _run(tmp_path / "c", "m.zip", [{**eps[0], "machine": here}, {**eps[1], "machine": there}])
+    old = _run(tmp_path / "d", "m.zip", eps)  # written before records had a machine
+
+    assert compare_runs(same_a, same_b)["machines_differ"] == []
+    assert compare_runs(same_a, other)["machines_differ"] == ["cpu", "mujoco"]
+    assert compare_runs(same_a, old)["machines_differ"] is None
+    assert main(["compare", "--baseline", str(same_a), "--candidate", str(other), "--out", str(tmp_path / "o")]) == 0
+    assert "different machines (cpu, mujoco)" in capsys.readouterr().out
+    assert "**Machines differ** (cpu, mujoco)" in (tmp_path / "o" / "comparison.md").read_text()
+    assert main(["compare", "--baseline", str(same_a), "--candidate", str(same_b), "--out", str(tmp_path / "s")]) == 0
+    assert "warning" not in capsys.readouterr().out
+    assert "one machine kind" in (tmp_path / "s" / "comparison.md").read_text()
+
+
+def test_machine_info_matches_the_libraries_themselves():
+    import platform
+
+    import mujoco
+    import numpy as np
+    import scipy
+
+    from agents.evaluation.machine import machine_info
+
+    m = machine_info()
+    assert m["numpy"] == np.__version__ and m["scipy"] == scipy.__version__ and m["mujoco"] == mujoco.__version__
+    assert m["python"] == platform.python_version() and m["arch"] == platform.machine()
+    assert m["cpu"] and set(m["simd"].split()) <= {"avx512f", "avx2", "fma", "avx", "sse4_2", "neon", "asimd"}
+    assert m["stable-baselines3"] != "absent" and m["torch"].startswith("2.")

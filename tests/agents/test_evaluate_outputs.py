@@ -16,6 +16,7 @@ import yaml
 import agents.evaluation.run as run_module
 from agents.cli import main
 from agents.evaluation.episode import EvalConfig, run_task
+from agents.evaluation.machine import machine_info
 from agents.evaluation.run import EvaluationInterrupted, evaluate
 from agents.evaluation.suites import EpisodeTask
 from agents.outputs import OutputError
@@ -82,6 +83,7 @@ def test_an_interrupt_keeps_the_finished_episodes_and_resume_runs_only_the_rest(
     assert second.calls == [3, 4, 5]
     assert strip(res["episodes"]) == strip(reference["episodes"])
     assert res["meta"]["resumed_episodes"] == 3
+    assert res["meta"]["machines"] == [machine_info()]  # every episode's record names this machine
     on_disk = json.loads((out / "results.json").read_text())
     assert strip(on_disk["episodes"]) == strip(reference["episodes"])
     assert (out / "report.md").is_file() and (out / "paths_entry1.png").stat().st_size > 10_000

@@ -15,7 +15,7 @@ import pytest
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.evaluation.policies import make_policy, policy_env_kwargs
 from agents.rl.config import load_train_config
-from agents.rl.expert_features import EXPERT_FEATURE_SIZE
+from agents.rl.expert_features import ADAPTATION_FEATURE_SIZE, EXPERT_FEATURE_SIZE
 from agents.rl.model_io import SB3Policy, read_metadata
 from agents.rl.residual_env import ResidualController
 
@@ -63,7 +63,8 @@ def test_the_shipped_model_drives_the_expert_in_a_randomized_world(name):
     assert env.unwrapped.controller.residual_basis == basis
     assert (env.unwrapped.controller.adaptation is not None) == ("_adaptive" in name)
     assert type(policy.model).__name__ == name.split("_")[0].upper()  # the class rl_meta.json records
-    assert policy.model.observation_space.shape == (env.observation_space.shape[0] + EXPERT_FEATURE_SIZE,)
+    adapted = ADAPTATION_FEATURE_SIZE if read_metadata(model).get("adaptation_features") else 0
+    assert policy.model.observation_space.shape == (env.observation_space.shape[0] + EXPERT_FEATURE_SIZE + adapted,)
     obs, _ = env.reset(seed=100)
     x0 = env.unwrapped.data.qpos[0]
     actions = []
