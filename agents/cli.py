@@ -616,6 +616,14 @@ def add_select_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--out", type=Path, default=None, help="output directory OUT (default DIR/selection)")
     p.add_argument("--episodes", type=int, default=None, help="at most N seeds per terrain entry (default: all)")
     p.add_argument("--workers", type=int, default=1, help="parallel episode processes (default 1)")
+    p.add_argument(
+        "--reference",
+        type=Path,
+        nargs="+",
+        default=[],
+        help="evaluation folder(s) of other policies on the same episodes (e.g. the expert's), listed and drawn "
+        "beside the candidates",
+    )
     p.add_argument("--overwrite", action="store_true", help="delete OUT's earlier evaluations and selection first")
     p.add_argument("--no-progress", action="store_true", help="no progress output")
     p.set_defaults(func=run_select_command)
@@ -634,10 +642,12 @@ def run_select_command(args: argparse.Namespace) -> int:
     with sigterm_as_keyboard_interrupt():
         result = select_checkpoint(
             args.run, suite, args.seed, out=args.out, episodes=args.episodes, workers=args.workers,
-            overwrite=args.overwrite, progress=not args.no_progress,
+            overwrite=args.overwrite, progress=not args.no_progress, references=args.reference,
         )  # fmt: skip
     for c in result["candidates"]:
         print(f"{c['name']:24s} success {c['successes']}/{c['episodes']}  falls {c['falls']}  rank {c['rank']}")
+    for r in result["references"]:
+        print(f"{'reference ' + str(r['policy']):24s} success {r['successes']}/{r['episodes']}  falls {r['falls']}")
     print(f"selected: {result['selected_model']}")
     return 0
 

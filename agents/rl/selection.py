@@ -39,6 +39,7 @@ __all__ = [
     "SELECTION_OUTPUTS",
     "SelectionError",
     "find_candidates",
+    "load_reference",
     "rank_key",
     "select_checkpoint",
     "selection_markdown",
@@ -110,6 +111,32 @@ def _copy_selected(run: Path, candidate: Mapping[str, Any], folder: Path) -> Pat
     return model
 
 
+def load_reference(folder: str | Path, suite: Suite, seed: int, episodes: int | None) -> dict[str, Any]:
+    """An evaluation of the same validation episodes by another policy (e.g. the expert), drawn beside the candidates.
+
+    :return: ``{"policy", "dir", "successes", "episodes", "falls", "mean_stability_index"}``.
+    :raises SelectionError: if ``folder`` has no results.json, or its suite, seed offset or episode cap differ.
+    """
+    folder = Path(folder)
+    try:
+        res = json.loads((folder / "results.json").read_text())
+    except (OSError, ValueError) as err:
+        raise SelectionError(f"reference {str(folder)!r}: no readable results.json ({err})") from None
+    meta = res.get("meta", {})
+    found = (res.get("suite"), meta.get("seed_offset"), meta.get("episodes_per_entry"))
+    if found != (suite.name, seed, episodes):
+        raise SelectionError(
+            f"reference {str(folder)!r}: evaluated suite {found[0]!r}, seed offset {found[1]}, episodes per entry "
+            f"{found[2]}; the selection uses {suite.name!r}, {seed}, {episodes}"
+        )
+    g = res["summary"]["overall"]
+    return {
+        "policy": res.get("policy"),
+        "dir": str(folder),
+        **{k: g[k] for k in ("successes", "episodes", "falls", "mean_stability_index")},
+    }
+
+
 def select_checkpoint(
     run: str | Path,
     suite: Suite | str | Path,
@@ -119,6 +146,7 @@ def select_checkpoint(
     workers: int = 1,
     overwrite: bool = False,
     progress: bool = True,
+    references: Sequence[str | Path] = (),
 ) -> dict[str, Any]:
     """Evaluate every candidate of ``run`` (:func:`find_candidates`) on ``suite`` and copy the best to ``out/selected``.
 
@@ -129,6 +157,8 @@ def select_checkpoint(
     :param episodes: at most this many seeds per terrain entry (None: all).
     :param workers: episode processes of each evaluation.
     :param overwrite: delete the earlier outputs in ``out`` (:data:`SELECTION_OUTPUTS`) first.
+    :param references: evaluation folders of other policies on the same episodes (:func:`load_reference`), listed
+        and drawn beside the candidates; they are not candidates.
     :return: the ``selection.json`` content: ``{"run", "suite", "seed", "candidates": [...], "selected"}``, every
         candidate with ``successes``, ``episodes``, ``falls``, ``mean_stability_index`` (N m) and ``rank`` (1: best).
     :raises SelectionError: on a run without models or a bad argument; the errors of ``evaluate`` otherwise.
@@ -139,6 +169,7 @@ def select_checkpoint(
         raise SelectionError(f"workers must be >= 1, got {workers}")
     if not isinstance(suite, Suite):
         suite = load_suite(suite)
+    refs = [load_reference(f, suite, seed, episodes) for f in references]
     out = run / "selection" if out is None else out
     out = prepare_output_dir(out, SELECTION_OUTPUTS, overwrite, keep=not overwrite, field="out")
     for c in candidates:
@@ -165,6 +196,7 @@ def select_checkpoint(
         "candidates": [{**c, "path": str(c["path"])} for c in candidates],
         "selected": best["name"],
         "selected_model": str(selected),
+        "references": refs,
     }
     write_json_atomic(out / "selection.json", json_safe(result))
     write_json_atomic(out / "selected" / "selection.json", json_safe(result))
@@ -190,6 +222,12 @@ def selection_markdown(result: Mapping[str, Any]) -> str:
             f"| {c['name']} | {c['steps'] if c['steps'] is not None else '-'} | {c['successes']}/{c['episodes']} | "
             f"{c['falls']} | {'-' if index is None else f'{index:.1f}'} | {c['rank']} |"
         )
+    for r in result.get("references", []):
+        index = r["mean_stability_index"]
+        lines.append(
+            f"| reference: `{r['policy']}` | - | {r['successes']}/{r['episodes']} | {r['falls']} | "
+            f"{'-' if index is None else f'{index:.1f}'} | - |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -204,6 +242,8 @@ def plot_selection(result: Mapping[str, Any], path: Path) -> Path:
     for c in rows:
         if c["name"] == result["selected"]:
             ax.plot([c["steps"]], [c["successes"]], "r*", markersize=14, label=f"selected: {c['name']}")
+    for r, style in zip(result.get("references", []), (":", "-.", "--", ":"), strict=False):
+        ax.axhline(r["successes"], color="gray", linestyle=style, label=f"successes of {Path(str(r['policy'])).name}")
     n = max((c["episodes"] for c in result["candidates"]), default=0)
     title = f"validation: {result['suite']}, seed offset {result['seed']}"
     ax.set(xlabel="training steps", ylabel=f"episodes (of {n})", title=title)

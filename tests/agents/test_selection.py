@@ -123,6 +123,20 @@ def test_select_evaluates_every_candidate_and_the_choice_reproduces(tiny_run, tm
     assert records["final"].stat().st_mtime_ns == kept  # a finished one is not run again
     assert json.loads((out / "selection.json").read_text())["selected"] == result["selected"]
 
+    ref = tmp_path / "expert"  # the expert on the same episodes, listed beside the candidates
+    expert = evaluate(suite_from_dict(SUITE, "test"), "expert", ref, seed=200, progress=False)
+    assert main([*argv, "--reference", str(ref)]) == 0, capsys.readouterr().err
+    listed = json.loads((out / "selection.json").read_text())["references"]
+    assert [(r["policy"], r["successes"], r["falls"]) for r in listed] == [
+        ("expert", expert["summary"]["overall"]["successes"], expert["summary"]["overall"]["falls"])
+    ]
+    assert "| reference: `expert` |" in (out / "selection.md").read_text()
+    other_seeds = tmp_path / "expert_0"
+    evaluate(suite_from_dict(SUITE, "test"), "expert", other_seeds, seed=0, progress=False)
+    assert main([*argv, "--reference", str(other_seeds)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: reference") and "seed offset 0" in err and err.count("\n") == 1
+
 
 @pytest.mark.parametrize(
     ("argv", "field"),

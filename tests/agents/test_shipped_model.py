@@ -1,5 +1,6 @@
 """The shipped models (models/ppo_residual_adaptive, the baseline; models/sac_residual_adaptive, its SAC
-comparison, and models/sac_residual_adaptive_continued, that run trained further; models/ppo_residual_gain,
+comparison, models/sac_residual_adaptive_continued, that run trained further, and
+models/sac_residual_adaptive_features, with the adapted gains in its observation; models/ppo_residual_gain,
 models/ppo_residual_extreme and models/ppo_residual_hard, its predecessors; models/ppo_scratch): load as data,
 run, match their configs."""
 
@@ -24,6 +25,7 @@ RESIDUAL_MODELS = {
     "ppo_residual_adaptive": ("extreme", "stance", "expert_torque"),
     "sac_residual_adaptive": ("extreme", "stance", "expert_torque"),
     "sac_residual_adaptive_continued": ("extreme", "stance", "expert_torque"),
+    "sac_residual_adaptive_features": ("extreme", "stance", "expert_torque"),
     "ppo_residual_gain": ("extreme", "stance", "expert_torque"),
     "ppo_residual_extreme": ("extreme", "stance", "torque_limit"),
     "ppo_residual_hard": ("hard", "all", "torque_limit"),
