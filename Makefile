@@ -96,11 +96,15 @@ rl-sac-continued: venv
 
 # Run 10 (docs/rl.md, models/sac_residual_adaptive_features): run 8 with the adapted knee gains in the observation,
 # from scratch; its snapshot chosen on the validation seeds 200-219 of robust_extreme (quad-uneven select: every 50k
-# steps' checkpoint and the final model, 60 episodes each), then the same evaluations. About 3 h 30 min on 2 cores.
+# steps' checkpoint and the final model, 60 episodes each, the expert's beside them), then the same evaluations.
+# About 3 h 30 min on 2 cores.
 RUN10 := runs/sac_residual_adaptive_features
 rl-sac-features: venv
 	$(PY) -m agents.cli train --config configs/rl/sac_residual_adaptive_features.yaml --out $(RUN10) --overwrite
-	$(PY) -m agents.cli select --run $(RUN10) --suite robust_extreme --seed 200 --workers 2 --overwrite
+	test -f runs/eval_robust_extreme_200_expert/results.json || \
+	  $(EVAL) --policy expert --suite robust_extreme --seed 200 --out runs/eval_robust_extreme_200_expert
+	$(PY) -m agents.cli select --run $(RUN10) --suite robust_extreme --seed 200 --workers 2 --overwrite \
+	  --reference runs/eval_robust_extreme_200_expert
 	$(call ship,$(RUN10)/selection/selected,models/sac_residual_adaptive_features)
 	cp $(RUN10)/selection/selection.json $(RUN10)/selection/selection.md $(RUN10)/selection/selection.png \
 	  models/sac_residual_adaptive_features/
