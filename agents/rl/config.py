@@ -116,6 +116,10 @@ class TrainConfig:
     """keyword arguments of the SB3 algorithm class (``learning_rate``, ``n_steps``, ...)."""
     policy_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
     """SB3 ``policy_kwargs`` (``net_arch``, ``log_std_init``, ...)."""
+    actor_warmup_steps: int = param(0, "steps", kind="int", lo=0)
+    """SAC only: for this many env steps (all envs) only the critics learn; the actor and the entropy temperature
+    stay the untrained agent's (:class:`agents.rl.training.ActorWarmupCallback`). 0: the actor learns from the
+    first update, on critics that know nothing yet."""
     init_from: str | None = None
     """a warm start: a saved model (a training run's folder or its ``.zip``) whose weights, optimizer states and
     observation statistics this run starts from (:mod:`agents.rl.warm_start`); it must have been trained for the
@@ -186,6 +190,11 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         raise TrainConfigError(
             "adaptation_features: true needs residual: true, expert_features: true and gain_adaptation: knee, got "
             f"residual={cfg.residual}, expert_features={cfg.expert_features}, gain_adaptation={cfg.gain_adaptation!r}"
+        )
+    if cfg.actor_warmup_steps and cfg.algo != "sac":
+        raise TrainConfigError(
+            f"actor_warmup_steps needs algo: sac (PPO's actor and critic share one optimizer), got algo "
+            f"{cfg.algo!r} with actor_warmup_steps={cfg.actor_warmup_steps}"
         )
     _mapping("hyperparams", cfg.hyperparams)
     _mapping("policy_kwargs", cfg.policy_kwargs)

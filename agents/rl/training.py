@@ -131,6 +131,42 @@ class CheckpointWithStatsCallback(CheckpointCallback):
         return super()._on_step()
 
 
+class ActorWarmupCallback(BaseCallback):
+    """SAC: for the first ``steps`` env steps the actor's and the entropy temperature's optimizers do not step
+    (their gradients are computed and dropped), so only the critics learn and the policy stays the untrained
+    agent. A residual agent starts as a good policy (the expert); actor updates on a critic that knows nothing
+    yet move it away from that before the critic can say which way is better."""
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        self.steps = steps
+        self._gated: list[Any] = []
+
+    def _optimizers(self) -> list[Any]:
+        found = (self.model.actor.optimizer, getattr(self.model, "ent_coef_optimizer", None))
+        return [o for o in found if o is not None]
+
+    def _on_training_start(self) -> None:
+        if self.model.num_timesteps >= self.steps:
+            return
+        for opt in self._optimizers():
+            opt.step = lambda *args, **kwargs: None  # an instance attribute: shadows Optimizer.step
+            self._gated.append(opt)
+
+    def _release(self) -> None:
+        for opt in self._gated:
+            del opt.step  # Optimizer.step again
+        self._gated = []
+
+    def _on_step(self) -> bool:
+        if self._gated and self.model.num_timesteps > self.steps:  # the updates after the first `steps` steps
+            self._release()
+        return True
+
+    def _on_training_end(self) -> None:
+        self._release()
+
+
 class EpisodeMetricsCallback(BaseCallback):
     """Logs our per-episode figures (:data:`EPISODE_KEYS`) through SB3's logger (TensorBoard, CSV, stdout).
 
@@ -257,6 +293,8 @@ def _constant_mean_action(model: Any, action: float = 0.0) -> None:
 
 def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCallback], Any]:
     callbacks: list[BaseCallback] = [ProgressCallback(progress), EpisodeMetricsCallback()]
+    if cfg.actor_warmup_steps > 0:
+        callbacks.append(ActorWarmupCallback(cfg.actor_warmup_steps))
     if cfg.time_limit_min > 0:
         callbacks.append(WallClockLimitCallback(cfg.time_limit_min))
     eval_env = None

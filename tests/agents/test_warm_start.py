@@ -137,3 +137,35 @@ def test_a_from_scratch_model_continues_too(tmp_path):
     cfg = load_train_config(write_config(tmp_path / "b.yaml", **scratch, init_from=str(tmp_path / "a")))
     summary = train(cfg, tmp_path / "b", progress=False)
     assert summary["init_timesteps"] == 16 and summary["timesteps"] == 16
+
+
+@pytest.mark.parametrize("warmup", [64, 32])
+def test_actor_warmup_keeps_the_untrained_actor_while_the_critics_learn(tmp_path, warmup):
+    """actor_warmup_steps: during the warm-up the actor's mean layer keeps its untrained values (weights 0, bias
+    the initial action) and the temperature its initial 0.1, while the critics' Adam steps; after it, both move."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    from agents.rl.training import train
+
+    cfg = load_train_config(write_config(tmp_path / "c.yaml", actor_warmup_steps=warmup, timesteps=64))
+    train(cfg, tmp_path / "run", progress=False)
+    _, params, variables = load_from_zip_file(tmp_path / "run" / "model.zip", device="cpu", load_data=False)
+    mu_weight = params["policy"]["actor.mu.weight"].numpy()
+    critic_steps = {int(s["step"]) for s in params["critic.optimizer"]["state"].values()}
+    actor_steps = {int(s["step"]) for s in params["actor.optimizer"]["state"].values()}
+    assert critic_steps == {64}  # learning_starts 0, one gradient step per env step
+    if warmup >= 64:
+        assert not mu_weight.any() and not params["policy"]["actor.mu.bias"].numpy().any()
+        assert variables["log_ent_coef"].item() == pytest.approx(np.log(0.1), abs=1e-7)
+        assert actor_steps <= {0}  # Adam never stepped
+    else:
+        assert mu_weight.any()
+        assert variables["log_ent_coef"].item() != pytest.approx(np.log(0.1), abs=1e-7)
+        assert actor_steps == {64 - warmup}
+
+
+def test_actor_warmup_is_refused_for_ppo(tmp_path):
+    from agents.rl.config import TrainConfigError
+
+    with pytest.raises(TrainConfigError, match=r"^actor_warmup_steps needs algo: sac"):
+        load_train_config(None, {"algo": "ppo", "actor_warmup_steps": 100})
