@@ -48,10 +48,14 @@ def _version(name: str) -> str:
         return "absent"
 
 
-@functools.cache
 def machine_info() -> dict[str, str]:
     """This process's machine: ``python``, ``arch``, ``cpu`` (model name), ``simd`` (flags present) and the version of
-    every :data:`PACKAGES` distribution. Computed once per process."""
+    every :data:`PACKAGES` distribution (a new dict each call; computed once per process)."""
+    return dict(_machine_info())
+
+
+@functools.cache
+def _machine_info() -> dict[str, str]:
     cpu, simd = _cpu()
     return {
         "python": platform.python_version(),

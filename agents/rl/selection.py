@@ -115,7 +115,8 @@ def load_reference(folder: str | Path, suite: Suite, seed: int, episodes: int | 
     """An evaluation of the same validation episodes by another policy (e.g. the expert), drawn beside the candidates.
 
     :return: ``{"policy", "dir", "successes", "episodes", "falls", "mean_stability_index"}``.
-    :raises SelectionError: if ``folder`` has no results.json, or its suite, seed offset or episode cap differ.
+    :raises SelectionError: if ``folder`` has no results.json, or its suite, entries, seed offset or episode cap
+        differ.
     """
     folder = Path(folder)
     try:
@@ -129,6 +130,8 @@ def load_reference(folder: str | Path, suite: Suite, seed: int, episodes: int | 
             f"reference {str(folder)!r}: evaluated suite {found[0]!r}, seed offset {found[1]}, episodes per entry "
             f"{found[2]}; the selection uses {suite.name!r}, {seed}, {episodes}"
         )
+    if meta.get("entries") != [e.label for e in suite.terrains]:
+        raise SelectionError(f"reference {str(folder)!r}: other suite entries than {suite.name!r}'s")
     g = res["summary"]["overall"]
     return {
         "policy": res.get("policy"),
@@ -231,6 +234,12 @@ def selection_markdown(result: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _policy_name(policy: str) -> str:
+    """A short label: a named policy as it is, a model file by its folder (``models/NAME/model.zip``: NAME)."""
+    path = Path(str(policy))
+    return path.parent.name or path.name if path.suffix == ".zip" else str(policy)
+
+
 def plot_selection(result: Mapping[str, Any], path: Path) -> Path:
     """Validation successes and falls of the candidates against their training steps (PNG)."""
     plt = pyplot()
@@ -243,7 +252,7 @@ def plot_selection(result: Mapping[str, Any], path: Path) -> Path:
         if c["name"] == result["selected"]:
             ax.plot([c["steps"]], [c["successes"]], "r*", markersize=14, label=f"selected: {c['name']}")
     for r, style in zip(result.get("references", []), (":", "-.", "--", ":"), strict=False):
-        ax.axhline(r["successes"], color="gray", linestyle=style, label=f"successes of {Path(str(r['policy'])).name}")
+        ax.axhline(r["successes"], color="gray", linestyle=style, label=f"successes of {_policy_name(r['policy'])}")
     n = max((c["episodes"] for c in result["candidates"]), default=0)
     title = f"validation: {result['suite']}, seed offset {result['seed']}"
     ax.set(xlabel="training steps", ylabel=f"episodes (of {n})", title=title)
