@@ -97,7 +97,7 @@ rl-sac-continued: venv
 # Run 10 (docs/rl.md, models/sac_residual_adaptive_features): run 8 with the adapted knee gains in the observation,
 # from scratch; its snapshot chosen on the validation seeds 200-219 of robust_extreme (quad-uneven select: every 50k
 # steps' checkpoint and the final model, 60 episodes each, the expert's beside them), then the same evaluations.
-# About 3 h 30 min on 2 cores.
+# About 3 h on 2 cores.
 RUN10 := runs/sac_residual_adaptive_features
 rl-sac-features: venv
 	$(PY) -m agents.cli train --config configs/rl/sac_residual_adaptive_features.yaml --out $(RUN10) --overwrite

@@ -118,8 +118,9 @@ class TrainConfig:
     """SB3 ``policy_kwargs`` (``net_arch``, ``log_std_init``, ...)."""
     actor_warmup_steps: int = param(0, "steps", kind="int", lo=0)
     """SAC only: for this many env steps (all envs) only the critics learn; the actor and the entropy temperature
-    stay the untrained agent's (:class:`agents.rl.training.ActorWarmupCallback`). 0: the actor learns from the
-    first update, on critics that know nothing yet."""
+    keep their starting values, the untrained agent's or a warm start's
+    (:class:`agents.rl.training.ActorWarmupCallback`). 0: the actor learns from the first update, on critics that
+    know nothing yet."""
     init_from: str | None = None
     """a warm start: a saved model (a training run's folder or its ``.zip``) whose weights, optimizer states and
     observation statistics this run starts from (:mod:`agents.rl.warm_start`); it must have been trained for the
