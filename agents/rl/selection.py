@@ -20,6 +20,7 @@ episodes is the user's.
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 import shutil
@@ -29,6 +30,7 @@ from typing import Any
 
 from agents.evaluation.metrics import json_safe
 from agents.evaluation.run import evaluate
+from agents.evaluation.store import RUN_FILE
 from agents.evaluation.suites import Suite, load_suite
 from agents.outputs import prepare_output_dir, write_json_atomic
 from agents.plotting import pyplot, save
@@ -177,7 +179,7 @@ def select_checkpoint(
     out = prepare_output_dir(out, SELECTION_OUTPUTS, overwrite, keep=not overwrite, field="out")
     for c in candidates:
         folder = out / "evals" / c["name"]
-        started = (folder / "run.json").is_file()
+        started = (folder / RUN_FILE).is_file()
         if progress:
             print(f"{c['name']}: {'resuming' if started else 'evaluating'} {c['path']}", flush=True)
         res = evaluate(suite, str(c["path"]), folder, episodes=episodes, seed=seed, workers=workers,
@@ -251,7 +253,7 @@ def plot_selection(result: Mapping[str, Any], path: Path) -> Path:
     for c in rows:
         if c["name"] == result["selected"]:
             ax.plot([c["steps"]], [c["successes"]], "r*", markersize=14, label=f"selected: {c['name']}")
-    for r, style in zip(result.get("references", []), (":", "-.", "--", ":"), strict=False):
+    for r, style in zip(result.get("references", []), itertools.cycle((":", "-.", (0, (5, 1, 1, 1)))), strict=False):
         ax.axhline(r["successes"], color="gray", linestyle=style, label=f"successes of {_policy_name(r['policy'])}")
     n = max((c["episodes"] for c in result["candidates"]), default=0)
     title = f"validation: {result['suite']}, seed offset {result['seed']}"
