@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out/demo
 
-.PHONY: venv demo test test-slow lint bench rl-baseline rl-sac rl-sac-continued rl-sac-features rl-scratch clean
+.PHONY: venv demo test test-slow lint bench rl-baseline rl-sac rl-sac-continued rl-sac-features rl-sac-warmup rl-scratch clean
 
 $(STAMP): pyproject.toml Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -94,21 +94,29 @@ rl-sac-continued: venv
 	$(call ship,runs/sac_residual_adaptive_continued,models/sac_residual_adaptive_continued)
 	$(call against_expert,models/sac_residual_adaptive_continued,sac9,reuse)
 
-# Run 10 (docs/rl.md, models/sac_residual_adaptive_features): run 8 with the adapted knee gains in the observation,
-# from scratch; its snapshot chosen on the validation seeds 200-219 of robust_extreme (quad-uneven select: every 50k
-# steps' checkpoint and the final model, 60 episodes each, the expert's beside them), then the same evaluations.
-# About 3 h on 2 cores.
-RUN10 := runs/sac_residual_adaptive_features
-rl-sac-features: venv
-	$(PY) -m agents.cli train --config configs/rl/sac_residual_adaptive_features.yaml --out $(RUN10) --overwrite
+# $(call train_select,CONFIG,RUN,MODEL,TAG): train CONFIG into RUN, choose its snapshot on the validation seeds
+# 200-219 of robust_extreme (quad-uneven select: every 50k steps' checkpoint and the final model, 60 episodes each,
+# the expert's beside them), ship the chosen one with its selection files to MODEL, then the held-out evaluations.
+define train_select
+	$(PY) -m agents.cli train --config $(1) --out $(2) --overwrite
 	test -f runs/eval_robust_extreme_200_expert/results.json || \
 	  $(EVAL) --policy expert --suite robust_extreme --seed 200 --out runs/eval_robust_extreme_200_expert
-	$(PY) -m agents.cli select --run $(RUN10) --suite robust_extreme --seed 200 --workers 2 --overwrite \
+	$(PY) -m agents.cli select --run $(2) --suite robust_extreme --seed 200 --workers 2 --overwrite \
 	  --reference runs/eval_robust_extreme_200_expert
-	$(call ship,$(RUN10)/selection/selected,models/sac_residual_adaptive_features)
-	cp $(RUN10)/selection/selection.json $(RUN10)/selection/selection.md $(RUN10)/selection/selection.png \
-	  models/sac_residual_adaptive_features/
-	$(call against_expert,models/sac_residual_adaptive_features,sac10,reuse)
+	$(call ship,$(2)/selection/selected,$(3))
+	cp $(2)/selection/selection.json $(2)/selection/selection.md $(2)/selection/selection.png $(3)/
+	$(call against_expert,$(3),$(4),reuse)
+endef
+
+# Run 10 (docs/rl.md, models/sac_residual_adaptive_features): run 8 with the adapted knee gains in the observation,
+# from scratch, its snapshot chosen on the validation seeds; then the same evaluations. About 3 h on 2 cores.
+rl-sac-features: venv
+	$(call train_select,configs/rl/sac_residual_adaptive_features.yaml,runs/sac_residual_adaptive_features,models/sac_residual_adaptive_features,sac10)
+
+# Run 11 (docs/rl.md, models/sac_residual_adaptive_warmup): run 10 with only the critics learning for the first 50k
+# steps (actor_warmup_steps), chosen and evaluated as run 10. About 3 h on 2 cores.
+rl-sac-warmup: venv
+	$(call train_select,configs/rl/sac_residual_adaptive_warmup.yaml,runs/sac_residual_adaptive_warmup,models/sac_residual_adaptive_warmup,sac11)
 
 # The from-scratch PPO reference (docs/rl.md), about 40 min on 2 cores.
 rl-scratch: venv
