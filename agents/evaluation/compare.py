@@ -132,12 +132,45 @@ def paired_outcomes(pairs: Sequence[tuple[Mapping[str, Any], Mapping[str, Any]]]
     }
 
 
+PUSH_FACTORS = ("push_count", "push_impulse_max")
+"""Factors that count what happened, not what was drawn: an episode that ends early receives fewer pushes."""
+
+
+def shared_push_factors(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, float] | None:
+    """The push factors of a pair over the pushes both episodes received (count, largest impulse in N s).
+
+    Both episodes draw the same pushes from the same world until the first of them ends, so their push lists
+    share a prefix; binning a pair by one side's own pushes would put that side's early falls into the
+    "fewest pushes" group and credit the other side there. None if either record has no push list.
+    """
+    pa, pb = a.get("pushes"), b.get("pushes")
+    if pa is None or pb is None:
+        return None
+    shared = []
+    for x, y in zip(pa, pb, strict=False):
+        if (x["start"], x["impulse"]) != (y["start"], y["impulse"]):
+            break
+        shared.append(float(x["impulse"]))
+    return {"push_count": float(len(shared)), "push_impulse_max": max(shared, default=0.0)}
+
+
+def _pair_factors(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, float]:
+    """The drawn factors of a pair (the baseline's record; both drew the same world), pushes as both received."""
+    factors = dict(a.get("factors") or {})
+    shared = shared_push_factors(a, b) if factors else None
+    if shared is not None:
+        factors.update({k: shared[k] for k in PUSH_FACTORS if k in factors})
+    return factors
+
+
 def _factor_groups(pairs: Sequence[tuple[dict, dict]]) -> list[dict[str, Any]]:
-    """Per factor, the paired episodes split into thirds of the drawn value (one group per value if <= 3)."""
-    names = sorted({k for a, _ in pairs for k in (a.get("factors") or {})})
+    """Per factor, the paired episodes split into thirds of the drawn value (one group per value if <= 3);
+    pushes by :func:`shared_push_factors`."""
+    factors = [_pair_factors(a, b) for a, b in pairs]
+    names = sorted({k for f in factors for k in f})
     rows = []
     for name in names:
-        items = [(a["factors"][name], a, b) for a, b in pairs if (a.get("factors") or {}).get(name) is not None]
+        items = [(f[name], a, b) for f, (a, b) in zip(factors, pairs, strict=True) if f.get(name) is not None]
         items.sort(key=lambda x: x[0])
         values = sorted({v for v, _, _ in items})
         if len(values) <= 3:
@@ -341,7 +374,15 @@ def comparison_markdown(comp: Mapping[str, Any]) -> str:
     for row in comp["by_entry"]:
         lines += _rows(f"[{row['entry']}] {row['label']}", row)
     if comp["by_factor"]:
-        lines += ["", "## By randomization factor (thirds of the drawn values)", "", head, sep]
+        lines += [
+            "",
+            "## By randomization factor (thirds of the drawn values)",
+            "",
+            "Pushes: the pushes both episodes of a pair received (the same draws until the first of them ends).",
+            "",
+            head,
+            sep,
+        ]
         for row in comp["by_factor"]:
             lines += _rows(f"{row['factor']} {row['low']:.3g}–{row['high']:.3g}", row)
     lines += ["", "## Episodes whose outcome differs", ""]

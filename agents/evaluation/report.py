@@ -88,9 +88,10 @@ def _factor_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
         "## By randomization factor",
         "",
         "Randomized episodes sorted by each factor's drawn value (motor strength: the weakest joint; damping "
-        "and frictionloss: the mean over the joints; pushes: their count and the largest impulse, N s) and "
-        "split into thirds (one group per value for factors with at most three values); each cell: value range, "
-        "success rate (successes / episodes), mean index (N m).",
+        "and frictionloss: the mean over the joints; pushes: the count and the largest impulse, N s, of those "
+        "received, so an episode that falls early counts few) and split into thirds (one group per value for "
+        "factors with at most three values); each cell: value range, success rate (successes / episodes), "
+        "mean index (N m).",
         "",
         head,
         "|" + "---|" * (head.count("|") - 1),

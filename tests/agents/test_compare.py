@@ -7,7 +7,7 @@ import json
 import pytest
 
 from agents.cli import main
-from agents.evaluation.compare import ComparisonError, compare_runs, failure_kind
+from agents.evaluation.compare import ComparisonError, compare_runs, failure_kind, shared_push_factors
 
 
 def _episode(entry, seed, success, end="goal", index=50.0, neg=0.1, residual=None, friction=1.0):
@@ -67,6 +67,52 @@ def test_counts_rates_and_changed_episodes(tmp_path):
     assert [(r["low"], r["high"]) for r in friction] == [(0.3, 0.4), (0.9, 0.9), (1.1, 1.1)]
     assert [r["baseline"]["successes"] for r in friction] == [1, 0, 1]
     assert [r["candidate"]["successes"] for r in friction] == [2, 0, 1]
+
+
+def _pushed(episode, impulses, received):
+    """``episode`` with the first ``received`` of the world's pushes (impulses in N s, one every 5 s)."""
+    pushes = [{"start": 5.0 * (k + 1), "impulse": imp} for k, imp in enumerate(impulses[:received])]
+    factors = {
+        **episode["factors"],
+        "push_count": float(received),
+        "push_impulse_max": max(impulses[:received], default=0.0),
+    }
+    return {**episode, "pushes": pushes, "factors": factors}
+
+
+def test_pairs_are_binned_by_the_pushes_both_episodes_received(tmp_path):
+    """The baseline falls after its first push in three worlds where the candidate walks on through four more:
+    binned by the baseline's own count those would be "its fewest pushes", all candidate successes; binned by
+    the pushes both received, each pair sits where the shorter episode ended, for both policies."""
+    world = [10.0, 3.0, 24.0, 5.0, 8.0]
+    base_eps, cand_eps = [], []
+    for seed in range(6):
+        early = seed < 3
+        base_eps.append(
+            _pushed(_episode(0, seed, not early, "goal" if not early else "fall"), world, 1 if early else 5)
+        )
+        cand_eps.append(_pushed(_episode(0, seed, True), world, 5))
+    comp = compare_runs(_run(tmp_path / "a", "expert", base_eps), _run(tmp_path / "b", "model.zip", cand_eps))
+    counts = [r for r in comp["by_factor"] if r["factor"] == "push_count"]
+    assert [(r["low"], r["baseline"]["episodes"]) for r in counts] == [(1.0, 3), (5.0, 3)]
+    assert [r["baseline"]["successes"] for r in counts] == [0, 3]
+    assert [r["candidate"]["successes"] for r in counts] == [3, 3]
+    impulses = [r for r in comp["by_factor"] if r["factor"] == "push_impulse_max"]
+    assert [(r["low"], r["high"]) for r in impulses] == [(10.0, 10.0), (24.0, 24.0)]
+    # the same pairs with the roles swapped: the same groups (binning by the baseline's own pushes would not)
+    swapped = compare_runs(tmp_path / "b", tmp_path / "a")
+    assert [(r["low"], r["baseline"]["episodes"]) for r in swapped["by_factor"] if r["factor"] == "push_count"] == [
+        (1.0, 3),
+        (5.0, 3),
+    ]
+
+
+def test_shared_pushes_stop_where_the_lists_differ():
+    a = {"pushes": [{"start": 5.0, "impulse": 10.0}, {"start": 10.0, "impulse": 20.0}]}
+    b = {"pushes": [{"start": 5.0, "impulse": 10.0}, {"start": 10.5, "impulse": 30.0}, {"start": 15.0, "impulse": 1}]}
+    assert shared_push_factors(a, b) == {"push_count": 1.0, "push_impulse_max": 10.0}
+    assert shared_push_factors(a, {"pushes": []}) == {"push_count": 0.0, "push_impulse_max": 0.0}
+    assert shared_push_factors(a, {}) is None
 
 
 def test_runs_of_other_episodes_are_refused_and_the_cli_writes_files(tmp_path, capsys):
