@@ -121,6 +121,11 @@ class TrainConfig:
     keep their starting values, the untrained agent's or a warm start's
     (:class:`agents.rl.training.ActorWarmupCallback`). 0: the actor learns from the first update, on critics that
     know nothing yet."""
+    initial_std: float | None = param(None, "action units", lo=0.0, hi=10.0, lo_open=True, none_ok=True)
+    """SAC only: the untrained actor's exploration std per action (before the tanh), the same in every state: its
+    log-std layer starts with zero weights and the bias log(initial_std), as the mean layer starts at
+    ``initial_action``. None: SB3's random layer, a std of about 1 in every state (SB3 ignores
+    ``policy_kwargs.log_std_init`` for SAC unless ``use_sde``; PPO takes that field and refuses this one)."""
     init_from: str | None = None
     """a warm start: a saved model (a training run's folder or its ``.zip``) whose weights, optimizer states and
     observation statistics this run starts from (:mod:`agents.rl.warm_start`); it must have been trained for the
@@ -196,6 +201,16 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         raise TrainConfigError(
             f"actor_warmup_steps needs algo: sac (PPO's actor and critic share one optimizer), got algo "
             f"{cfg.algo!r} with actor_warmup_steps={cfg.actor_warmup_steps}"
+        )
+    if cfg.initial_std is not None and cfg.hyperparams.get("use_sde"):
+        raise TrainConfigError(
+            "initial_std is for SAC without use_sde; with use_sde set policy_kwargs.log_std_init, got "
+            f"initial_std={cfg.initial_std} and hyperparams.use_sde=true"
+        )
+    if cfg.initial_std is not None and cfg.algo != "sac":
+        raise TrainConfigError(
+            f"initial_std needs algo: sac (PPO's exploration std is policy_kwargs.log_std_init), got algo "
+            f"{cfg.algo!r} with initial_std={cfg.initial_std}"
         )
     _mapping("hyperparams", cfg.hyperparams)
     _mapping("policy_kwargs", cfg.policy_kwargs)

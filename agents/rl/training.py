@@ -269,7 +269,18 @@ def _make_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) ->
         raise TrainConfigError(f"hyperparams/policy_kwargs: {err}") from None
     if cfg.residual:
         _constant_mean_action(model, cfg.initial_action)
+    if cfg.initial_std is not None:
+        _constant_log_std(model, cfg.initial_std)
     return model
+
+
+def _constant_log_std(model: Any, std: float) -> None:
+    """Make SAC's log-std layer output ``log(std)`` in every state (zero weights, that bias); it still learns."""
+    import torch
+
+    with torch.no_grad():
+        model.actor.log_std.weight.zero_()
+        model.actor.log_std.bias.fill_(float(np.log(std)))
 
 
 def _constant_mean_action(model: Any, action: float = 0.0) -> None:

@@ -1,14 +1,17 @@
-"""quad-uneven train --init-from: a warm start takes the saved weights, optimizers, temperature and statistics."""
+"""How a SAC residual run starts: --init-from (a warm start takes the saved weights, optimizers, temperature and
+statistics), actor_warmup_steps (the critics learn first) and initial_std (the untrained actor's exploration std)."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 import yaml
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 from agents.cli import main
 from agents.rl.config import TrainConfigError, default_config_path, load_train_config
@@ -20,7 +23,7 @@ TINY_SAC = {
     "eval_freq": 0,
     "checkpoint_freq": 0,
     "hyperparams": {"buffer_size": 1000, "batch_size": 16, "learning_starts": 0, "ent_coef": "auto_0.1"},
-    "policy_kwargs": {"net_arch": [16], "log_std_init": -2.3},
+    "policy_kwargs": {"net_arch": [16]},
 }
 """Overrides of the shipped SAC config for a run of a few seconds."""
 
@@ -169,3 +172,80 @@ def test_actor_warmup_is_refused_for_ppo(tmp_path):
 
     with pytest.raises(TrainConfigError, match=r"^actor_warmup_steps needs algo: sac"):
         load_train_config(None, {"algo": "ppo", "actor_warmup_steps": 100})
+
+
+OBS_DIM = 30
+
+
+class _Box(gym.Env):
+    """Spaces only: the model is built, never stepped."""
+
+    observation_space = gym.spaces.Box(-10.0, 10.0, (OBS_DIM,), np.float32)
+    action_space = gym.spaces.Box(-1.0, 1.0, (12,), np.float32)
+
+    def reset(self, seed=None, options=None):
+        return np.zeros(OBS_DIM, np.float32), {}
+
+    def step(self, action):
+        return np.zeros(OBS_DIM, np.float32), 0.0, False, False, {}
+
+
+def _std(tmp_path, **changes) -> np.ndarray:
+    """The untrained actor's std per action on 500 standard-normal (normalized) observations."""
+    from agents.rl.training import _make_model
+
+    model = _make_model(load_train_config(write_config(tmp_path / "c.yaml", **changes)), DummyVecEnv([_Box]))
+    with torch.no_grad():
+        _, log_std, _ = model.actor.get_action_dist_params(
+            torch.randn(500, OBS_DIM, generator=torch.Generator().manual_seed(0))
+        )
+    return log_std.exp().numpy()
+
+
+def test_sb3_sac_ignores_log_std_init(tmp_path):
+    """Why initial_std exists: with policy_kwargs.log_std_init -2.3 (std 0.1) SB3's SAC actor starts with a random
+    log-std layer, a std near 1 that varies with the state."""
+    std = _std(tmp_path, initial_std=None, policy_kwargs={"net_arch": [16], "log_std_init": -2.3})
+    assert np.median(std) > 0.5 and std.std() > 1e-3
+
+
+@pytest.mark.parametrize("initial_std", [0.1, 0.3])
+def test_initial_std_is_the_std_in_every_state(tmp_path, initial_std):
+    std = _std(tmp_path, initial_std=initial_std)
+    np.testing.assert_allclose(std, initial_std, rtol=1e-6)
+
+
+def test_initial_std_survives_the_actor_warmup_and_then_learns(tmp_path):
+    """Held by actor_warmup_steps (zero weights, bias log 0.1 in the saved model), moved by the actor's updates."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    from agents.rl.training import train
+
+    for warmup, name in ((64, "held"), (0, "free")):
+        cfg = load_train_config(write_config(tmp_path / f"{name}.yaml", initial_std=0.1, actor_warmup_steps=warmup))
+        train(cfg, tmp_path / name, progress=False)
+        _, params, _ = load_from_zip_file(tmp_path / name / "model.zip", device="cpu", load_data=False)
+        weight = params["policy"]["actor.log_std.weight"].numpy()
+        bias = params["policy"]["actor.log_std.bias"].numpy()
+        if warmup:
+            assert not weight.any()
+            np.testing.assert_allclose(bias, np.log(0.1), rtol=1e-6)
+        else:
+            assert weight.any() and not np.allclose(bias, np.log(0.1))
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"algo": "ppo", "initial_std": 0.1}, r"^initial_std needs algo: sac"),
+        (
+            {"algo": "sac", "initial_std": 0.1, "hyperparams": {"use_sde": True}},
+            r"^initial_std is for SAC without use_sde",
+        ),
+        ({"algo": "sac", "initial_std": 0.0}, r"initial_std"),
+        ({"algo": "sac", "initial_std": "wide"}, r"initial_std"),
+    ],
+)
+def test_bad_initial_std_is_refused_naming_the_field(changes, message):
+    with pytest.raises(TrainConfigError, match=message):
+        load_train_config(None, changes)
