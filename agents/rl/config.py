@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -121,11 +122,12 @@ class TrainConfig:
     keep their starting values, the untrained agent's or a warm start's
     (:class:`agents.rl.training.ActorWarmupCallback`). 0: the actor learns from the first update, on critics that
     know nothing yet."""
-    initial_std: float | None = param(None, "action units", lo=0.0, hi=10.0, lo_open=True, none_ok=True)
+    initial_std: float | None = param(None, "action units", lo=0.0, hi=7.0, lo_open=True, none_ok=True)
     """SAC only: the untrained actor's exploration std per action (before the tanh), the same in every state: its
     log-std layer starts with zero weights and the bias log(initial_std), as the mean layer starts at
-    ``initial_action``. None: SB3's random layer, a std of about 1 in every state (SB3 ignores
-    ``policy_kwargs.log_std_init`` for SAC unless ``use_sde``; PPO takes that field and refuses this one)."""
+    ``initial_action`` (at most 7: SB3 clamps the log std to 2). None: SB3's random layer, a std of about 1 in
+    every state (SB3 ignores ``policy_kwargs.log_std_init`` for SAC unless ``use_sde``; PPO takes that field and
+    refuses this one)."""
     init_from: str | None = None
     """a warm start: a saved model (a training run's folder or its ``.zip``) whose weights, optimizer states and
     observation statistics this run starts from (:mod:`agents.rl.warm_start`); it must have been trained for the
@@ -206,6 +208,12 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         raise TrainConfigError(
             "initial_std is for SAC without use_sde; with use_sde set policy_kwargs.log_std_init, got "
             f"initial_std={cfg.initial_std} and hyperparams.use_sde=true"
+        )
+    if cfg.algo == "sac" and "log_std_init" in cfg.policy_kwargs and not cfg.hyperparams.get("use_sde"):
+        warnings.warn(
+            "policy_kwargs.log_std_init has no effect on SAC without use_sde (SB3): the untrained actor explores "
+            "with a std of about 1 unless initial_std is set",
+            stacklevel=2,
         )
     if cfg.initial_std is not None and cfg.algo != "sac":
         raise TrainConfigError(

@@ -205,7 +205,8 @@ def _std(tmp_path, **changes) -> np.ndarray:
 def test_sb3_sac_ignores_log_std_init(tmp_path):
     """Why initial_std exists: with policy_kwargs.log_std_init -2.3 (std 0.1) SB3's SAC actor starts with a random
     log-std layer, a std near 1 that varies with the state."""
-    std = _std(tmp_path, initial_std=None, policy_kwargs={"net_arch": [16], "log_std_init": -2.3})
+    with pytest.warns(UserWarning, match=r"^policy_kwargs.log_std_init has no effect on SAC without use_sde"):
+        std = _std(tmp_path, initial_std=None, policy_kwargs={"net_arch": [16], "log_std_init": -2.3})
     assert np.median(std) > 0.5 and std.std() > 1e-3
 
 
