@@ -114,7 +114,8 @@ rl-sac-features: venv
 	$(call train_select,configs/rl/sac_residual_adaptive_features.yaml,runs/sac_residual_adaptive_features,models/sac_residual_adaptive_features,sac10)
 
 # Run 11 (docs/rl.md, models/sac_residual_adaptive_warmup): run 10 with only the critics learning for the first 50k
-# steps (actor_warmup_steps), chosen and evaluated as run 10. About 3 h on 2 cores.
+# steps (actor_warmup_steps) and an exploration std of 0.1 at the start (initial_std), chosen and evaluated as run 10.
+# About 3 h on 2 cores.
 rl-sac-warmup: venv
 	$(call train_select,configs/rl/sac_residual_adaptive_warmup.yaml,runs/sac_residual_adaptive_warmup,models/sac_residual_adaptive_warmup,sac11)
 
