@@ -755,8 +755,8 @@ class ExpertPolicy:
             self._current, self._current_ref = hold, hold
             duration = hold.duration
         else:
-            self._current, self._current_ref = plan, plan.reference(self.cfg)
-            duration = plan.duration
+            self._current, self._current_ref = plan
+            duration = self._current.duration
             self._yaw += turn
         self._row_of = getattr(self._current_ref, "row", None)
         self._grid = getattr(self._current_ref, "grid", None)
@@ -764,14 +764,15 @@ class ExpertPolicy:
         self._t_start, self._t_end = t0, t0 + duration
 
     def _try_plan(self, scenario: Scenario, t0: float, stride: tuple[float, float], note: str = "") -> tuple[Any, bool]:
-        """Plan one gait cycle: (the plan or None, whether a steeper foothold slope limit could give it
-        footholds); a failure is logged with the stride (m) and ``note``."""
+        """Plan one gait cycle: ((the plan, its whole-body reference) or None, whether a steeper foothold slope
+        limit could give it footholds); a failure, or a reference that cannot be tracked
+        (:meth:`planners.reference.Reference.defect`), is logged with the stride (m) and ``note``."""
         tic = time.perf_counter()
         try:
             # Small dense problems: multi-threaded BLAS only adds contention (much slower on
             # a loaded 2-core machine), so the planner runs single-threaded.
             with _blas_controller().limit(limits=1, user_api="blas"):
-                return plan_gait_cycle(scenario), False
+                plan = plan_gait_cycle(scenario)
         except PlanningError as err:
             self._log(f"t={t0:.2f} s, stride {_fmt(stride)} m{note}: {err}")
             return None, isinstance(err, FootholdError) and err.slope_blocked > 0
@@ -780,6 +781,12 @@ class ExpertPolicy:
             return None, False
         finally:
             self.planner_times_ms.append(1e3 * (time.perf_counter() - tic))
+        reference = plan.reference(self.cfg)
+        defect = reference.defect()
+        if defect is not None:
+            self._log(f"t={t0:.2f} s, stride {_fmt(stride)} m{note}: whole-body reference refused ({defect})")
+            return None, False
+        return (plan, reference), False
 
 
 def _fmt(stride: tuple[float, float]) -> str:

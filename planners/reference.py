@@ -27,6 +27,9 @@ from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 from quad_uneven_env.spatial import quat_to_matrix
 
 _IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
+MAX_JOINT_SPEED = 50.0
+"""rad/s: a reference joint speed above this is a singular leg, not a motion (planned gait cycles stay below
+~12 rad/s, also on the randomized suites; a leg planned at full stretch gives 1e17 and more)."""
 _STANCE_OF_MASK = [tuple(bool(m >> i & 1) for i in range(4)) for m in range(16)]
 """stance tuple (LF, RF, LH, RH) of each 4-bit mask."""
 
@@ -83,6 +86,29 @@ class Reference:
         k = round(tc / self._grid_dt)
         if k < len(self._rows) and abs(self._grid_t_list[k] - tc) < 1e-9:
             return self._rows[k], self._grid_mask[k]
+        return None
+
+    def defect(self, max_joint_speed: float = MAX_JOINT_SPEED) -> str | None:
+        """Why this reference cannot be tracked, or None if it can: a non-finite value or a joint speed above
+        ``max_joint_speed`` (rad/s) on its grid.
+
+        Both come from a leg the plan holds at or beyond full stretch (a measured start whose feet are
+        farther from the hips than the leg reaches): its IK is clipped to the stretched knee, where the leg
+        Jacobian is singular and the joint velocities and accelerations are not defined.
+        """
+        p, pd, pdd, q, qd, qdd, _ = self._grid
+        for name, a in (("base", np.hstack([p, pd, pdd])), ("joint", np.hstack([q, qd, qdd]))):
+            if not np.isfinite(a).all():
+                k = int(np.flatnonzero(~np.isfinite(a).all(axis=1))[0])
+                return f"non-finite {name} reference at t={self._grid_t[k]:.3f} s"
+        speed = np.abs(qd)
+        k, j = np.unravel_index(int(np.argmax(speed)), speed.shape)
+        if speed[k, j] > max_joint_speed:
+            knee = abs(q[k, 3 * (j // 3) + 2])
+            return (
+                f"singular leg {LEG_NAMES[j // 3]}: joint speed {speed[k, j]:.3g} rad/s > {max_joint_speed:g} at "
+                f"t={self._grid_t[k]:.3f} s (knee {knee:.3f} rad from stretched)"
+            )
         return None
 
     def feet(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -81,7 +81,7 @@ def expert_features(expert, data: mujoco.MjData) -> np.ndarray:
 
     :param expert: an :class:`agents.expert.ExpertPolicy` that has been reset with the env.
     :param data: the simulator's data (what the expert measures: ``qpos``, ``qvel`` and ``time``).
-    :return: (EXPERT_FEATURE_SIZE,) float32, clipped to the field bounds.
+    :return: (EXPERT_FEATURE_SIZE,) float32, clipped to the field bounds (a non-finite entry reads 0).
     """
     ref, phase = expert.planned_now(float(data.time))
     q, v = data.qpos, data.qvel
@@ -102,6 +102,9 @@ def expert_features(expert, data: mujoco.MjData) -> np.ndarray:
     out[_SLICES["expert_cycle_phase"]] = (math.sin(2 * math.pi * phase), math.cos(2 * math.pi * phase))
     out[_SLICES["expert_base_acc_ref"]] = R_WY.T @ ref.a_base_W
     out[_SLICES["expert_torque"]] = expert.last_torques / expert.env.idx.torque_limit
+    # A non-finite plan is refused by the expert; should one get through, the agent still sees a finite
+    # observation (NaN as no error, infinities at the bounds), never NaN.
+    np.nan_to_num(out, copy=False, nan=0.0)
     np.clip(out, _LOW, _HIGH, out=out)
     return out.astype(np.float32)
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -9,6 +11,7 @@ import pytest
 import quad_uneven_env  # noqa: F401
 from agents import expert as expert_mod
 from agents.expert import ExpertConfig, attach_expert
+import planners
 from planners import PlanningError
 from quad_uneven_env import constants as C
 
@@ -75,6 +78,27 @@ def test_planning_failure_degrades_to_standing(monkeypatch):
         assert not terminated
     assert any("forced failure" in line for line in policy.failure_log)
     assert any("standing still" in line for line in policy.failure_log)
+    np.testing.assert_allclose(info["cog"][:2], x0[:2], atol=0.01)
+
+
+def test_a_plan_with_a_stretched_stance_leg_is_refused(monkeypatch):
+    """A plan whose whole-body reference holds a leg beyond full stretch (singular joint velocities) is refused
+    like a failed plan: the expert stands still, its torques stay finite, the refusal names the leg."""
+    start = {"pos": (0.01, 0.0, 0.594), "vel": (0.0, 0.0, 0.0), "acc": (0.0, 0.0, 0.0)}  # 5 cm above reach
+    stretched = planners.plan_gait_cycle(dataclasses.replace(planners.paper_scenario(), cog_start=start))
+    monkeypatch.setattr(expert_mod, "plan_gait_cycle", lambda scenario: stretched)
+    env = gym.make("QuadUneven-v0", terrain="flat")
+    policy = attach_expert(env)
+    obs, info = env.reset(seed=0)
+    x0 = info["cog"].copy()
+    for _ in range(100):
+        obs, _, terminated, _, info = env.step(policy.predict(obs)[0])
+        assert not terminated
+        assert np.isfinite(policy.last_torques).all()
+    refused = [line for line in policy.failure_log if "whole-body reference refused (singular leg" in line]
+    assert refused, policy.failure_log[:3]
+    assert any("standing still" in line for line in policy.failure_log)
+    assert not any("non-finite" in line for line in policy.failure_log)
     np.testing.assert_allclose(info["cog"][:2], x0[:2], atol=0.01)
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import gymnasium as gym
 import mujoco
 import numpy as np
@@ -108,3 +110,28 @@ def test_the_documented_layout_is_the_code():
     doc = (Path(__file__).resolve().parents[2] / "docs" / "rl.md").read_text()
     assert observation_table(EXPERT_FEATURE_FIELDS) in doc
     assert observation_table(ADAPTATION_FEATURE_FIELDS) in doc
+
+
+def test_a_non_finite_plan_gives_finite_features(monkeypatch):
+    """A plan with NaN and infinite entries (a singular whole-body reference): the NaN entries read 0, the
+    infinite ones their bound, and every other entry is as computed from the finite plan."""
+    env = gym.make(RESIDUAL_ENV_ID, terrain="flat")
+    env.reset(seed=0)
+    base, expert = env.unwrapped, env.get_wrapper_attr("expert")
+    finite = expert_features(expert, base.data)
+    ref, phase = expert.planned_now(float(base.data.time))
+    q_bad = ref.q_joints.copy()
+    q_bad[[0, 4]] = np.nan
+    q_bad[7] = np.inf
+    bad = dataclasses.replace(ref, p_base_W=np.full(3, np.nan), q_joints=q_bad)
+    monkeypatch.setattr(expert, "planned_now", lambda t: (bad, phase))
+    features = expert_features(expert, base.data)
+    assert np.isfinite(features).all()
+    pos, joints = SLICES["expert_base_pos_error"], SLICES["expert_joint_pos_error"]
+    np.testing.assert_array_equal(features[pos], 0.0)
+    assert features[joints][0] == features[joints][4] == 0.0
+    assert features[joints][7] == EXPERT_FEATURE_FIELDS[3].high
+    keep = np.ones(EXPERT_FEATURE_SIZE, dtype=bool)
+    keep[pos] = False
+    keep[np.arange(EXPERT_FEATURE_SIZE)[joints][[0, 4, 7]]] = False
+    np.testing.assert_array_equal(features[keep], finite[keep])

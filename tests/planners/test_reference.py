@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+
 import mujoco
 import numpy as np
 import pytest
 
 import planners
+from planners.reference import MAX_JOINT_SPEED
 from planners.wholebody import WholeBody, leg_point
 from quad_uneven_env import constants as C
 from quad_uneven_env.config import load_robot_config
@@ -171,3 +175,31 @@ def test_compiled_base_placement_equals_numpy():
     for a, b in zip(fast, slow, strict=True):
         np.testing.assert_allclose(a, b.reshape(a.shape), rtol=0, atol=1e-9)
     assert np.abs(fast[5]).max() > 1.0  # swing legs really accelerate: the comparison is not trivial
+
+
+@pytest.mark.parametrize("raise_m", [0.0, 0.03, 0.05, 0.08])
+def test_defect_names_a_leg_planned_beyond_full_stretch(raise_m):
+    """The paper's cycle started ``raise_m`` higher: up to 3 cm the legs still reach (finite joint speeds under
+    the nominal ~6 rad/s); from 5 cm a stance leg is held stretched, its Jacobian singular, and the reference's
+    joint speeds are not defined: the defect names the leg."""
+    sc = planners.paper_scenario()
+    start = {"pos": (0.01, 0.0, 0.544 + raise_m), "vel": (0.0, 0.0, 0.0), "acc": (0.0, 0.0, 0.0)}
+    ref = planners.plan_gait_cycle(dataclasses.replace(sc, cog_start=start)).reference()
+    qd = ref.evaluate(ref._grid_t, newton_steps=3)[4]
+    if raise_m <= 0.03:
+        assert ref.defect() is None
+        assert np.abs(qd).max() < 10.0
+    else:
+        defect = ref.defect()
+        assert defect is not None and defect.startswith("singular leg ")
+        assert defect.split()[2].rstrip(":") in C.LEG_NAMES
+        assert not (np.abs(qd).max() < MAX_JOINT_SPEED)  # huge or NaN: not a motion
+
+
+def test_defect_reports_a_non_finite_grid(ref):
+    broken = copy.copy(ref)
+    grid = [a.copy() for a in ref._grid]
+    grid[0][7, 2] = np.nan
+    broken._grid = tuple(grid)
+    assert broken.defect() == f"non-finite base reference at t={ref._grid_t[7]:.3f} s"
+    assert ref.defect() is None
