@@ -8,10 +8,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+import planners
 import quad_uneven_env  # noqa: F401
 from agents import expert as expert_mod
 from agents.expert import ExpertConfig, attach_expert
-import planners
 from planners import PlanningError
 from quad_uneven_env import constants as C
 
