@@ -69,16 +69,24 @@ def test_planning_failure_degrades_to_standing(monkeypatch):
         raise PlanningError("forced failure for the test")
 
     monkeypatch.setattr(expert_mod, "plan_gait_cycle", always_fail)
+    policy = _stands_still_on_flat_ground()
+    assert any("forced failure" in line for line in policy.failure_log)
+
+
+def _stands_still_on_flat_ground(steps: int = 100):
+    """The expert on flat ground for ``steps`` control steps: it must not fall, keep finite torques, log a
+    stand-still and end where it started (1 cm)."""
     env = gym.make("QuadUneven-v0", terrain="flat")
     policy = attach_expert(env)
     obs, info = env.reset(seed=0)
     x0 = info["cog"].copy()
-    for _ in range(100):
+    for _ in range(steps):
         obs, _, terminated, _, info = env.step(policy.predict(obs)[0])
         assert not terminated
-    assert any("forced failure" in line for line in policy.failure_log)
+        assert np.isfinite(policy.last_torques).all()
     assert any("standing still" in line for line in policy.failure_log)
     np.testing.assert_allclose(info["cog"][:2], x0[:2], atol=0.01)
+    return policy
 
 
 def test_a_plan_with_a_stretched_stance_leg_is_refused(monkeypatch):
@@ -87,19 +95,10 @@ def test_a_plan_with_a_stretched_stance_leg_is_refused(monkeypatch):
     start = {"pos": (0.01, 0.0, 0.594), "vel": (0.0, 0.0, 0.0), "acc": (0.0, 0.0, 0.0)}  # 5 cm above reach
     stretched = planners.plan_gait_cycle(dataclasses.replace(planners.paper_scenario(), cog_start=start))
     monkeypatch.setattr(expert_mod, "plan_gait_cycle", lambda scenario: stretched)
-    env = gym.make("QuadUneven-v0", terrain="flat")
-    policy = attach_expert(env)
-    obs, info = env.reset(seed=0)
-    x0 = info["cog"].copy()
-    for _ in range(100):
-        obs, _, terminated, _, info = env.step(policy.predict(obs)[0])
-        assert not terminated
-        assert np.isfinite(policy.last_torques).all()
+    policy = _stands_still_on_flat_ground()
     refused = [line for line in policy.failure_log if "whole-body reference refused (singular leg" in line]
     assert refused, policy.failure_log[:3]
-    assert any("standing still" in line for line in policy.failure_log)
     assert not any("non-finite" in line for line in policy.failure_log)
-    np.testing.assert_allclose(info["cog"][:2], x0[:2], atol=0.01)
 
 
 def test_bad_config_is_rejected():
