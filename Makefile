@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out/demo
 
-.PHONY: venv demo test test-slow lint bench rl-baseline rl-sac rl-sac-continued rl-sac-features rl-sac-warmup rl-scratch clean
+.PHONY: venv demo test test-slow lint bench strength-estimator rl-baseline rl-sac rl-sac-continued rl-sac-features rl-sac-warmup rl-scratch clean
 
 $(STAMP): pyproject.toml Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -65,6 +65,12 @@ define against_expert
 	  --candidate $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_$(2)) \
 	  --out runs/compare_robust_extreme_pooled_$(2)
 endef
+
+# The learned strength estimator (agents/rl/data/strength_estimator.npz, gain_adaptation: learned; docs/rl.md,
+# session 20): 600 episodes of the expert in the extreme world on training seeds 1000-1199, then the fit; about
+# 15 min on 2 cores, seeded.
+strength-estimator: venv
+	$(PY) -m agents.rl.strength_data --seeds 1000-1199 --workers 2
 
 # The shipped residual baseline (docs/rl.md, models/ppo_residual_adaptive, run 7): PPO on the extreme world (motors
 # down to half their torque, payloads to +50 %, the rest of robust_hard's randomization) over a mix of six

@@ -317,9 +317,10 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     )
     p.add_argument(
         "--gain-adaptation",
-        choices=("none", "knee"),
+        choices=("none", "knee", "learned"),
         default=None,
-        help="adaptive knee gains on the expert under the residual (default: the config's)",
+        help="adaptive gains on the expert under the residual: knees by the hand-made law, or every joint by the "
+        "learned strength estimator (default: the config's)",
     )
     p.add_argument(
         "--time-limit-min", type=float, default=None, help="stop (and save) after this many minutes of training"

@@ -29,9 +29,10 @@ RESIDUAL_BASES = ("torque_limit", "expert_torque")
 """What one unit of residual action is: a fraction of the motor's torque limit (additive), or of the expert's
 own torque at that physics step (a gain on the expert: ``tau = tau_expert x (1 + residual_scale x action)``)."""
 
-GAIN_ADAPTATIONS = ("none", "knee")
-"""What the residual acts on: the expert's torques, or those with adaptive knee gains
-(:mod:`agents.rl.gain_adaptation`)."""
+GAIN_ADAPTATIONS = ("none", "knee", "learned")
+"""What the residual acts on: the expert's torques, those with adaptive knee gains
+(:mod:`agents.rl.gain_adaptation`), or those with adaptive gains on every joint driven by the learned strength
+estimator (:mod:`agents.rl.strength_estimator`)."""
 
 ALGOS = ("ppo", "sac")
 """Stable-Baselines3 algorithms ``quad-uneven train`` supports."""
@@ -90,7 +91,8 @@ class TrainConfig:
     gain_adaptation: str = param("none", kind="choice", choices=GAIN_ADAPTATIONS)
     """``none``: the residual acts on the expert's torques; ``knee``: on the expert's torques with adaptive knee
     gains (:mod:`agents.rl.gain_adaptation`: each knee's gain follows the correlation of its tracking error
-    with its load)."""
+    with its load); ``learned``: on the expert's torques with adaptive gains on all twelve joints, driven by the
+    learned strength estimator (:mod:`agents.rl.strength_estimator`)."""
     adaptation_features: bool = param(False, kind="bool")
     """append the adapted knee gains to the observation, after the expert features (needs ``gain_adaptation:
     knee`` and ``expert_features``): what the adaptation has learned of the motors, which the policy cannot

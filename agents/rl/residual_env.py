@@ -46,6 +46,7 @@ from agents.rl.config import RESIDUAL_BASES, RESIDUAL_LEGS
 from agents.rl.expert_features import adaptation_features as adaptation_feature_vector
 from agents.rl.expert_features import augmented_space, expert_features
 from agents.rl.gain_adaptation import KneeGainAdaptation, check_gain_adaptation
+from agents.rl.strength_estimator import LearnedGainAdaptation
 from quad_uneven_env.env import QuadUnevenEnv
 from quad_uneven_env.measurement_kernels import clip_finite_into
 
@@ -93,6 +94,17 @@ def check_residual_scale(residual_scale: Any) -> float:
     return value
 
 
+def make_gain_adaptation(name: str, period: float) -> KneeGainAdaptation | LearnedGainAdaptation | None:
+    """The adaptation ``name`` (one of :data:`~agents.rl.config.GAIN_ADAPTATIONS`) updated every ``period`` s,
+    or None for ``"none"``."""
+    name = check_gain_adaptation(name)
+    if name == "knee":
+        return KneeGainAdaptation(period)
+    if name == "learned":
+        return LearnedGainAdaptation(period)
+    return None
+
+
 class ResidualController:
     """Physics-rate controller: the expert's torques plus ``residual_scale`` x action x torque limit (or x the
     expert's torque with ``residual_basis="expert_torque"``).
@@ -107,11 +119,16 @@ class ResidualController:
         for ``"stance"``).
     :param residual_basis: ``"torque_limit"`` (residual = scale x action x ``torque_limit``) or
         ``"expert_torque"`` (residual = scale x action x the expert's torque, joint by joint).
-    :param gain_adaptation: ``"none"``, or ``"knee"``: the expert's knee torques are first multiplied by the
-        adaptive gains of :class:`~agents.rl.gain_adaptation.KneeGainAdaptation`, updated every
-        ``update_period`` from the expert's plan (``expert.planned_now``) and torques; the residual then acts
-        on the adapted torques. With ``"knee"`` action 0 is no longer the expert alone.
+    :param gain_adaptation: ``"none"``, ``"knee"`` or ``"learned"``: the expert's knee torques (``"knee"``) or
+        all its joint torques (``"learned"``) are first multiplied by the adaptive gains of
+        :class:`~agents.rl.gain_adaptation.KneeGainAdaptation` or
+        :class:`~agents.rl.strength_estimator.LearnedGainAdaptation`, updated every ``update_period`` from the
+        expert's plan (``expert.planned_now``) and torques; the residual then acts on the adapted torques. With
+        an adaptation, action 0 is no longer the expert alone.
     :param update_period: s between two updates of the adaptation (the env's control step).
+    :param adaptation: an adaptation object to use instead of the one ``gain_adaptation`` names (its ``gain``
+        (12,) array multiplies the expert's torques, its ``reset()`` and ``update(error, load, t)`` are called as
+        :class:`~agents.rl.gain_adaptation.KneeGainAdaptation`'s; the strength estimator's data collection).
     """
 
     def __init__(
@@ -124,12 +141,17 @@ class ResidualController:
         residual_basis: str = "torque_limit",
         gain_adaptation: str = "none",
         update_period: float = 0.02,
+        adaptation: Any = None,
     ) -> None:
         self.expert = expert
         self.gain_adaptation = check_gain_adaptation(gain_adaptation)
-        self.adaptation = KneeGainAdaptation(update_period) if self.gain_adaptation == "knee" else None
+        if adaptation is None:
+            adaptation = make_gain_adaptation(self.gain_adaptation, update_period)
+        self.adaptation = adaptation
         if self.adaptation is not None and not hasattr(expert, "planned_now"):
-            raise ValueError("gain_adaptation='knee' needs an expert with a plan (planned_now), like ExpertPolicy")
+            raise ValueError(
+                f"gain_adaptation={self.gain_adaptation!r} needs an expert with a plan (planned_now), like ExpertPolicy"
+            )
         self._next_update = self._t_reset = 0.0
         self.residual_scale = check_residual_scale(residual_scale)
         self.residual_legs = check_residual_legs(residual_legs)
@@ -306,7 +328,7 @@ class ResidualExpertEnv(gym.Wrapper):
         (``info["reward_terms"]["residual"]``); 0 keeps the env's reward.
     :param residual_legs: ``"all"`` or ``"stance"`` (see :class:`ResidualController`).
     :param residual_basis: ``"torque_limit"`` or ``"expert_torque"`` (see :class:`ResidualController`).
-    :param gain_adaptation: ``"none"`` or ``"knee"`` (see :class:`ResidualController`).
+    :param gain_adaptation: ``"none"``, ``"knee"`` or ``"learned"`` (see :class:`ResidualController`).
     :param adaptation_features: append the adapted knee gains after the expert features
         (:data:`agents.rl.expert_features.ADAPTATION_FEATURE_FIELDS`); needs ``gain_adaptation="knee"`` and
         ``expert_features``.
@@ -399,7 +421,8 @@ def make_residual_env(
     :param residual_penalty: reward penalty per unit of mean(action^2) (see :class:`ResidualExpertEnv`).
     :param residual_legs: ``"all"`` or ``"stance"``: which legs take the residual (:class:`ResidualController`).
     :param residual_basis: ``"torque_limit"`` or ``"expert_torque"``: what a unit of action is.
-    :param gain_adaptation: ``"none"`` or ``"knee"``: adaptive knee gains on the expert under the residual.
+    :param gain_adaptation: ``"none"``, ``"knee"`` or ``"learned"``: adaptive gains on the expert under the
+        residual.
     :param adaptation_features: append the adapted knee gains to the observation (needs ``"knee"``).
     :param env_kwargs: ``QuadUnevenEnv`` arguments (``terrain``, ``reward_weights``, ...); ``action_mode`` must be
         ``"torque"`` and ``controller`` is not accepted.

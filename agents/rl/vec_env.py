@@ -96,7 +96,7 @@ def make_train_env(
     :param residual_penalty: reward penalty per unit of mean(action^2).
     :param residual_legs: ``all`` or ``stance``: which legs take the residual.
     :param residual_basis: ``torque_limit`` or ``expert_torque``: what a unit of residual action is.
-    :param gain_adaptation: ``none`` or ``knee``: adaptive knee gains on the expert under the residual.
+    :param gain_adaptation: ``none``, ``knee`` or ``learned``: adaptive gains on the expert under the residual.
     :param adaptation_features: append the adapted knee gains to the observation.
     :param residual: false: plain ``QuadUneven-v0`` in ``joint_pd`` mode instead (training from scratch).
     """

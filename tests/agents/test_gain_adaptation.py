@@ -57,7 +57,7 @@ def test_a_knee_at_strength_s_settles_near_one_over_s(strength):
 def test_bad_arguments_are_named():
     with pytest.raises(ValueError, match="period"):
         GA.KneeGainAdaptation(period=0.0)
-    with pytest.raises(ValueError, match=r"gain_adaptation must be one of \['none', 'knee'\]"):
+    with pytest.raises(ValueError, match=r"gain_adaptation must be one of \['none', 'knee', 'learned'\]"):
         GA.check_gain_adaptation("hip")
     with pytest.raises(ValueError, match="gain_adaptation must be one of"):
         make_residual_env(terrain="flat", gain_adaptation=None)
@@ -131,7 +131,8 @@ def test_the_adaptive_env_compensates_a_weak_knee_and_passes_both_checkers():
     assert isinstance(gym.make("QuadUnevenResidual-v0", terrain="flat", gain_adaptation="knee"), gym.Env)
 
 
-def test_a_model_folder_brings_its_adaptation_to_evaluate_and_onnx(tmp_path):
+@pytest.mark.parametrize("adaptation", ["knee", "learned"])
+def test_a_model_folder_brings_its_adaptation_to_evaluate_and_onnx(tmp_path, adaptation):
     """``gain_adaptation`` in rl_meta.json: the loader installs the same adaptive controller the training env had,
     the ONNX metadata names it, and an unknown value is refused by name."""
     import json
@@ -143,25 +144,27 @@ def test_a_model_folder_brings_its_adaptation_to_evaluate_and_onnx(tmp_path):
     from agents.rl.export import export_onnx
     from agents.rl.model_io import ModelError, read_metadata, write_metadata
     from agents.rl.residual_env import RESIDUAL_ENV_ID
+    from agents.rl.strength_estimator import LearnedGainAdaptation
 
-    train_env = gym.make(RESIDUAL_ENV_ID, terrain="flat", gain_adaptation="knee")
+    train_env = gym.make(RESIDUAL_ENV_ID, terrain="flat", gain_adaptation=adaptation)
     model = stable_baselines3.PPO("MlpPolicy", train_env, n_steps=64, batch_size=32, device="cpu", seed=0,
                                   policy_kwargs={"net_arch": [16]})  # fmt: skip
     model.save(tmp_path / "model.zip")
     meta = {"algo": "ppo", "residual": True, "residual_scale": 0.5, "expert_features": True,
             "normalize_obs": False, "env_kwargs": {"terrain": "flat"}, "residual_basis": "expert_torque",
-            "gain_adaptation": "knee"}  # fmt: skip
+            "gain_adaptation": adaptation}  # fmt: skip
     write_metadata(tmp_path, meta)
     path = tmp_path / "model.zip"
     env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(str(path)), "terrain": "flat"})
     make_policy(str(path), env)
-    assert env.unwrapped.controller.gain_adaptation == "knee"
-    assert isinstance(env.unwrapped.controller.adaptation, GA.KneeGainAdaptation)
+    assert env.unwrapped.controller.gain_adaptation == adaptation
+    kind = {"knee": GA.KneeGainAdaptation, "learned": LearnedGainAdaptation}[adaptation]
+    assert isinstance(env.unwrapped.controller.adaptation, kind)
     export_onnx(path, tmp_path / "p.onnx")
     props = {p.key: p.value for p in onnx.load(str(tmp_path / "p.onnx")).metadata_props}
-    assert json.loads(props["gain_adaptation"]) == "knee"
+    assert json.loads(props["gain_adaptation"]) == adaptation
     write_metadata(tmp_path, {**meta, "gain_adaptation": "hip"})
-    with pytest.raises(ModelError, match=r"gain_adaptation must be one of \['none', 'knee'\], got 'hip'"):
+    with pytest.raises(ModelError, match=r"gain_adaptation must be one of \['none', 'knee', 'learned'\], got 'hip'"):
         read_metadata(path)
 
 
