@@ -86,6 +86,16 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
         adaptation = meta.get("gain_adaptation", META_DEFAULTS["gain_adaptation"])
         if adaptation not in GAIN_ADAPTATIONS:
             raise ModelError(f"{path}: gain_adaptation must be one of {list(GAIN_ADAPTATIONS)}, got {adaptation!r}")
+        if adaptation == "learned":
+            from agents.rl.strength_estimator import DEFAULT_ESTIMATOR, estimator_digest
+
+            digest = meta.get("strength_estimator_sha256")
+            if digest != estimator_digest():
+                raise ModelError(
+                    f"{path}: strength_estimator_sha256 must be the sha256 of {DEFAULT_ESTIMATOR.name} the model was "
+                    f"made with ({estimator_digest()[:12]}... is installed), got {str(digest)[:12]!r}: the model's "
+                    "gains would come from another estimator"
+                )
         gains_seen = meta.get("adaptation_features", META_DEFAULTS["adaptation_features"])
         needs = adaptation == "knee" and meta.get("expert_features")
         if not isinstance(gains_seen, bool) or (gains_seen and not needs):

@@ -214,6 +214,14 @@ def fit_estimator(
     return StrengthEstimator(mean, scale, weights, biases)
 
 
+def estimator_digest(path: Path = DEFAULT_ESTIMATOR) -> str:
+    """sha256 (hex) of the estimator file ``path``: recorded in a model's ``rl_meta.json`` so that a model is never
+    evaluated with an estimator other than the one it was made with."""
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
 class LearnedGainAdaptation:
     """Adaptive gains on all twelve of the expert's joint torques, driven by a :class:`StrengthEstimator`
     (the interface of :class:`~agents.rl.gain_adaptation.KneeGainAdaptation`).

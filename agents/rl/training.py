@@ -231,6 +231,10 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
             "env_kwargs": {**SCRATCH_ENV_KWARGS, **cfg.env_kwargs},
             "expert_features": False,
         }
+    if cfg.gain_adaptation == "learned":
+        from agents.rl.strength_estimator import estimator_digest
+
+        common = {**common, "strength_estimator_sha256": estimator_digest()}
     return {
         **common,
         "residual": True,

@@ -144,7 +144,7 @@ def test_a_model_folder_brings_its_adaptation_to_evaluate_and_onnx(tmp_path, ada
     from agents.rl.export import export_onnx
     from agents.rl.model_io import ModelError, read_metadata, write_metadata
     from agents.rl.residual_env import RESIDUAL_ENV_ID
-    from agents.rl.strength_estimator import LearnedGainAdaptation
+    from agents.rl.strength_estimator import LearnedGainAdaptation, estimator_digest
 
     train_env = gym.make(RESIDUAL_ENV_ID, terrain="flat", gain_adaptation=adaptation)
     model = stable_baselines3.PPO("MlpPolicy", train_env, n_steps=64, batch_size=32, device="cpu", seed=0,
@@ -153,6 +153,8 @@ def test_a_model_folder_brings_its_adaptation_to_evaluate_and_onnx(tmp_path, ada
     meta = {"algo": "ppo", "residual": True, "residual_scale": 0.5, "expert_features": True,
             "normalize_obs": False, "env_kwargs": {"terrain": "flat"}, "residual_basis": "expert_torque",
             "gain_adaptation": adaptation}  # fmt: skip
+    if adaptation == "learned":
+        meta["strength_estimator_sha256"] = estimator_digest()
     write_metadata(tmp_path, meta)
     path = tmp_path / "model.zip"
     env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(str(path)), "terrain": "flat"})
@@ -163,6 +165,10 @@ def test_a_model_folder_brings_its_adaptation_to_evaluate_and_onnx(tmp_path, ada
     export_onnx(path, tmp_path / "p.onnx")
     props = {p.key: p.value for p in onnx.load(str(tmp_path / "p.onnx")).metadata_props}
     assert json.loads(props["gain_adaptation"]) == adaptation
+    if adaptation == "learned":  # a model made with another estimator is refused, not run with this one
+        write_metadata(tmp_path, {**meta, "strength_estimator_sha256": "0" * 64})
+        with pytest.raises(ModelError, match="strength_estimator_sha256 must be the sha256"):
+            read_metadata(path)
     write_metadata(tmp_path, {**meta, "gain_adaptation": "hip"})
     with pytest.raises(ModelError, match=r"gain_adaptation must be one of \['none', 'knee', 'learned'\], got 'hip'"):
         read_metadata(path)

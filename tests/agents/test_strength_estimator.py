@@ -179,3 +179,13 @@ def test_one_collected_episode_pairs_statistics_with_the_drawn_strengths():
     gain = np.exp(target) * (draw.total_mass / nominal_mass) / draw.motor_strength
     assert np.all((gain >= GAIN_BOUNDS[0] - 1e-9) & (gain <= GAIN_BOUNDS[1] + 1e-9))
     assert np.abs(np.log(gain)).max() > 0.05  # gains were drawn, not left at 1
+
+
+def test_a_training_run_records_the_estimator_it_adapts_with():
+    from agents.rl.config import load_train_config
+    from agents.rl.training import _metadata
+
+    meta = _metadata(load_train_config(None, {"gain_adaptation": "learned"}))
+    assert meta["gain_adaptation"] == "learned"
+    assert meta["strength_estimator_sha256"] == SE.estimator_digest() and len(meta["strength_estimator_sha256"]) == 64
+    assert "strength_estimator_sha256" not in _metadata(load_train_config(None, {"gain_adaptation": "knee"}))
