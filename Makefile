@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out/demo
 
-.PHONY: venv demo test test-slow lint bench strength-estimator rl-baseline rl-sac rl-sac-continued rl-sac-features rl-sac-warmup rl-scratch clean
+.PHONY: venv demo test test-slow lint bench strength-estimator learned-adaptation rl-baseline rl-sac rl-sac-continued rl-sac-features rl-sac-warmup rl-scratch clean
 
 $(STAMP): pyproject.toml Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -70,7 +70,17 @@ endef
 # session 20): 600 episodes of the expert in the extreme world on training seeds 1000-1199, then the fit; about
 # 15 min on 2 cores, seeded.
 strength-estimator: venv
-	$(PY) -m agents.rl.strength_data --seeds 1000-1199 --workers 2
+	$(PY) -m agents.cli fit-strength --seeds 1000-1199 --workers 2 --plot docs/rl_strength_estimator_fit.png
+
+# The residual agent over the learned adaptation (models/learned_adaptation; docs/rl.md, session 20): the strength
+# estimator above, then run 7's config with gain_adaptation: learned stopped before its first update (its PPO
+# residual is zero: what it adds to the expert is the estimator's gains), then the expert and it on every HELD_OUT
+# set with their paired comparisons (runs/compare_*_learned). About 1 h 45 min on 2 cores.
+learned-adaptation: strength-estimator
+	$(PY) -m agents.cli train --config configs/rl/ppo_residual_adaptive.yaml --gain-adaptation learned \
+	  --out runs/ppo_residual_learned_prior --time-limit-min 0.0001 --overwrite
+	$(call ship,runs/ppo_residual_learned_prior,models/learned_adaptation)
+	$(call against_expert,models/learned_adaptation,learned)
 
 # The shipped residual baseline (docs/rl.md, models/ppo_residual_adaptive, run 7): PPO on the extreme world (motors
 # down to half their torque, payloads to +50 %, the rest of robust_hard's randomization) over a mix of six

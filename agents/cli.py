@@ -653,6 +653,48 @@ def run_select_command(args: argparse.Namespace) -> int:
     return 0
 
 
+# -------------------------------------------------------------------------------------- fit-strength
+def add_fit_strength_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``fit-strength`` subcommand on ``sub``."""
+    p = sub.add_parser(
+        "fit-strength",
+        help="collect expert episodes in the extreme world and fit the learned strength estimator",
+        description="Run the expert with fixed gains drawn around each joint's ideal one on training seeds of "
+        "robust_extreme's terrains, fit the strength estimator of gain_adaptation 'learned' on four fifths of the "
+        "seeds, report it on the rest, then fit it on all and write it (default: over the shipped one, "
+        "agents/rl/data/strength_estimator.npz). Models made with the previous estimator then refuse to load. "
+        "Exit code 2 on a bad option.",
+    )
+    p.add_argument("--seeds", default="1000-1199", help="FIRST-LAST: world seeds per terrain entry (default 1000-1199)")
+    p.add_argument("--seconds", type=float, default=10.0, help="simulated s per episode (default 10)")
+    p.add_argument("--workers", type=int, default=2, help="parallel episode processes (default 2)")
+    p.add_argument("--test-every", type=int, default=5, help="every N-th seed reports the fit (default 5)")
+    p.add_argument("--out", type=Path, default=None, help="the fitted estimator (.npz; default: the shipped one)")
+    p.add_argument("--data", type=Path, default=None, help="also save the samples (.npz) here")
+    p.add_argument("--from-data", type=Path, default=None, help="fit samples saved by --data instead of collecting")
+    p.add_argument("--plot", type=Path, default=None, help="draw the held-out fit (.png) here")
+    p.set_defaults(func=run_fit_strength_command)
+    return p
+
+
+def run_fit_strength_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven fit-strength``: 0 on success, 2 on a bad option."""
+    import json
+
+    from agents.rl.strength_data import fit_strength_estimator, parse_seeds
+    from agents.rl.strength_estimator import DEFAULT_ESTIMATOR
+
+    out = DEFAULT_ESTIMATOR if args.out is None else args.out
+    seeds = parse_seeds(args.seeds)
+    with sigterm_as_keyboard_interrupt():
+        report = fit_strength_estimator(
+            seeds, args.seconds, args.workers, args.test_every, out, args.data, args.from_data, args.plot
+        )
+    print(json.dumps(report, indent=1))
+    print(f"wrote {out}" + ("" if args.plot is None else f" and {args.plot}"))
+    return 0
+
+
 # --------------------------------------------------------------------------------------------- sweep
 def add_sweep_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register the ``sweep`` subcommand on ``sub``."""
@@ -727,6 +769,7 @@ def build_parser() -> argparse.ArgumentParser:
     for add in (
         add_demo_parser, add_evaluate_parser, add_train_parser, add_export_parser, add_paper_parser,
         add_plan_paper_parser, add_robustness_parser, add_compare_parser, add_select_parser, add_sweep_parser,
+        add_fit_strength_parser,
     ):  # fmt: skip
         add(sub)
     return parser

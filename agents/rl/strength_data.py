@@ -1,4 +1,4 @@
-"""Data for the learned strength estimator, and its fit: ``python -m agents.rl.strength_data``.
+"""Data for the learned strength estimator, and its fit (``quad-uneven fit-strength``).
 
 Runs the expert in the extreme world (``robust_extreme``'s three terrains) on training seeds, disjoint from every
 validation and held-out set, with a fixed gain per joint on its torque drawn around the ideal one, and records the
@@ -9,8 +9,6 @@ then fits it on all and writes it (by default over the shipped one).
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from pathlib import Path
 
@@ -112,48 +110,102 @@ def collect_episode(job: tuple[str, int, float]) -> tuple[np.ndarray, np.ndarray
     return features, np.log(strength * recorder.gain / load)
 
 
-def _seeds(text: str) -> list[int]:
-    first, _, last = text.partition("-")
+def parse_seeds(text: str) -> list[int]:
+    """``"FIRST-LAST"`` (inclusive) or ``"SEED"`` as a list of seeds.
+
+    :raises ValueError: naming ``--seeds`` and the accepted form.
+    """
+    first, _, last = str(text).partition("-")
     try:
-        return list(range(int(first), int(last or first) + 1))
+        seeds = list(range(int(first), int(last or first) + 1))
     except ValueError:
-        raise SystemExit(f"--seeds must be FIRST-LAST (integers), got {text!r}") from None
+        seeds = []
+    if not seeds:
+        raise ValueError(f"--seeds must be FIRST-LAST with FIRST <= LAST (integers), got {text!r}")
+    return seeds
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Collect episodes on training seeds, fit the estimator on some and report it on the others, save it."""
+def collect(seeds: list[int], seconds: float, workers: int, test_every: int) -> dict[str, np.ndarray]:
+    """Every entry x seed episode (:func:`collect_episode`, ``workers`` processes, a progress bar), flattened to one
+    row per joint and sample: ``features`` (N, F), ``target``, ``kind``, ``test`` (the seed is a multiple of
+    ``test_every``) and ``episode`` (N,)."""
     from multiprocessing import get_context
 
     from tqdm import tqdm
 
-    ap = argparse.ArgumentParser(description="Fit the learned strength estimator (docs/rl.md).")
-    ap.add_argument("--seeds", default="1000-1199", help="FIRST-LAST: world seeds per terrain entry (training)")
-    ap.add_argument("--test-every", type=int, default=5, help="every N-th seed is held out to report the fit")
-    ap.add_argument("--seconds", type=float, default=10.0, help="simulated s per episode")
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--out", type=Path, default=DEFAULT_ESTIMATOR)
-    ap.add_argument("--data", type=Path, default=None, help="also save the samples (npz) here")
-    args = ap.parse_args(argv)
-    seeds = _seeds(args.seeds)
-    jobs = [(entry, seed, args.seconds) for seed in seeds for entry in ENTRIES]
-    t0 = time.perf_counter()
-    with get_context("spawn").Pool(args.workers) as pool:
+    jobs = [(entry, seed, seconds) for seed in seeds for entry in ENTRIES]
+    with get_context("spawn").Pool(workers) as pool:
         results = list(tqdm(pool.imap(collect_episode, jobs), total=len(jobs), desc="episodes"))
-    feats, targets, kinds, tests, groups = [], [], [], [], []
+    rows: dict[str, list[np.ndarray]] = {"features": [], "target": [], "kind": [], "test": [], "episode": []}
     for i, ((_, seed, _), (f, y)) in enumerate(zip(jobs, results, strict=True)):
         for j in range(C.N_JOINTS):
-            feats.append(f[:, j])
-            targets.append(np.full(len(f), y[j]))
-            kinds.append(np.full(len(f), JOINT_KIND[j]))
-            tests.append(np.full(len(f), seed % args.test_every == 0))
-            groups.append(np.full(len(f), i))
-    x, y, k = np.concatenate(feats), np.concatenate(targets), np.concatenate(kinds)
-    test, group = np.concatenate(tests), np.concatenate(groups)
-    if args.data is not None:
-        np.savez(args.data, features=x, target=y, kind=k, test=test, episode=group)
+            rows["features"].append(f[:, j])
+            rows["target"].append(np.full(len(f), y[j]))
+            rows["kind"].append(np.full(len(f), JOINT_KIND[j]))
+            rows["test"].append(np.full(len(f), seed % test_every == 0))
+            rows["episode"].append(np.full(len(f), i))
+    return {name: np.concatenate(parts) for name, parts in rows.items()}
+
+
+def plot_fit(target: np.ndarray, estimate: np.ndarray, kind: np.ndarray, path: Path) -> None:
+    """Held-out estimate against target, one panel per joint kind, written to ``path`` (png)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(C.JOINT_KINDS), figsize=(12, 4), sharex=True, sharey=True)
+    for k, (ax, name) in enumerate(zip(axes, C.JOINT_KINDS, strict=True)):
+        m = kind == k
+        ax.hexbin(target[m], estimate[m], gridsize=40, mincnt=1, cmap="viridis", bins="log")
+        lo, hi = np.percentile(target, [0.5, 99.5])
+        ax.plot([lo, hi], [lo, hi], "r--", lw=1)
+        ax.set_title(f"{name}: corr {np.corrcoef(target[m], estimate[m])[0, 1]:.2f}")
+        ax.set_xlabel("log(s g m0 / m), drawn")
+    axes[0].set_ylabel("estimated")
+    fig.suptitle("learned strength estimator on held-out training-world seeds")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def fit_strength_estimator(
+    seeds: list[int],
+    seconds: float = 10.0,
+    workers: int = 2,
+    test_every: int = 5,
+    out: Path = DEFAULT_ESTIMATOR,
+    data: Path | None = None,
+    from_data: Path | None = None,
+    plot: Path | None = None,
+) -> dict:
+    """Collect (or read ``from_data``) the samples, fit on the seeds that are not multiples of ``test_every`` and
+    report on those that are, then fit on all and write ``out``; ``data`` keeps the samples, ``plot`` draws the
+    held-out fit (``quad-uneven fit-strength``).
+
+    :return: the report: episodes, samples, per joint kind the held-out correlation, rms error and target std.
+    """
+    if workers < 1 or test_every < 2 or not seconds > START_TIME + WARMUP:
+        raise ValueError(
+            f"workers must be >= 1, test_every >= 2 and seconds > {START_TIME + WARMUP:g}, got {workers}, "
+            f"{test_every} and {seconds!r}"
+        )
+    t0 = time.perf_counter()
+    if from_data is not None:
+        try:
+            with np.load(from_data, allow_pickle=False) as f:
+                samples = {name: f[name] for name in ("features", "target", "kind", "test", "episode")}
+        except (OSError, KeyError, ValueError) as err:
+            raise ValueError(f"--from-data {from_data}: not samples written by --data ({err})") from None
+    else:
+        samples = collect(seeds, seconds, workers, test_every)
+    if data is not None:
+        np.savez(data, **samples)
+    x, y, k, test = samples["features"], samples["target"], samples["kind"], samples["test"]
     est = fit_estimator(x[~test], y[~test], k[~test])
     pred = est.predict_kind(x[test], k[test])
-    report = {"episodes": len(jobs), "samples": len(y), "minutes": (time.perf_counter() - t0) / 60}
+    report: dict = {"episodes": len(np.unique(samples["episode"])), "samples": len(y)}
     for kind, name in enumerate(C.JOINT_KINDS):
         m = test & (k == kind)
         slope = x[m, FEATURE_NAMES.index("slope_0.5s")]
@@ -161,12 +213,10 @@ def main(argv: list[str] | None = None) -> None:
             "held-out corr(estimate, target)": float(np.corrcoef(pred[k[test] == kind], y[m])[0, 1]),
             "held-out corr(slope 0.5 s, target)": float(np.corrcoef(slope, y[m])[0, 1]),
             "held-out rms error": float(np.sqrt(np.mean((pred[k[test] == kind] - y[m]) ** 2))),
+            "target std": float(y[m].std()),
         }
-    est = fit_estimator(x, y, k)
-    est.save(args.out)
-    print(json.dumps(report, indent=1))
-    print(f"wrote {args.out}")
-
-
-if __name__ == "__main__":
-    main()
+    if plot is not None:
+        plot_fit(y[test], pred, k[test], plot)
+    fit_estimator(x, y, k).save(out)
+    report["minutes"] = (time.perf_counter() - t0) / 60
+    return report

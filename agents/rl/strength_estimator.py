@@ -14,8 +14,8 @@ law an integrator with its fixed point at ``g = (m / m0) / s``:
 
     log g <- clip(log g - k dt log(s g m0 / m)_estimated, log g_min, log g_max)
 
-The estimator is fitted on episodes run with a fixed gain per joint drawn around 1/s (``python -m
-agents.rl.strength_data``), on seeds disjoint from every validation and held-out set. Its parameters ship as a
+The estimator is fitted on episodes run with a fixed gain per joint drawn around the ideal one (``quad-uneven
+fit-strength``), on seeds disjoint from every validation and held-out set. Its parameters ship as a
 plain ``.npz`` (no pickled objects).
 """
 
@@ -50,7 +50,7 @@ ADAPTATION_RATE = 0.5
 """k (1/s): rate of the log-gain integrator (a 2 s time constant, the long window's)."""
 
 DEFAULT_ESTIMATOR = Path(__file__).resolve().parent / "data" / "strength_estimator.npz"
-"""The shipped estimator (fitted by ``python -m agents.rl.strength_data``)."""
+"""The shipped estimator (fitted by ``quad-uneven fit-strength``)."""
 
 WARMUP = 1.0
 """s of statistics after :data:`~agents.rl.gain_adaptation.START_TIME` before the gains move."""

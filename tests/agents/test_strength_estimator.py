@@ -189,3 +189,30 @@ def test_a_training_run_records_the_estimator_it_adapts_with():
     assert meta["gain_adaptation"] == "learned"
     assert meta["strength_estimator_sha256"] == SE.estimator_digest() and len(meta["strength_estimator_sha256"]) == 64
     assert "strength_estimator_sha256" not in _metadata(load_train_config(None, {"gain_adaptation": "knee"}))
+
+
+def test_the_fit_command_refits_saved_samples_and_names_bad_options(tmp_path, capsys):
+    """``quad-uneven fit-strength --from-data``: a fitted file, its report and figure; bad options exit 2, one line."""
+    from agents.cli import main
+
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(3000, F))
+    kind = rng.integers(0, 3, 3000)
+    samples = {"features": x, "target": 0.2 * np.tanh(x[:, 0]) + 0.05 * kind, "kind": kind,
+               "test": rng.random(3000) < 0.2, "episode": rng.integers(0, 50, 3000)}  # fmt: skip
+    np.savez(tmp_path / "samples.npz", **samples)
+    out, plot = tmp_path / "est.npz", tmp_path / "fit.png"
+    code = main(["fit-strength", "--from-data", str(tmp_path / "samples.npz"), "--out", str(out), "--plot", str(plot)])
+    assert code == 0 and plot.stat().st_size > 0
+    report = capsys.readouterr().out
+    assert '"held-out corr(estimate, target)"' in report and "KFE" in report
+    est = SE.StrengthEstimator.load(out)
+    assert np.corrcoef(est.predict_kind(x, kind), samples["target"])[0, 1] > 0.9
+    for argv, field in (
+        (["--seeds", "9-3"], "--seeds must be FIRST-LAST"),
+        (["--workers", "0"], "workers must be >= 1"),
+        (["--from-data", str(tmp_path / "missing.npz")], "--from-data"),
+    ):
+        assert main(["fit-strength", "--out", str(out), *argv]) == 2
+        err = capsys.readouterr().err
+        assert field in err and len(err.strip().splitlines()) == 1
