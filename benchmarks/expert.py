@@ -4,17 +4,19 @@ Measured in one run, on the same model: (1) the expert walking (planner every ga
 computed-torque controller at every 2 ms physics step, through QuadUneven-v0's hook);
 (2) the same model stepped with zero torques by raw ``mj_step`` from the same standing state
 (restarted every 2 s so it keeps simulating contacts rather than a pile on the ground).
-Targets (issue 13): expert >= 0.6 x the zero-torque rate and >= 25 x real time.
+Targets: expert >= 0.6 x the zero-torque rate and >= 25 x real time.
 
 Usage: ``python benchmarks/expert.py [--seconds 30] [--terrain rough] [--model nominal|oracle] [--copy] [--split]
-[--hook-cpu] [--no-lane] [--alternate PAIRS]`` (``--copy``: the nominal expert copies the measured state into its own
-model every physics step even in the nominal world, as it does whenever the simulated robot differs from the nominal
-one; ``--split``: also time ``mj_step1`` and ``mj_step2`` inside the env's loop and print where each physics step's
-time goes;
+[--hook-cpu] [--no-lane] [--readable] [--paths REPS]`` (``--copy``: the nominal expert copies the measured state into
+its own model every physics step even in the nominal world, as it does whenever the simulated robot differs from the
+nominal one; ``--split``: also time ``mj_step1`` and ``mj_step2`` inside the env's loop and print where each physics
+step's time goes;
 ``--hook-cpu``: the expert hook's CPU time (``time.thread_time_ns``, which a preempting process on a shared machine
 does not inflate the way it does wall time), split into planning, the plans' reference grids and the rest;
-``--no-lane``: without the hook's fast lane, ``ExpertPolicy.torques_into``; ``--alternate PAIRS``: afterwards the
-same episode without and with the lane, alternated, the machine's noise being larger than the difference).
+``--no-lane``: without the hook's fast lane, ``ExpertPolicy.torques_into``; ``--readable``: the controller's readable
+call at every physics step instead of its compiled step (``hook.compiled = False``); ``--paths REPS``: afterwards the
+same episode with the readable call, the compiled step without the lane and with it, alternated REPS times in this
+process (the machine's drift then falls on all alike), with their cost against the readable call's).
 """
 
 from __future__ import annotations
@@ -41,9 +43,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--split", action="store_true", help="time mj_step1/mj_step2 in the env's loop too")
     parser.add_argument("--hook-cpu", action="store_true", help="CPU time of the expert's hook, split")
     parser.add_argument("--no-lane", action="store_true", help="without the hook's fast lane (torques_into)")
+    parser.add_argument("--readable", action="store_true", help="the readable controller call at every physics step")
     parser.add_argument(
-        "--alternate", type=int, default=0, metavar="PAIRS",
-        help="then walk the same episode PAIRS times without and with the fast lane, alternated in this process",
+        "--paths", type=int, default=0, metavar="REPS",
+        help="then walk the same episode REPS times with each control path (readable, compiled, compiled + lane)",
     )  # fmt: skip
     args = parser.parse_args(argv)
     split = _StepTimer.install() if args.split else None
@@ -56,6 +59,8 @@ def main(argv: list[str] | None = None) -> None:
     policy = attach_expert(env, config)
     if args.no_lane:
         policy.torques_into = None  # the env then makes the hook's full call at every physics step
+    if args.readable:
+        policy.hook.compiled = False
     # Warm-up: numba kernels compile on first use; keep that out of the timing.
     obs, _ = env.reset(seed=1)
     for _ in range(5):
@@ -127,8 +132,8 @@ def main(argv: list[str] | None = None) -> None:
             f"mj_step2 {split.step2 / n * 1e6:.0f} + planning {planner_s / n * 1e6:.0f} + controller and the "
             f"rest {rest / n * 1e6:.0f}"
         )
-    if args.alternate:
-        _alternate(env, policy, args.seconds, args.alternate)
+    if args.paths:
+        _paths(env, policy, args.seconds, args.paths)
     if hook_cpu is not None:
         n = round(sim_expert / u.model.opt.timestep)
         h = hook_cpu
@@ -139,43 +144,65 @@ def main(argv: list[str] | None = None) -> None:
         )
 
 
-def _alternate(env: gym.Env, policy, seconds: float, pairs: int) -> None:
-    """Walk ``seconds`` from ``reset(seed=0)`` ``pairs`` times without and with the hook's fast lane, alternated
-    (the machine's drift then falls on both alike); print the wall time per physics step of each run."""
+PATHS = {
+    "readable": "the readable controller call (the reference)",
+    "compiled": "its compiled step, without the lane",
+    "lane": "its compiled step, with the lane",
+}
+"""The expert's control paths ``--paths`` compares: the hook's full call with ``hook.compiled`` off, on, and the
+env's fast lane (``torques_into``) in front of it."""
+
+
+def _paths(env: gym.Env, policy, seconds: float, reps: int) -> None:
+    """Walk ``seconds`` from ``reset(seed=0)`` ``reps`` times with each of :data:`PATHS`, in turn (reversed every
+    other repetition, so that the machine's drift falls on all alike); print the CPU and wall time per physics step
+    of each, and the readable call's CPU time over each path's (medians of the same run)."""
     u = env.unwrapped
-    times: dict[bool, list[float]] = {False: [], True: []}
-    positions: dict[bool, np.ndarray] = {}
-    for _ in range(pairs):
-        for lane in (False, True):
-            policy.torques_into = type(policy).torques_into.__get__(policy) if lane else None
+    lane = type(policy).torques_into.__get__(policy)
+    cpu: dict[str, list[float]] = {p: [] for p in PATHS}
+    wall: dict[str, list[float]] = {p: [] for p in PATHS}
+    ends: dict[str, np.ndarray] = {}
+    order = list(PATHS)
+    for rep in range(reps):
+        for path in order if rep % 2 == 0 else order[::-1]:
+            policy.hook.compiled = path != "readable"
+            policy.torques_into = lane if path == "lane" else None
             obs, _ = env.reset(seed=0)
             n = int(seconds / u.dt)
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             for _ in range(n):
                 obs, _, terminated, _, _ = env.step(policy.predict(obs)[0])
                 if terminated:
                     break
-            times[lane].append((time.perf_counter() - t0) / round(u.data.time / u.model.opt.timestep) * 1e6)
-            positions[lane] = u.data.qpos.copy()
-    same = "the same" if np.array_equal(positions[False], positions[True]) else "DIFFERENT"
-    print(f"fast lane off/on, {pairs} alternated pairs of {seconds:g} s (end states {same}), us per physics step:")
-    for lane in (False, True):
-        t = np.array(times[lane])
-        runs = " ".join(f"{x:.0f}" for x in t)
-        print(f"  lane {'on ' if lane else 'off'}: min {t.min():.1f}, median {np.median(t):.1f} ({runs})")
+            c1, t1 = time.process_time(), time.perf_counter()
+            steps = round(u.data.time / u.model.opt.timestep)
+            cpu[path].append((c1 - c0) / steps * 1e6)
+            wall[path].append((t1 - t0) / steps * 1e6)
+            ends[path] = u.data.qpos.copy()
+    policy.hook.compiled, policy.torques_into = True, lane
+    same = all(np.array_equal(ends[p], ends["readable"]) for p in PATHS)
+    ended = "the same" if same else "DIFFERENT"
+    print(f"control paths, {reps} alternated repetitions of {seconds:g} s (end states {ended}), per physics step:")
+    reference = float(np.median(cpu["readable"]))
+    for path, what in PATHS.items():
+        c, w = np.array(cpu[path]), np.array(wall[path])
+        print(
+            f"  {path:9s} CPU median {np.median(c):6.1f} us (min {c.min():6.1f}), wall median {np.median(w):6.1f} us; "
+            f"readable / this {reference / np.median(c):4.2f}: {what}"
+        )
 
 
 class _HookCPU:
     """CPU time (``time.thread_time_ns``) of the env's physics-rate hook, of the planner
-    (``agents.expert.plan_gait_cycle``) and of the plans' reference grids (``planners.reference.Reference.__init__``),
-    each wrapped."""
+    (``agents.expert.cycle.plan_gait_cycle``) and of the plans' reference grids
+    (``planners.reference.Reference.__init__``), each wrapped."""
 
     def __init__(self) -> None:
         self.hook = self.plan = self.grid = 0
 
     @classmethod
     def install(cls) -> _HookCPU:
-        import agents.expert as expert_module
+        import agents.expert.cycle as expert_module
         from planners import reference
 
         timer, clock = cls(), time.thread_time_ns
@@ -214,7 +241,7 @@ class _HookCPU:
         self.hook = self.plan = self.grid = 0
 
     def uninstall(self) -> None:
-        import agents.expert as expert_module
+        import agents.expert.cycle as expert_module
         from planners import reference
 
         reference.Reference.__init__, expert_module.plan_gait_cycle = self._originals

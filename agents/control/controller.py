@@ -21,6 +21,11 @@ used unchanged: losing control of the base (fewer than three feet cannot hold it
 than commanding a force on a foot a few millimetres from the ground. ``stance_mode``
 ``"planned"`` or ``"measured"`` uses one source only.
 
+*The compiled step.* For a reference planned on a grid (the expert), :meth:`ComputedTorqueController.grid_step_into`
+does the same step in one compiled call (:func:`agents.control.controller_kernels.grid_control_step`) and gives the
+same torques (tested against ``__call__``); it declines, changing nothing the call would not redo, where the
+readable path must run.
+
 Public API: :class:`Gains`, :class:`ComputedTorqueController`, and re-exports of
 :class:`InverseDynamics`, :class:`IDResult`, :func:`eliminate_constraints`,
 :func:`verify_inverse_dynamics`.
@@ -30,7 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import mujoco
 import numpy as np
@@ -38,8 +43,7 @@ from numba.core.errors import NumbaError
 
 from agents.control import controller_kernels as FK
 from agents.control import inverse_dynamics_kernels as K
-from agents.control.elimination import ProjectedDynamics, eliminate_constraints, stance_layout
-from agents.control.fast_path import FastControlStep, PackedReference, contact_pairs
+from agents.control.elimination import DAMPING, SINGULAR_SIGMA, ProjectedDynamics, eliminate_constraints, stance_layout
 from agents.control.inverse_dynamics import (
     DISTRIBUTIONS,
     QP_SOLVERS,
@@ -49,7 +53,7 @@ from agents.control.inverse_dynamics import (
     friction_pyramid,
 )
 from agents.control.verify import IDCheck, verify_inverse_dynamics
-from planners.types import ReferenceGrid, ReferenceSample
+from planners.types import PACKED_FIELDS, ReferenceGrid, ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env.compiled_call import entry_point
 from quad_uneven_env.fields import check_fields, param
@@ -70,6 +74,39 @@ __all__ = [
 
 STANCE_MODES: tuple[str, ...] = ("both", "planned", "measured")
 """Allowed values of ``ComputedTorqueController(stance_mode=...)``; the index is the kernels' code."""
+
+_NO_TERRAIN = (np.empty(0), 0, 0, 0.0, 0.0, 0.0)
+"""height-field kernel arguments that tell ``control_step`` to skip the normals."""
+
+
+def contact_pairs(data: mujoco.MjData) -> np.ndarray:
+    """(ncon, 2) int32: the geom pairs of ``data``'s contacts, C-contiguous whatever ``ncon``.
+
+    MuJoCo's own view (``data.contact.geom``) is strided for two contacts or more and contiguous for none or
+    one, which numba types as two array layouts: every compiled control kernel would compile twice, the second
+    time in the middle of a rollout (the first airborne step), for seconds.
+    """
+    return np.ascontiguousarray(data.contact.geom)
+
+
+class PackedReference(NamedTuple):
+    """A reference sample as the compiled step received it: a packed row (:data:`PACKED_FIELDS`) and a stance mask."""
+
+    t: float
+    """s since the controller's reset."""
+    row: np.ndarray
+    """(55,) packed :class:`ReferenceSample` arrays."""
+    planned: int
+    """planned stance bitmask (bit i: leg i)."""
+
+    def unpack(self) -> ReferenceSample:
+        """The :class:`ReferenceSample` (copies)."""
+        parts, k = [], 0
+        for _, n in PACKED_FIELDS:
+            parts.append(self.row[k : k + n].copy())
+            k += n
+        stance = tuple(bool(self.planned >> i & 1) for i in range(C.N_LEGS))
+        return ReferenceSample(self.t, *parts, stance)  # type: ignore[arg-type]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -127,11 +164,6 @@ class ComputedTorqueController:
     :param gains: PD gains; default :class:`Gains`.
     :param stance_mode: ``"both"`` (plan and measured contacts, see module doc), ``"planned"``, ``"measured"``.
     :param min_normal_force: N, minimum normal force per stance foot in "qp".
-    :param reference_row: optional fast form of ``reference``: ``reference_row(t) -> (row, planned)``
-        with ``row`` the same sample packed as :data:`planners.types.PACKED_FIELDS` (55,) and
-        ``planned`` its stance bitmask, or None where only ``reference`` applies. With the
-        "mujoco" backend the controller then runs one compiled call per step
-        (:class:`agents.control.fast_path.FastControlStep`) and gives the same torques.
     :param mu: friction coefficient of the "qp" cones (-); None: the model's foot friction.
     :param qp_solver: "qp" solver, ``"compiled"`` or ``"daqp"`` (:class:`InverseDynamics`).
     """
@@ -144,7 +176,6 @@ class ComputedTorqueController:
         gains: Gains | None = None,
         stance_mode: str = "both",
         min_normal_force: float = 5.0,
-        reference_row: Callable[[float], tuple[np.ndarray, int] | None] | None = None,
         mu: float | None = None,
         qp_solver: str = "compiled",
     ) -> None:
@@ -153,7 +184,6 @@ class ComputedTorqueController:
         if stance_mode not in STANCE_MODES:
             raise ValueError(f"stance_mode must be one of {list(STANCE_MODES)}, got {stance_mode!r}")
         self.reference = reference
-        self.reference_row = reference_row
         self.backend = backend
         self.distribution = distribution
         self.gains = gains or Gains()
@@ -168,17 +198,18 @@ class ComputedTorqueController:
         self.t0 = 0.0
         self.terrain: Any = None
         self._model: mujoco.MjModel | None = None
-        self._fast: FastControlStep | None = None
         self._last: IDResult | WorkspaceResult | None = None
         self._last_reference: ReferenceSample | PackedReference | None = None
         self._bdd = np.empty(C.NV)
         self._stance_memo: dict = {}
-        self._grid_cache: tuple | None = None  # (grid, touch, tau_ok, their GridArguments) of step_on_grid
+        self._layouts = [stance_layout(tuple(bool(m >> i & 1) for i in range(C.N_LEGS))) for m in range(16)]
+        self._step_cache: tuple | None = None  # (data, height field, gains, their StepArguments or None: refused)
+        self._grid_cache: tuple | None = None  # (grid, touch, tau_ok, their GridArguments) of grid_step_into
         self._grid_step: tuple | None = None  # (code, t, grid, workspace version) of the last grid step, unread
-        self._lane_call: tuple | None = None
-        """(lane_control_step's compiled entry point, then the objects that fix its argument types: StepArguments,
-        GridArguments, limit, out, the stance mode; its code) of :meth:`grid_step_into` (see
-        :mod:`quad_uneven_env.compiled_call`)."""
+        self._grid_calls: dict[tuple[int, int], tuple] = {}
+        """per (id(limit), id(out)) of :meth:`grid_step_into`: grid_control_step's compiled entry point, then the
+        objects that fix its argument types (StepArguments, GridArguments, limit, out, the stance mode) and its
+        code (see :mod:`quad_uneven_env.compiled_call`)."""
 
     @property
     def last(self) -> IDResult | None:
@@ -239,13 +270,16 @@ class ComputedTorqueController:
             np.empty(C.NV),
         )
         self._stance_memo.clear()
-        self._grid_cache = self._grid_step = self._lane_call = None
-        self._fast = None
-        if self.backend == "mujoco":
-            self._fast = FastControlStep(
-                model, self.dynamics, self.id,
-                self.foot_of_geom, self.terrain_geom, self.torque_limit,
-            )  # fmt: skip
+        self._grid_cache = self._grid_step = self._step_cache = None
+        self._grid_calls.clear()
+        # outputs of the compiled step: M, J_feet, Jdot qdot, G; beta_ddot; foot sites; normals; clipped torques
+        self._step_terms = (
+            np.empty((C.NV, C.NV)), np.empty((C.N_LEGS, 3, C.NV)), np.empty((C.N_LEGS, 3)), np.empty(C.NV),
+        )  # fmt: skip
+        self._step_bdd = np.empty(C.NV)
+        self._step_sites = np.empty((C.N_LEGS, 3))
+        self._step_normals = np.empty((C.N_LEGS, 3))
+        self._step_tau = np.empty(C.N_JOINTS)
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any = None) -> None:
         """Bind to ``model``, restart the reference clock at ``data.time``, keep ``terrain`` for normals."""
@@ -259,8 +293,7 @@ class ComputedTorqueController:
         :meth:`reset` rebuilds them from :attr:`mu` (which this sets too)."""
         self.mu = float(mu)
         self.id.set_mu(mu)
-        if self._fast is not None:
-            self._fast.forget_arguments()
+        self._step_cache = None  # the compiled step's arguments hold the cones' friction
 
     # ------------------------------------------------------------------ control law
     def __call__(
@@ -278,17 +311,6 @@ class ComputedTorqueController:
             self._bind(model)
         self._grid_step = None
         t = float(data.time) - self.t0
-        if self.reference_row is not None and self._fast is not None:
-            packed = self.reference_row(t)
-            if packed is not None:
-                fast = self._fast.step(
-                    data, self.terrain, self._gains, STANCE_MODES.index(self.stance_mode), *packed,
-                    -1 if contacts is None else contacts,
-                )  # fmt: skip
-                if fast is not None:
-                    tau, self._last = fast
-                    self._last_reference = PackedReference(t, *packed)
-                    return tau
         ref = self.reference(t)
         if contacts is not None:
             meas = contacts
@@ -324,48 +346,6 @@ class ComputedTorqueController:
         """Bitmask of the feet touching the terrain in ``data.contact`` (bit i: leg i; after ``mj_step1``)."""
         return K.foot_contact_mask(contact_pairs(data), self.foot_of_geom, self.terrain_geom) if data.ncon else 0
 
-    def step_on_grid(
-        self,
-        model: mujoco.MjModel,
-        data: mujoco.MjData,
-        grid: ReferenceGrid,
-        t_start: float,
-        t_stop: float,
-        touch: np.ndarray,
-        touch_adr: np.ndarray,
-        tau_ok: np.ndarray,
-        contacts: int | None = None,
-    ) -> np.ndarray | None:
-        """The call ``self(model, data, None, contacts)`` makes when ``reference_row(t)`` is ``grid``'s row at
-        ``t - t_start`` and the fast path solves the step, in one compiled call
-        (:func:`~agents.control.controller_kernels.grid_control_step`); else None, and nothing but the
-        inverse-dynamics buffers changed: the caller then makes that call.
-
-        For a physics-rate hook that plans on a grid (the expert): the row lookup, the check that every planned
-        stance foot touches (``touch[touch_adr[leg]] > 0``, the simulator's touch sensors), the step and the
-        torques' finite check happen inside the compiled call.
-
-        :param grid: the plan's rows, valid for controller times ``t`` (s) in [``t_start``, ``t_stop``).
-        :param tau_ok: (12,) the last finite torques: overwritten with the step's torques when it returns them.
-        :return: the torques (12, N m, clipped, finite; a copy of ``tau_ok``), or None.
-        """
-        t = float(data.time) - self.t0
-        args = None if t >= t_stop else self._grid_arguments(model, data, grid, touch, touch_adr, tau_ok)
-        if args is None:
-            return None
-        self.id.workspace_version += 1  # the compiled call rewrites the inverse-dynamics buffers
-        try:
-            code = FK.grid_control_step(
-                t - t_start, STANCE_MODES.index(self.stance_mode), contact_pairs(data),
-                -1 if contacts is None else contacts, args[0], args[1],
-            )  # fmt: skip
-        except (TypeError, NumbaError):  # arrays the kernel does not take: the general path
-            return None
-        if code < 0:
-            return None
-        self._grid_step = (code, t, grid, self.id.workspace_version)
-        return tau_ok.copy()
-
     def grid_step_into(
         self,
         model: mujoco.MjModel,
@@ -381,11 +361,18 @@ class ComputedTorqueController:
         off_plan: tuple[float, float] = (-1.0, -1.0),
         contacts: int = -1,
     ) -> int:
-        """:meth:`step_on_grid` (``contacts`` as there, -1 for None) for a caller that needs only the torques:
-        they go into ``tau_ok`` and, clipped to ``±limit`` (N m), into ``out`` (the simulator's ``ctrl``), in one
-        compiled call (:func:`~agents.control.controller_kernels.lane_control_step`). 1 when it took the step;
-        0 where :meth:`step_on_grid` would return None (nothing but the inverse-dynamics buffers changed).
+        """The call ``self(model, data, None, contacts)`` for a reference planned on ``grid``, in one compiled call
+        (:func:`~agents.control.controller_kernels.grid_control_step`): its torques (clipped to the motor limits,
+        finite) into ``tau_ok`` and, clipped to ``±limit`` (N m), into ``out``. 1 when it took the step; 0 where
+        the call must run instead (nothing but the inverse-dynamics buffers changed).
 
+        It takes the step where the reference at controller time ``t`` is ``grid``'s row at ``t - t_start`` (s),
+        every planned stance foot touches (``touch[touch_adr[leg]] > 0``, the simulator's touch sensors), and the
+        step needs nothing the kernel leaves to Python (1-2 stance feet, a failed Cholesky, a QP the compiled solver
+        gives up on). :attr:`last` and :attr:`last_reference` are then those of the call it replaces.
+
+        :param grid: the plan's rows, valid for controller times ``t`` (s) in [``t_start``, ``t_stop``).
+        :param contacts: bitmask of the feet measured in contact (bit i: leg i); -1: from ``data.contact``.
         :param off_plan: (m^2, (m/s)^2) squared tolerances of the base's horizontal position and velocity
             against the grid row, checked before the step (negative: no check); off the plan it returns
             :data:`~agents.control.controller_kernels.OFF_PLAN` (-2) and writes nothing.
@@ -394,27 +381,32 @@ class ComputedTorqueController:
         args = None if t >= t_stop else self._grid_arguments(model, data, grid, touch, touch_adr, tau_ok)
         if args is None:
             return 0
-        self.id.workspace_version += 1
+        self.id.workspace_version += 1  # the compiled call rewrites the inverse-dynamics buffers
         a, g = args
-        lane = self._lane_call
+        key = (id(limit), id(out))
+        call = self._grid_calls.get(key)
         try:
             if (
-                lane is not None and lane[1] is a and lane[2] is g and lane[3] is limit and lane[4] is out
-                and lane[5] is self.stance_mode
+                call is not None and call[1] is a and call[2] is g and call[3] is limit and call[4] is out
+                and call[5] is self.stance_mode
             ):  # fmt: skip
-                code = lane[0](
-                    t - t_start, off_plan[0], off_plan[1], lane[6], contact_pairs(data), contacts, data.qpos,
-                    data.qvel, a, g, limit, out,
-                )  # fmt: skip
+                code = call[0](
+                    t - t_start, off_plan[0], off_plan[1], call[6], contact_pairs(data), contacts, a, g, limit, out
+                )
             else:
-                call = (
+                values = (
                     t - t_start, float(off_plan[0]), float(off_plan[1]), STANCE_MODES.index(self.stance_mode),
-                    contact_pairs(data), int(contacts), data.qpos, data.qvel, a, g, limit, out,
+                    contact_pairs(data), int(contacts), a, g, limit, out,
                 )  # fmt: skip
-                code = FK.lane_control_step(*call)
-                entry = entry_point(FK.lane_control_step, call)
-                self._lane_call = None if entry is None else (entry, a, g, limit, out, self.stance_mode, call[3])
-        except (TypeError, NumbaError):
+                code = FK.grid_control_step(*values)
+                entry = entry_point(FK.grid_control_step, values)
+                if len(self._grid_calls) >= 4:  # a caller handing new buffers every step: keep the cache small
+                    self._grid_calls.clear()
+                if entry is not None:
+                    self._grid_calls[key] = (entry, a, g, limit, out, self.stance_mode, values[3])
+        except (TypeError, NumbaError):  # arrays the kernel does not take (numba dispatch): the readable path,
+            # for these inputs from now on: a failed compilation is not retried every step
+            self._step_cache = (data, getattr(self.terrain, "heightfield", None), self._gains, None)
             return 0
         if code < 0:
             return FK.OFF_PLAN if code == FK.OFF_PLAN else 0
@@ -430,12 +422,11 @@ class ComputedTorqueController:
         touch_adr: np.ndarray,
         tau_ok: np.ndarray,
     ) -> tuple[FK.StepArguments, FK.GridArguments] | None:
-        """The compiled grid step's two argument records (built when an input changes), or None where the
-        general path must run (no fast path, another model, no row reference, arguments the kernel refuses)."""
-        fast = self._fast
-        if fast is None or model is not self._model or self.reference_row is None:
+        """The compiled step's two argument records (built when an input changes), or None where the readable
+        path must run (not the "mujoco" backend, another model, arguments the kernel refused)."""
+        if self.backend != "mujoco" or model is not self._model:
             return None
-        packed, _ = fast.arguments(data, self.terrain, self._gains)
+        packed = self._step_arguments(data)
         if packed is None:
             return None
         c = self._grid_cache
@@ -445,12 +436,36 @@ class ComputedTorqueController:
             c = self._grid_cache = (grid, touch, tau_ok, g)
         return packed, c[3]
 
+    def _step_arguments(self, data: mujoco.MjData) -> FK.StepArguments | None:
+        """The arguments of ``control_step`` that outlive a step (views and buffers) in one record (None: refused
+        by the kernel), rebuilt when an input object changes (the data, the terrain's height field, the gains) and
+        after :meth:`set_friction`."""
+        hf = getattr(self.terrain, "heightfield", None)
+        c = self._step_cache
+        if c is not None and c[0] is data and c[1] is hf and c[2] is self._gains:
+            return c[3]
+        ident = self.id
+        qp = ident.distribution == "qp"
+        normals = self._step_normals if qp and hasattr(hf, "kernel_args") else None
+        hf_args = _NO_TERRAIN if normals is None else hf.kernel_args
+        fields = (
+            self.foot_of_geom, self.terrain_geom,
+            data.qpos, data.qvel, self._gains, self._step_bdd, *self.dynamics.data_views(data)[1:],
+            *self._step_terms, data.qfrc_bias, 1.0 / SINGULAR_SIGMA, DAMPING, *ident.workspace,
+            *hf_args, self._foot_sites, self._step_sites, ident.up_normals if normals is None else normals,
+            ident.mu if qp else 0.0, ident.cone_lower, ident.cone_buffer, ident.qp_solver == "compiled",
+            self.torque_limit, self._step_tau,
+        )  # fmt: skip
+        packed = FK.StepArguments(*fields)
+        self._step_cache = (data, hf, self._gains, packed)
+        return packed
+
     def _settle_grid_step(self) -> None:
         """Turn the last grid step's code into :attr:`last`'s and :attr:`last_reference`'s records."""
         code, t, grid, version = self._grid_step
         self._grid_step = None
         planned = code >> FK.GRID_PLANNED_SHIFT & 15
-        self._last = WorkspaceResult(code >> 4 & 15, self._fast.layouts[code & 15], version, bool(code & FK.QP_RELAXED))
+        self._last = WorkspaceResult(code >> 4 & 15, self._layouts[code & 15], version, bool(code & FK.QP_RELAXED))
         self._last_reference = PackedReference(t, grid.rows[code >> FK.GRID_ROW_SHIFT], planned)
 
     def select_stance(self, planned, measured: np.ndarray) -> tuple[bool, bool, bool, bool]:

@@ -1,20 +1,19 @@
-"""One compiled call for the controller's per-step work on the MuJoCo backend (the expert's hot path).
+"""The controller's per-step work on the MuJoCo backend in one compiled call (the expert's hot path).
 
-:func:`control_step` does in one numba call what :meth:`agents.control.controller.ComputedTorqueController.__call__`
-otherwise does in a dozen (each paying Python and dispatch overhead): the measured foot contacts and
-the stance set, the PD command from a packed reference row (:data:`planners.types.PACKED_FIELDS`),
-the dynamics terms from ``mj_step1``'s results, the pinv inverse dynamics, and the terrain normals
-under the feet, and the "qp" distribution when the pinv forces leave a friction cone. It calls the same
-kernels as the general path (:mod:`agents.control.inverse_dynamics_kernels`, :mod:`agents.control.qp_kernels`,
-:mod:`quad_uneven_env.robot.dynamics.mujoco_kernels`, the height field's normal kernel), so the two
-paths give the same torques (tested); every rare case (1-2 stance feet, a failed Cholesky, a QP the
-compiled solver gives up on) stays in Python.
-:func:`packed_control_step` is the same call with the arguments that outlive a step packed in one
-:class:`StepArguments` (numba unboxes one argument instead of ~45). :func:`grid_control_step` is that call
-with the reference row looked up on the plan's grid and the expert's touch-down check done inside it
-(:class:`GridArguments`), so that the expert's physics-rate hook is one Python layer over one compiled call.
-:func:`control_step`, :func:`packed_control_step` and :func:`grid_control_step` compile on their first call (a
-few seconds per process), the others at import.
+:func:`grid_control_step` does in one numba call what
+:meth:`agents.control.controller.ComputedTorqueController.__call__` (the readable reference) does in a dozen Python
+calls, for a reference planned on a grid (:class:`planners.types.ReferenceGrid`): the row lookup at the plan time,
+the check that every planned stance foot touches, the measured foot contacts and the stance set, the PD command
+from the packed row (:data:`planners.types.PACKED_FIELDS`), the dynamics terms from ``mj_step1``'s results, the
+pinv inverse dynamics, the terrain normals under the feet, the "qp" distribution when the pinv forces leave a
+friction cone, the motor limits and a finite check. It calls the same kernels as the readable path
+(:mod:`agents.control.inverse_dynamics_kernels`, :mod:`agents.control.qp_kernels`,
+:mod:`quad_uneven_env.robot.dynamics.mujoco_kernels`, the height field's normal kernel), so the two give the same
+torques (tested); every rare case (1-2 stance feet, a failed Cholesky, a QP the compiled solver gives up on, a late
+touch-down) declines to the readable path. The arguments that outlive a step travel in two records
+(:class:`StepArguments`, :class:`GridArguments`): numba unboxes two arguments instead of ~50. :func:`control_step`
+(its body) and :func:`grid_control_step` compile on their first call (a few seconds per process), the others at
+import.
 """
 
 from __future__ import annotations
@@ -135,7 +134,7 @@ STEP_FIELDS: tuple[str, ...] = (
     "mu", "cone_lower", "cones", "compiled_qp", "torque_limit", "tau_out",
 )  # fmt: skip
 """The fields of :class:`StepArguments`: :func:`control_step`'s arguments that outlive a step (in its order),
-then the motor limits and the output of the clipped torques (:func:`packed_control_step`)."""
+then the motor limits and the buffer of the clipped torques (:func:`grid_control_step`)."""
 
 
 @structref.register
@@ -150,24 +149,6 @@ class StepArguments(structref.StructRefProxy):
 
 
 structref.define_proxy(StepArguments, _StepArgumentsType, list(STEP_FIELDS))
-
-
-@nb.njit(cache=False, nogil=True)
-def packed_control_step(row, planned, stance_mode, contact_geom, measured, a):  # pragma: no cover - compiled
-    """:func:`control_step` with the arguments that outlive a step in ``a`` (a :class:`StepArguments`); when it
-    solved the step (a non-negative result with the ``DONE`` status bit), ``a.tau`` clipped to
-    ``±a.torque_limit`` is written into ``a.tau_out``."""
-    code = control_step(
-        row, planned, stance_mode, contact_geom, a.foot_of_geom, a.terrain_geom, measured,
-        a.qpos, a.qvel, a.gains, a.bdd,
-        a.M_csr, a.rowadr, a.rownnz, a.colind, a.xpos, a.xmat, a.xanchor, a.xaxis, a.site_xpos, a.subtree_com,
-        a.idx, a.par, a.M, a.J, a.Jdd, a.G, a.h, a.inv_sigma, a.damping, a.tau, a.F, a.qacc, a.r, a.Jinv, a.S,
-        a.hf_flat, a.nrow, a.ncol, a.ox, a.oy, a.inv_cell, a.foot_sites, a.site_pos, a.normals,
-        a.mu, a.cone_lower, a.cones, a.compiled_qp,
-    )  # fmt: skip
-    if code >= 0 and (code >> 4) & K.DONE:
-        K.clip_into(a.tau, a.torque_limit, a.tau_out)
-    return code
 
 
 GRID_PLANNED_SHIFT, GRID_ROW_SHIFT = 20, 24
@@ -192,61 +173,57 @@ class GridArguments(structref.StructRefProxy):
 structref.define_proxy(GridArguments, _GridArgumentsType, list(GRID_FIELDS))
 
 
-@nb.njit(cache=False, nogil=True)
-def grid_control_step(t, stance_mode, contact_geom, measured, a, g):  # pragma: no cover - compiled
-    """:func:`packed_control_step` at the row of ``g``'s grid at plan time ``t`` (s), where the readable path's
-    fast form would take it, with the torques' finite check.
+OFF_PLAN = -2
+""":func:`grid_control_step`'s result when the base is off its plan (the caller's readable path replans)."""
 
-    The row is the one :meth:`planners.reference.Reference.row` returns (:func:`grid_index`), and the step is
-    taken only if every planned stance foot's touch sensor reads > 0 (``ExpertPolicy._reference_row``; else the
-    expert pushes the late foot down on the readable path). Returns -1 where the caller must take its general
-    path: no grid row, a planned foot not touching, a step :func:`packed_control_step` did not solve, a "qp"
-    step whose QP it left to DAQP (``g.qp``, stance feet, neither ``INSIDE_CONES`` nor ``QP_DONE``), or
-    non-finite torques; otherwise the clipped torques are in ``a.tau_out`` and ``g.tau_ok``, and the result is
+
+@nb.njit(cache=False, nogil=True)
+def grid_control_step(  # pragma: no cover - compiled
+    t, position_tol2, velocity_tol2, stance_mode, contact_geom, measured, a, g, limit, out
+):
+    """The control step at the row of ``g``'s grid at plan time ``t`` (s), with the step's arguments in ``a`` (a
+    :class:`StepArguments`); the torques, clipped to the motor limits (``a.torque_limit``), in ``g.tau_ok`` and,
+    clipped to ``±limit`` (N m), in ``out``.
+
+    The row is the one :meth:`planners.reference.Reference.row` returns (:func:`grid_index`). With
+    ``position_tol2 >= 0`` the disturbance check comes first (``ExpertConfig.recovery``): if the base's horizontal
+    position (m) or velocity (m/s) is farther than the tolerances' square roots from the row's, nothing is written
+    and :data:`OFF_PLAN` is returned. The step is taken only if every planned stance foot's touch sensor reads > 0
+    (else the caller pushes the late foot down on the readable path). ``measured`` as in :func:`control_step`.
+
+    Returns -1 where the caller must take its readable path, writing nothing but the inverse-dynamics buffers: no
+    grid row, a planned foot not touching, a step :func:`control_step` did not solve, a "qp" step whose QP it left
+    to DAQP (``g.qp``, stance feet, neither ``INSIDE_CONES`` nor ``QP_DONE``), or non-finite torques. Otherwise
     :func:`control_step`'s code or-ed with ``planned << GRID_PLANNED_SHIFT | row << GRID_ROW_SHIFT``.
     """
     k = grid_index(t, g.grid_t, g.grid_dt, g.t_end)
     if k < 0:
         return -1
+    row = g.rows[k]
+    if position_tol2 >= 0.0:
+        qpos, qvel = a.qpos, a.qvel
+        dv = (qvel[0] - row[7]) ** 2 + (qvel[1] - row[8]) ** 2
+        dp = (qpos[0] - row[0]) ** 2 + (qpos[1] - row[1]) ** 2
+        if not (dv <= velocity_tol2 and dp <= position_tol2):
+            return OFF_PLAN
     planned = g.masks[k]
     for leg in range(4):
         if (planned >> leg) & 1 and g.touch[g.touch_adr[leg]] <= 0:
             return -1
-    code = packed_control_step(g.rows[k], planned, stance_mode, contact_geom, measured, a)
+    code = control_step(
+        row, planned, stance_mode, contact_geom, a.foot_of_geom, a.terrain_geom, measured,
+        a.qpos, a.qvel, a.gains, a.bdd,
+        a.M_csr, a.rowadr, a.rownnz, a.colind, a.xpos, a.xmat, a.xanchor, a.xaxis, a.site_xpos, a.subtree_com,
+        a.idx, a.par, a.M, a.J, a.Jdd, a.G, a.h, a.inv_sigma, a.damping, a.tau, a.F, a.qacc, a.r, a.Jinv, a.S,
+        a.hf_flat, a.nrow, a.ncol, a.ox, a.oy, a.inv_cell, a.foot_sites, a.site_pos, a.normals,
+        a.mu, a.cone_lower, a.cones, a.compiled_qp,
+    )  # fmt: skip
     if code < 0 or not (code >> 4) & K.DONE:
         return -1
     if g.qp and code & 15 and not code & (INSIDE_CONES | QP_DONE):
         return -1
+    K.clip_into(a.tau, a.torque_limit, a.tau_out)
     if not K.copy_if_finite(a.tau_out, g.tau_ok):
         return -1
+    K.clip_into(g.tau_ok, limit, out)
     return code | planned << GRID_PLANNED_SHIFT | k << GRID_ROW_SHIFT
-
-
-OFF_PLAN = -2
-""":func:`lane_control_step`'s result when the base is off its plan (the caller's general path replans)."""
-
-
-@nb.njit(cache=False, nogil=True)
-def lane_control_step(  # pragma: no cover - compiled
-    t, position_tol2, velocity_tol2, stance_mode, contact_geom, measured, qpos, qvel, a, g, limit, out
-):
-    """:func:`grid_control_step` for a caller that needs only the torques, written clipped to ``±limit`` (N m)
-    into ``out`` (the env's clip); ``measured`` as there (-1: from ``contact_geom``).
-
-    With ``position_tol2 >= 0`` the disturbance check comes first (``ExpertPolicy._check_disturbance``): if the
-    base's horizontal position (m) or velocity (m/s) is farther than the tolerances' square roots from the grid
-    row's, nothing is written and :data:`OFF_PLAN` is returned. Otherwise -1 where :func:`grid_control_step`
-    declines, else its code.
-    """
-    if position_tol2 >= 0.0:
-        k = grid_index(t, g.grid_t, g.grid_dt, g.t_end)
-        if k >= 0:
-            row = g.rows[k]
-            dv = (qvel[0] - row[7]) ** 2 + (qvel[1] - row[8]) ** 2
-            dp = (qpos[0] - row[0]) ** 2 + (qpos[1] - row[1]) ** 2
-            if not (dv <= velocity_tol2 and dp <= position_tol2):
-                return OFF_PLAN
-    code = grid_control_step(t, stance_mode, contact_geom, measured, a, g)  # a runtime -1: one compilation
-    if code >= 0:
-        K.clip_into(g.tau_ok, limit, out)
-    return code

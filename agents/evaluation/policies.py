@@ -117,8 +117,8 @@ def make_policy(
 ) -> Policy:
     """A policy with SB3's ``predict`` for ``env`` (built with :func:`policy_env_kwargs` of ``name``).
 
-    :param name: ``"zero"`` (the zero action), ``"expert"`` (``agents.expert.ExpertPolicy(env)``, which installs
-        its physics-rate controller into ``env.unwrapped``), or the path of an SB3 model ``.zip`` (a residual
+    :param name: ``"zero"`` (the zero action), ``"expert"`` (``agents.expert.attach_expert(env)``: the expert,
+        installed as the physics-rate controller of ``env.unwrapped``), or the path of an SB3 model ``.zip`` (a residual
         model, per its ``rl_meta.json``, installs the expert plus residual: :mod:`agents.rl.model_io`).
     :param algo: ``"ppo"`` or ``"sac"``: the class an SB3 model file is loaded with (None: :func:`model_algo`).
     :param allow_pickle: unpickle files of the model folder (trusted files only; default: refused).

@@ -10,8 +10,8 @@ import pytest
 
 import planners
 import quad_uneven_env  # noqa: F401
-from agents import expert as expert_mod
-from agents.expert import ExpertConfig, attach_expert
+from agents.expert import ExpertConfig, ExpertPolicy, attach_expert
+from agents.expert import cycle as expert_cycle
 from planners import PlanningError
 from quad_uneven_env import constants as C
 
@@ -64,11 +64,57 @@ def test_predict_follows_sb3_protocol():
     assert state == "s" and env.action_space.contains(action)
 
 
+class _Wrapper:
+    """A physics-rate controller around the expert, as the residual agent's: holds it as ``.expert``, forwards
+    the reset."""
+
+    def __init__(self, expert):
+        self.expert = expert
+
+    def reset(self, model, data, terrain):
+        self.expert.reset(model, data, terrain)
+
+    def __call__(self, model, data, action):
+        return self.expert(model, data, action)
+
+
+def test_an_expert_that_is_not_its_envs_controller_refuses_to_act():
+    """Built but not installed, installed after the reset, or replaced: ``predict`` raises a RuntimeError naming
+    ``attach_expert`` instead of returning zero actions to a robot without torques; the hook called by an env
+    whose reset did not reach it ends the episode with that reason. Installed (directly or held by a controller
+    that forwards the reset) before the reset, it acts."""
+    env = gym.make("QuadUneven-v0", terrain="flat")
+    u = env.unwrapped
+    expert = ExpertPolicy(env)
+    obs, _ = env.reset(seed=0)
+    with pytest.raises(RuntimeError, match=r"not its env's physics-rate controller.*attach_expert\(env"):
+        expert.predict(obs)
+    with pytest.raises(RuntimeError, match="attach_expert"):
+        expert.planned_now(0.0)
+    u.set_controller(expert)  # after the reset: no plan
+    with pytest.raises(RuntimeError, match=r"installed after the env's last reset.*attach_expert"):
+        expert.predict(obs)
+    _, _, terminated, _, info = env.step(np.zeros(12, dtype=np.float32))
+    assert terminated and "RuntimeError" in info["termination_reason"] and "attach_expert" in info["termination_reason"]
+    for controller in (expert, _Wrapper(expert)):
+        u.set_controller(controller)
+        obs, info = env.reset(seed=0)
+        x0 = info["cog"][0]
+        for _ in range(60):
+            obs, _, terminated, _, info = env.step(expert.predict(obs)[0])
+            assert not terminated
+        assert info["cog"][0] - x0 > 0.05  # it walks
+        assert np.abs(expert.last_torques).max() > 1.0
+    u.set_controller(None)
+    with pytest.raises(RuntimeError, match="not its env's physics-rate controller"):
+        expert.predict(obs)
+
+
 def test_planning_failure_degrades_to_standing(monkeypatch):
     def always_fail(scenario):
         raise PlanningError("forced failure for the test")
 
-    monkeypatch.setattr(expert_mod, "plan_gait_cycle", always_fail)
+    monkeypatch.setattr(expert_cycle, "plan_gait_cycle", always_fail)
     policy = _stands_still_on_flat_ground()
     assert any("forced failure" in line for line in policy.failure_log)
 
@@ -94,7 +140,7 @@ def test_a_plan_with_a_stretched_stance_leg_is_refused(monkeypatch):
     like a failed plan: the expert stands still, its torques stay finite, the refusal names the leg."""
     start = {"pos": (0.01, 0.0, 0.594), "vel": (0.0, 0.0, 0.0), "acc": (0.0, 0.0, 0.0)}  # 5 cm above reach
     stretched = planners.plan_gait_cycle(dataclasses.replace(planners.paper_scenario(), cog_start=start))
-    monkeypatch.setattr(expert_mod, "plan_gait_cycle", lambda scenario: stretched)
+    monkeypatch.setattr(expert_cycle, "plan_gait_cycle", lambda scenario: stretched)
     policy = _stands_still_on_flat_ground()
     refused = [line for line in policy.failure_log if "whole-body reference refused (singular leg" in line]
     assert refused, policy.failure_log[:3]
@@ -160,6 +206,7 @@ def test_a_foot_in_the_air_at_a_measured_replan_lands_at_the_nearest_terrain_poi
     expert = attach_expert(env)
     env.reset(seed=0)
     u = env.unwrapped
+    footholds = expert.planner.measured_footholds
     hf = u.terrain.heightfield
     x0, y0 = u.data.qpos[:2]
     ramp = x0 + np.linspace(0.0, 3.0, 301)
@@ -168,10 +215,10 @@ def test_a_foot_in_the_air_at_a_measured_replan_lands_at_the_nearest_terrain_poi
     u.data.qpos[2] += float(hf.height(x1, y0) - hf.height(x0, y0)) + 0.15  # 15 cm higher: beyond reach
     u.data.qpos[3:7] = (np.cos(np.radians(-10.0)), 0.0, np.sin(np.radians(-10.0)), 0.0)  # pitched with the ramp
     mujoco.mj_forward(u.model, u.data)
-    touch = u.data.sensordata[expert._foot_sensor_adr]
+    touch = u.data.sensordata[expert.planner.foot_sensor_adr]
     assert (touch <= 0).all()
-    lifted = expert._measured_footholds(mid_swing=True)
-    plain = expert._measured_footholds()
+    lifted = footholds(mid_swing=True)
+    plain = footholds()
     sites = physics.feet_pos(u.data, u.idx)
     for leg in range(4):
         g = np.arange(-0.1, 0.1001, 0.002)
@@ -187,13 +234,13 @@ def test_a_foot_in_the_air_at_a_measured_replan_lands_at_the_nearest_terrain_poi
         assert np.linalg.norm(plain[leg] - sites[leg]) - got > 0.005  # not straight below
     u.data.qpos[2] -= 0.11  # 4 cm above the ramp: within reach
     mujoco.mj_forward(u.model, u.data)
-    assert (u.data.sensordata[expert._foot_sensor_adr] <= 0).all()
-    np.testing.assert_array_equal(expert._measured_footholds(mid_swing=True), expert._measured_footholds())
+    assert (u.data.sensordata[expert.planner.foot_sensor_adr] <= 0).all()
+    np.testing.assert_array_equal(footholds(mid_swing=True), footholds())
     u.data.qpos[2] -= 0.04  # down: the feet in contact keep the point below them
     mujoco.mj_forward(u.model, u.data)
-    down = u.data.sensordata[expert._foot_sensor_adr] > 0
+    down = u.data.sensordata[expert.planner.foot_sensor_adr] > 0
     assert down.any()
-    np.testing.assert_array_equal(expert._measured_footholds(mid_swing=True)[down], expert._measured_footholds()[down])
+    np.testing.assert_array_equal(footholds(mid_swing=True)[down], footholds()[down])
 
 
 @pytest.mark.parametrize("steep_friction", [0.8, 0.0])

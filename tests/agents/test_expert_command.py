@@ -65,7 +65,7 @@ def test_a_faster_command_shortens_the_phases_not_the_stride(command, expected):
     env = gym.make("QuadUneven-v0", terrain="flat", command=command)
     expert = attach_expert(env)
     env.reset(seed=0)
-    np.testing.assert_allclose(expert._cycle_durations(), expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(expert.planner.durations, expected, rtol=0, atol=1e-12)
     plan = expert.plans[0][1]
     assert plan.duration == pytest.approx(sum(expected), abs=1e-12)
 
@@ -84,7 +84,7 @@ def test_expert_walks_backwards_and_sideways_on_rough_terrain(vx, vy):
     expert = attach_expert(env)
     _, info = env.reset(seed=1)
     dt = env.unwrapped.dt
-    period = float(sum(expert._cycle_durations()))
+    period = float(sum(expert.planner.durations))
     per_cycle = round(period / dt)
     cogs, index = [info["cog"][:2].copy()], []
     for _ in range(3 * per_cycle):

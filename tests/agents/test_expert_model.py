@@ -141,8 +141,9 @@ def test_a_failing_controller_step_keeps_the_last_torques_and_is_logged():
     def broken(*args, **kwargs):
         raise ZeroDivisionError("division by zero")
 
-    calls = {"__call__": broken, "step_on_grid": broken}  # the controller's two entries from the expert's hook
-    policy.controller = type("Broken", (), {**calls, "t0": 0.0, "foot_of_geom": None, "terrain_geom": 0})()
+    calls = {"__call__": broken, "grid_step_into": broken}  # the controller's two entries from the expert's hook
+    broken_controller = {**calls, "t0": 0.0, "torque_limit": None, "foot_of_geom": None, "terrain_geom": 0}
+    policy.hook.controller = type("Broken", (), broken_controller)()
     obs, _, _, _, info = env.step(policy.predict(obs)[0])
     assert not info["diverged"]
     np.testing.assert_array_equal(env.unwrapped.data.ctrl, last)
