@@ -217,7 +217,7 @@ class ComputedTorqueController:
         if self._grid_step is not None:
             self._settle_grid_step()
         last = self._last
-        if isinstance(last, WorkspaceResult):  # fast path (pinv, or its QP): built on demand
+        if isinstance(last, WorkspaceResult):  # the compiled step (pinv, or its QP): built on demand
             distribution = "qp" if self.distribution == "qp" and last.layout.n_stance else "pinv"
             last = self._last = last.build(self.id, distribution)
         return last
@@ -228,7 +228,7 @@ class ComputedTorqueController:
         if self._grid_step is not None:
             self._settle_grid_step()
         last = self._last_reference
-        if isinstance(last, PackedReference):  # fast path: unpacked on demand
+        if isinstance(last, PackedReference):  # the compiled step: unpacked on demand
             last = self._last_reference = last.unpack()
         return last
 

@@ -108,7 +108,7 @@ class WorkspaceResult(NamedTuple):
     """A solution (pinv, or "qp" by the compiled step) still held in an :class:`InverseDynamics` workspace;
     :meth:`build` copies it out.
 
-    The fast path records this instead of copying every step; it is valid until the workspace is reused.
+    The compiled step records this instead of copying every step; it is valid until the workspace is reused.
     """
 
     status: int
