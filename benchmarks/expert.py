@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> None:
     config = ExpertConfig(distribution=args.distribution, model=args.model, share_nominal_world=not args.copy)
     policy = attach_expert(env, config)
     if args.no_lane:
-        policy.torques_into = None  # the env then makes the hook's full call at every physics step
+        policy.torques_into = _declines  # the env then makes the hook's full call at every physics step
     if args.readable:
         policy.hook.compiled = False
     # Warm-up: numba kernels compile on first use; keep that out of the timing.
@@ -153,6 +153,11 @@ PATHS = {
 env's fast lane (``torques_into``) in front of it."""
 
 
+def _declines(model, data, action, out, limit) -> bool:
+    """A fast lane that never answers: the env makes the hook's full call."""
+    return False
+
+
 def _paths(env: gym.Env, policy, seconds: float, reps: int) -> None:
     """Walk ``seconds`` from ``reset(seed=0)`` ``reps`` times with each of :data:`PATHS`, in turn (reversed every
     other repetition, so that the machine's drift falls on all alike); print the CPU and wall time per physics step
@@ -166,7 +171,7 @@ def _paths(env: gym.Env, policy, seconds: float, reps: int) -> None:
     for rep in range(reps):
         for path in order if rep % 2 == 0 else order[::-1]:
             policy.hook.compiled = path != "readable"
-            policy.torques_into = lane if path == "lane" else None
+            policy.torques_into = lane if path == "lane" else _declines
             obs, _ = env.reset(seed=0)
             n = int(seconds / u.dt)
             c0, t0 = time.process_time(), time.perf_counter()
