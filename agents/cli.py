@@ -316,11 +316,10 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         "(default: the config's)",
     )
     p.add_argument(
-        "--gain-adaptation",
-        choices=("none", "knee", "learned"),
+        "--expert-config",
         default=None,
-        help="adaptive gains on the expert under the residual: knees by the hand-made law, or every joint by the "
-        "learned strength estimator (default: the config's)",
+        help="JSON object of agents.expert.ExpertConfig fields for the expert under the residual, e.g. "
+        "'{\"adaptation\": \"knee\"}' (replaces the config's expert:; default: the config's)",
     )
     p.add_argument(
         "--time-limit-min", type=float, default=None, help="stop (and save) after this many minutes of training"
@@ -358,7 +357,7 @@ def run_train_command(args: argparse.Namespace) -> int:
         "residual_scale": args.residual_scale,
         "residual_legs": args.residual_legs,
         "residual_basis": args.residual_basis,
-        "gain_adaptation": args.gain_adaptation,
+        "expert": None if args.expert_config is None else _json_object(args.expert_config, "--expert-config"),
         "time_limit_min": args.time_limit_min,
         "init_from": args.init_from,
     }
@@ -660,9 +659,10 @@ def add_fit_strength_parser(sub: argparse._SubParsersAction) -> argparse.Argumen
         "fit-strength",
         help="collect expert episodes in the extreme world and fit the learned strength estimator",
         description="Run the expert with fixed gains drawn around each joint's ideal one on training seeds of "
-        "robust_extreme's terrains, fit the strength estimator of gain_adaptation 'learned' on four fifths of the "
-        "seeds, report it on the rest, then fit it on all and write it (default: over the shipped one, "
-        "agents/rl/data/strength_estimator.npz). Models made with the previous estimator then refuse to load. "
+        "robust_extreme's terrains, fit the strength estimator of the expert's adaptation 'learned' on four fifths "
+        "of the seeds, report it on the rest, then fit it on all and write it (default: over the shipped one, "
+        "agents/control/adaptation/data/strength_estimator.npz). Models made with another estimator then refuse to "
+        "load. "
         "Exit code 2 on a bad option.",
     )
     p.add_argument("--seeds", default="1000-1199", help="FIRST-LAST: world seeds per terrain entry (default 1000-1199)")
@@ -681,8 +681,8 @@ def run_fit_strength_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven fit-strength``: 0 on success, 2 on a bad option."""
     import json
 
-    from agents.rl.strength_data import fit_strength_estimator, parse_seeds
-    from agents.rl.strength_estimator import DEFAULT_ESTIMATOR
+    from agents.control.adaptation.learned import DEFAULT_ESTIMATOR
+    from agents.rl.strength_fit import fit_strength_estimator, parse_seeds
 
     out = DEFAULT_ESTIMATOR if args.out is None else args.out
     seeds = parse_seeds(args.seeds)

@@ -58,6 +58,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from agents.control import inverse_dynamics_kernels as IK
+from agents.control.adaptation import ADAPTATIONS, make_adaptation
 from agents.control.controller import ComputedTorqueController, Gains
 from agents.control.inverse_dynamics import DISTRIBUTIONS
 from agents.control.nominal import NominalModel
@@ -72,6 +73,7 @@ from planners.types import FootholdError, ReferenceGrid, ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env import physics
 from quad_uneven_env.fields import check_fields, param
+from quad_uneven_env.measurement_kernels import clip_finite_into
 from quad_uneven_env.robot.dynamics import BACKENDS
 from quad_uneven_env.robot.kinematics import hip_positions_B
 from quad_uneven_env.spatial import quat_to_matrix, wrap_angle, yaw_of_quat
@@ -217,6 +219,11 @@ class ExpertConfig:
     """with "nominal": when the simulated robot's parameters equal the nominal ones exactly (checked at
     every reset), read the dynamics terms from the simulator's data instead of copying the measured
     state into the nominal model: the same numbers bit for bit (tested), about 10 µs a step cheaper."""
+    adaptation: str = param("none", kind="choice", choices=ADAPTATIONS)
+    """adaptive gains on the controller's joint torques (:mod:`agents.control.adaptation`), updated once per control
+    step of the env from the plan's tracking error and the torques: "none", "knee" (the four knees' gains follow
+    the correlation of their tracking error with their load) or "learned" (all twelve, driven by the learned
+    strength estimator). They undo weak or strong motors and a heavier body than the model's."""
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -330,6 +337,8 @@ class ExpertPolicy:
         self._yaw = 0.0  # rad: the planned base yaw at the end of the current plan (0 until a command turns it)
         self._durations: tuple[float, ...] = self.config.durations  # s: the phases of the current cycle
         self._off_plan_tol2 = (self.config.recovery_position**2, self.config.recovery_velocity**2)
+        self.adaptation = make_adaptation(self.config.adaptation, self.env.dt, self.env.idx.torque_limit)
+        """the adaptive gains on the torques (:class:`agents.control.adaptation.AdaptiveGains`; None: "none")."""
 
     # -------------------------------------------------------------- SB3 protocol
     def predict(
@@ -376,12 +385,22 @@ class ExpertPolicy:
         self._base_mu = float(self.controller.mu)
         self._foothold_limits = foothold_limits_for_friction(self._base_mu)
         self._start_cycle(0.0, cog_start=None)
+        if self.adaptation is not None:
+            self.adaptation.reset(float(data.time))
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
-        """Joint torques (N m) of the computed-torque controller at the measured state.
+        """Joint torques (N m) of the computed-torque controller at the measured state, times the adaptive gains
+        (``ExpertConfig.adaptation``).
 
         Never raises: a failing step (logged in :attr:`failure_log`) returns the last good torques.
         """
+        tau = self._controller_torques(model, data, action)
+        if self.adaptation is None:
+            return tau
+        return self.adaptation.apply(tau, float(data.time), data.qpos[7:], self.planned_now)
+
+    def _controller_torques(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
+        """Joint torques (N m) of the computed-torque controller (the call's, before the adaptive gains)."""
         try:
             own = data if self.shares_simulator_data else self.nominal.measure(data.qpos, data.qvel, data.time)  # type: ignore[union-attr]
             self._steps += 1
@@ -419,12 +438,25 @@ class ExpertPolicy:
         data, action)`` returns, clipped to ``±limit`` (N m), written into ``out`` in one compiled call when the
         step is a plain grid step; False where the full call must run instead (nothing it would not redo the
         same way changed: the own model's copy of the measured state, the inverse-dynamics buffers). The action
-        is ignored, as by the call.
+        is ignored, as by the call. With an adaptation the lane writes the controller's torques unclipped, and
+        the gains and the clip follow here, as in the call.
 
         Never taken on a slip-check step, and on a disturbance-check step only while the base is on its plan (the
         check is compiled into the call). Outside the nominal world the measured state is first copied into the
         expert's own model, as the call does.
         """
+        adaptation = self.adaptation
+        if adaptation is not None:
+            if not self._lane_torques_into(model, data, adaptation.raw, adaptation.no_limit):
+                return False
+            tau = adaptation.apply(adaptation.raw, float(data.time), data.qpos[7:], self.planned_now)
+            return bool(clip_finite_into(tau, limit, out))
+        return self._lane_torques_into(model, data, out, limit)
+
+    def _lane_torques_into(
+        self, model: mujoco.MjModel, data: mujoco.MjData, out: np.ndarray, limit: np.ndarray
+    ) -> bool:
+        """:meth:`torques_into` before the adaptive gains."""
         grid = self._grid
         if grid is None or data is not self._sim:
             return False

@@ -25,15 +25,7 @@ from agents.rl.vec_env import make_train_env
 
 def _rate(cfg, std: float, steps: int, seed: int) -> dict[str, float]:
     env = make_train_env(
-        cfg.terrain,
-        cfg.residual_scale,
-        cfg.max_episode_steps,
-        dict(cfg.env_kwargs),
-        cfg.randomization,
-        expert_features=True,
-        residual_legs=cfg.residual_legs,
-        residual_basis=cfg.residual_basis,
-        gain_adaptation=cfg.gain_adaptation,
+        cfg.terrain, cfg.max_episode_steps, dict(cfg.env_kwargs), cfg.randomization, cfg.residual_config()
     )
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)

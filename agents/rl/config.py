@@ -29,11 +29,6 @@ RESIDUAL_BASES = ("torque_limit", "expert_torque")
 """What one unit of residual action is: a fraction of the motor's torque limit (additive), or of the expert's
 own torque at that physics step (a gain on the expert: ``tau = tau_expert x (1 + residual_scale x action)``)."""
 
-GAIN_ADAPTATIONS = ("none", "knee", "learned")
-"""What the residual acts on: the expert's torques, those with adaptive knee gains
-(:mod:`agents.rl.gain_adaptation`), or those with adaptive gains on every joint driven by the learned strength
-estimator (:mod:`agents.rl.strength_estimator`)."""
-
 ALGOS = ("ppo", "sac")
 """Stable-Baselines3 algorithms ``quad-uneven train`` supports."""
 
@@ -88,15 +83,10 @@ class TrainConfig:
     residual_basis: str = param("torque_limit", kind="choice", choices=RESIDUAL_BASES)
     """``torque_limit``: residual torque = residual_scale x action x the motor limit; ``expert_torque``:
     residual_scale x action x the expert's own torque (per joint and physics step: a gain on the expert)."""
-    gain_adaptation: str = param("none", kind="choice", choices=GAIN_ADAPTATIONS)
-    """``none``: the residual acts on the expert's torques; ``knee``: on the expert's torques with adaptive knee
-    gains (:mod:`agents.rl.gain_adaptation`: each knee's gain follows the correlation of its tracking error
-    with its load); ``learned``: on the expert's torques with adaptive gains on all twelve joints, driven by the
-    learned strength estimator (:mod:`agents.rl.strength_estimator`)."""
-    adaptation_features: bool = param(False, kind="bool")
-    """append the adapted knee gains to the observation, after the expert features (needs ``gain_adaptation:
-    knee`` and ``expert_features``): what the adaptation has learned of the motors, which the policy cannot
-    reconstruct from one observation."""
+    expert: dict[str, Any] = dataclasses.field(default_factory=dict)
+    """fields of :class:`agents.expert.ExpertConfig` for the expert under the residual, e.g. ``{adaptation: knee}``
+    (adaptive gains on its knee torques, :mod:`agents.control.adaptation`: the residual then acts on the adapted
+    torques); ``{}``: its defaults."""
     initial_action: float = param(0.0, "action units", lo=-1.0, hi=1.0)
     """the untrained policy's mean action, every joint (0: the expert exactly). With ``expert_torque`` and
     ``stance`` legs, ``initial_action x residual_scale`` is a hand-made prior: e.g. 0.6 x 0.5 = +30 % torque
@@ -133,12 +123,22 @@ class TrainConfig:
     init_from: str | None = None
     """a warm start: a saved model (a training run's folder or its ``.zip``) whose weights, optimizer states and
     observation statistics this run starts from (:mod:`agents.rl.warm_start`); it must have been trained for the
-    same env (``algo``, ``residual_*``, ``gain_adaptation``, ``expert_features``, ``normalize_obs``,
-    ``env_kwargs``). None: a new model."""
+    same env (``algo``, ``residual_*``, ``expert``, ``expert_features``, ``normalize_obs``, ``env_kwargs``). None: a
+    new model."""
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-serialisable copy."""
         return dataclasses.asdict(self)
+
+    def residual_config(self) -> Any:
+        """The residual env's :class:`~agents.rl.residual_env.ResidualConfig` of this run (``residual: true``).
+
+        :raises ValueError: naming ``expert.field`` on a bad expert setting (:func:`validate` checks it first).
+        """
+        from agents.rl.residual_env import ResidualConfig  # deferred: the expert's kernels
+
+        fields = ("residual_scale", "residual_legs", "residual_basis", "expert_features", "residual_penalty", "expert")
+        return ResidualConfig.from_dict({name: getattr(self, name) for name in fields}, where="")
 
 
 def _mapping(name: str, value: Any) -> dict[str, Any]:
@@ -180,27 +180,30 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         or cfg.residual_penalty
         or cfg.residual_legs != "all"
         or cfg.residual_basis != "torque_limit"
-        or cfg.gain_adaptation != "none"
+        or cfg.expert
         or cfg.initial_action
     ):
         raise TrainConfigError(
             "residual: false trains from scratch without the expert, so expert_features must be false, "
-            "residual_penalty 0, residual_legs 'all', residual_basis 'torque_limit', gain_adaptation 'none' and "
+            "residual_penalty 0, residual_legs 'all', residual_basis 'torque_limit', expert {} and "
             "initial_action 0, got "
             f"expert_features={cfg.expert_features}, residual_penalty={cfg.residual_penalty}, "
             f"residual_legs={cfg.residual_legs!r}, residual_basis={cfg.residual_basis!r}, "
-            f"gain_adaptation={cfg.gain_adaptation!r}, "
+            f"expert={cfg.expert!r}, "
             f"initial_action={cfg.initial_action}"
         )
     if cfg.init_from is not None and (not isinstance(cfg.init_from, str) or not cfg.init_from):
         raise TrainConfigError(
             f"init_from must be a path to a saved model (folder or .zip) or null, got {cfg.init_from!r}"
         )
-    if cfg.adaptation_features and not (cfg.residual and cfg.expert_features and cfg.gain_adaptation == "knee"):
-        raise TrainConfigError(
-            "adaptation_features: true needs residual: true, expert_features: true and gain_adaptation: knee, got "
-            f"residual={cfg.residual}, expert_features={cfg.expert_features}, gain_adaptation={cfg.gain_adaptation!r}"
-        )
+    expert = _mapping("expert", cfg.expert)
+    if expert:
+        from agents.rl.residual_env import expert_config  # deferred: the expert's kernels
+
+        try:
+            expert_config(expert, "expert")
+        except ValueError as err:
+            raise TrainConfigError(str(err)) from None
     if cfg.actor_warmup_steps and cfg.algo != "sac":
         raise TrainConfigError(
             f"actor_warmup_steps needs algo: sac (PPO's actor and critic share one optimizer), got algo "

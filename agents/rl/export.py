@@ -8,10 +8,10 @@ metadata travels in the ONNX ``metadata_props``: ``observation_layout`` (JSON na
 ``action_low``/``action_high``, ``residual``, ``residual_scale``, ``residual_legs`` and ``residual_basis`` (a
 residual action is added to the expert's torques as ``residual_scale x action x torque_limit``, or with
 ``residual_basis`` "expert_torque" as ``residual_scale x action x`` the expert's torque; with ``residual_legs``
-"stance" only on the legs whose foot touches the ground), ``gain_adaptation`` ("knee": the expert's knee
-torques are first multiplied by the adaptive gains of :mod:`agents.rl.gain_adaptation`, which a deployment must
-run too), ``torque_limit`` (N m), ``algo``,
-``env_id``, ``env_kwargs``, ``observation_normalization`` ("folded" or "none").
+"stance" only on the legs whose foot touches the ground), ``expert`` (the expert's config: its fields that
+differ from :class:`agents.expert.ExpertConfig`'s defaults; with ``adaptation`` "knee" or "learned" its torques are
+first multiplied by the adaptive gains of :mod:`agents.control.adaptation`, which a deployment must run too),
+``torque_limit`` (N m), ``algo``, ``env_id``, ``env_kwargs``, ``observation_normalization`` ("folded" or "none").
 """
 
 from __future__ import annotations
@@ -120,7 +120,7 @@ def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None
         "residual_scale": json.dumps(meta.get("residual_scale")),
         **{  # the residual's settings (defaults for older models' metadata); None for a model from scratch
             name: json.dumps(meta.get(name, META_DEFAULTS[name]) if meta.get("residual") else None)
-            for name in ("residual_legs", "residual_basis", "gain_adaptation", "adaptation_features")
+            for name in ("residual_legs", "residual_basis", "expert")
         },
         "torque_limit": json.dumps(torque_limit),
         "algo": algo,

@@ -231,18 +231,18 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
             "env_kwargs": {**SCRATCH_ENV_KWARGS, **cfg.env_kwargs},
             "expert_features": False,
         }
-    if cfg.gain_adaptation == "learned":
-        from agents.rl.strength_estimator import estimator_digest
+    residual = cfg.residual_config()
+    if residual.expert.adaptation == "learned":
+        from agents.control.adaptation.learned import estimator_digest
 
         common = {**common, "strength_estimator_sha256": estimator_digest()}
     return {
         **common,
         "residual": True,
-        "residual_scale": float(cfg.residual_scale),
-        "residual_legs": cfg.residual_legs,
-        "residual_basis": cfg.residual_basis,
-        "gain_adaptation": cfg.gain_adaptation,
-        "adaptation_features": bool(cfg.adaptation_features),
+        "residual_scale": float(residual.residual_scale),
+        "residual_legs": residual.residual_legs,
+        "residual_basis": residual.residual_basis,
+        "expert": residual.to_dict()["expert"],
         "initial_action": float(cfg.initial_action),
         "env_id": RESIDUAL_ENV_ID,
         "env_kwargs": dict(cfg.env_kwargs),

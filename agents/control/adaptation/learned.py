@@ -1,6 +1,6 @@
-"""A learned estimate of each motor's strength from how its joint tracks: the residual agent's adaptation module.
+"""A learned estimate of each motor's strength from how its joint tracks, driving adaptive gains on the expert.
 
-The hand-made knee law (:mod:`agents.rl.gain_adaptation`) drives one statistic, the slope of a knee's tracking
+The hand-made knee law (:mod:`agents.control.adaptation.knee`) drives one statistic, the slope of a knee's tracking
 error on its load, to zero. This module learns the map instead, by supervision on worlds whose motors are known
 (the second phase of RMA, Kumar et al. 2021: a student that infers the privileged parameters from the recent
 history of the robot's own signals). Per joint, running means of its load u (the expert's torque over the torque
@@ -14,9 +14,10 @@ law an integrator with its fixed point at ``g = (m / m0) / s``:
 
     log g <- clip(log g - k dt log(s g m0 / m)_estimated, log g_min, log g_max)
 
-The estimator is fitted on episodes run with a fixed gain per joint drawn around the ideal one (``quad-uneven
-fit-strength``), on seeds disjoint from every validation and held-out set. Its parameters ship as a
-plain ``.npz`` (no pickled objects).
+The gains multiply the expert's joint torques (``ExpertConfig(adaptation="learned")``). The estimator is fitted
+on episodes run with a fixed gain per joint drawn around the ideal one (``quad-uneven fit-strength``,
+:mod:`agents.rl.strength_fit`), on seeds disjoint from every validation and held-out set. Its parameters ship as
+package data, a plain ``.npz`` (no pickled objects).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.rl.gain_adaptation import EPS, GAIN_BOUNDS, START_TIME
+from agents.control.adaptation.knee import EPS, GAIN_BOUNDS, START_TIME
 from quad_uneven_env import constants as C
 
 TIME_CONSTANTS = (0.5, 2.0)
@@ -53,7 +54,7 @@ DEFAULT_ESTIMATOR = Path(__file__).resolve().parent / "data" / "strength_estimat
 """The shipped estimator (fitted by ``quad-uneven fit-strength``)."""
 
 WARMUP = 1.0
-"""s of statistics after :data:`~agents.rl.gain_adaptation.START_TIME` before the gains move."""
+"""s of statistics after :data:`~agents.control.adaptation.knee.START_TIME` before the gains move."""
 
 
 class JointStatistics:
@@ -168,52 +169,6 @@ class StrengthEstimator:
         return cls(mean, scale, weights, biases)
 
 
-def fit_estimator(
-    features: np.ndarray,
-    target: np.ndarray,
-    kind: np.ndarray,
-    hidden: tuple[int, ...] = (64, 64),
-    epochs: int = 40,
-    seed: int = 0,
-) -> StrengthEstimator:
-    """Fit the MLP by Adam on the squared error (torch, CPU, seeded; weight decay 1e-4, batches of 1024).
-
-    :param features: (N, F) samples; ``target`` (N,) log(effective strength relative to the load); ``kind`` (N,)
-        joint kind index.
-    :param hidden: widths of the hidden layers.
-    :param epochs: passes over the samples.
-    """
-    import torch
-
-    if len(target) < 10 * features.shape[1]:
-        raise ValueError(f"fit_estimator: {len(target)} samples are too few for {features.shape[1]} features")
-    mean, scale = features.mean(axis=0), np.maximum(features.std(axis=0), 1e-9)
-    x = np.concatenate([(features - mean) / scale, np.eye(N_KINDS)[kind]], axis=1)
-    gen = torch.Generator().manual_seed(seed)
-    torch.manual_seed(seed)
-    sizes = (x.shape[1], *hidden, 1)
-    layers: list[torch.nn.Module] = []
-    for i in range(len(sizes) - 1):
-        layers.append(torch.nn.Linear(sizes[i], sizes[i + 1]))
-        if i < len(sizes) - 2:
-            layers.append(torch.nn.Tanh())
-    net = torch.nn.Sequential(*layers).double()
-    opt = torch.optim.Adam(net.parameters(), lr=1e-3, weight_decay=1e-4)
-    xt, yt = torch.from_numpy(x), torch.from_numpy(np.asarray(target, dtype=float))
-    for _ in range(epochs):
-        perm = torch.randperm(len(yt), generator=gen)
-        for i in range(0, len(yt), 1024):
-            batch = perm[i : i + 1024]
-            loss = ((net(xt[batch])[:, 0] - yt[batch]) ** 2).mean()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-    linear = [m for m in net if isinstance(m, torch.nn.Linear)]
-    weights = tuple(m.weight.detach().numpy().T.copy() for m in linear)
-    biases = tuple(m.bias.detach().numpy().copy() for m in linear)
-    return StrengthEstimator(mean, scale, weights, biases)
-
-
 def estimator_digest(path: Path = DEFAULT_ESTIMATOR) -> str:
     """sha256 (hex) of the estimator file ``path``: recorded in a model's ``rl_meta.json`` so that a model is never
     evaluated with an estimator other than the one it was made with."""
@@ -224,7 +179,7 @@ def estimator_digest(path: Path = DEFAULT_ESTIMATOR) -> str:
 
 class LearnedGainAdaptation:
     """Adaptive gains on all twelve of the expert's joint torques, driven by a :class:`StrengthEstimator`
-    (the interface of :class:`~agents.rl.gain_adaptation.KneeGainAdaptation`).
+    (the interface of :class:`~agents.control.adaptation.knee.KneeGainAdaptation`).
 
     :param period: s between two updates (the control step).
     :param estimator: the fitted estimator (default: the shipped one).
@@ -258,3 +213,19 @@ class LearnedGainAdaptation:
         log_effective = self.estimator.predict(self.stats.features())
         log_gain = np.log(self.gain) - ADAPTATION_RATE * self.period * np.nan_to_num(log_effective)
         self.gain[:] = np.exp(np.clip(log_gain, *self._log_bounds))
+
+
+__all__ = [
+    "ADAPTATION_RATE",
+    "DEFAULT_ESTIMATOR",
+    "FEATURE_NAMES",
+    "JOINT_KIND",
+    "N_KINDS",
+    "STAT_NAMES",
+    "TIME_CONSTANTS",
+    "WARMUP",
+    "JointStatistics",
+    "LearnedGainAdaptation",
+    "StrengthEstimator",
+    "estimator_digest",
+]

@@ -1,4 +1,4 @@
-"""An adaptive gain on the expert's knee torques: the residual agent's estimate of its own knee motors.
+"""The knee law: an adaptive gain on the expert's knee torques, its estimate of its own knee motors.
 
 The expert's model assumes nominal motors. In the extreme world a knee motor delivers 50-130 % of the torque
 it is sent, and a loaded knee then sags: its tracking error (planned minus measured angle) follows the torque
@@ -9,10 +9,10 @@ in model-reference adaptive control),
 
 with ``u`` the expert's knee torque over the torque limit and ``e`` the knee's tracking error (rad), once per
 control step ``dt``. It stops moving where the knee's error no longer follows its load: a knee at strength s
-settles near g = 1/s (an overloaded knee higher). The gains multiply the expert's knee torques before any
-learned residual. Only the knees: on the validation worlds an oracle that undoes the drawn strength of the
-four knee motors recovers most of what undoing all twelve does (docs/rl.md, run 7), and the knees' error
-follows their strength most closely (``benchmarks/knee_strength_signal.py``); the same law on all twelve
+settles near g = 1/s (an overloaded knee higher). The gains multiply the expert's knee torques
+(``ExpertConfig(adaptation="knee")``). Only the knees: on the validation worlds an oracle that undoes the drawn
+strength of the four knee motors recovers most of what undoing all twelve does (docs/rl.md), and the knees'
+error follows their strength most closely (``benchmarks/knee_strength_signal.py``); the same law on all twelve
 joints did no better on the validation worlds.
 """
 
@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.rl.config import GAIN_ADAPTATIONS
 from quad_uneven_env import constants as C
 
 KNEE_JOINTS = np.arange(C.JOINT_KINDS.index("KFE"), C.N_JOINTS, len(C.JOINT_KINDS))
@@ -77,14 +76,12 @@ class KneeGainAdaptation:
         self.gain[KNEE_JOINTS] = np.clip(self.gain[KNEE_JOINTS] + step, *GAIN_BOUNDS)
 
 
-def check_gain_adaptation(value: object) -> str:
-    """``value`` if it is one of :data:`GAIN_ADAPTATIONS`.
-
-    :raises ValueError: naming ``gain_adaptation`` and its allowed values otherwise.
-    """
-    if not isinstance(value, str) or value not in GAIN_ADAPTATIONS:
-        raise ValueError(f"gain_adaptation must be one of {list(GAIN_ADAPTATIONS)}, got {value!r}")
-    return value
-
-
-__all__ = ["GAIN_ADAPTATIONS", "KNEE_JOINTS", "KneeGainAdaptation", "check_gain_adaptation"]
+__all__ = [
+    "ADAPTATION_RATE",
+    "CORRELATION_TIME",
+    "EPS",
+    "GAIN_BOUNDS",
+    "KNEE_JOINTS",
+    "START_TIME",
+    "KneeGainAdaptation",
+]

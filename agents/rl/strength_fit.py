@@ -1,10 +1,11 @@
-"""Data for the learned strength estimator, and its fit (``quad-uneven fit-strength``).
+"""Data for the learned strength estimator of ``ExpertConfig(adaptation="learned")``, and its fit
+(``quad-uneven fit-strength``).
 
 Runs the expert in the extreme world (``robust_extreme``'s three terrains) on training seeds, disjoint from every
 validation and held-out set, with a fixed gain per joint on its torque drawn around the ideal one, and records the
-joint statistics of :mod:`agents.rl.strength_estimator` with the effective strength relative to the load,
-``s g m0 / m``, they should reveal. Fits the estimator on four fifths of the seeds, reports it on the last fifth,
-then fits it on all and writes it (by default over the shipped one).
+joint statistics of :mod:`agents.control.adaptation.learned` with the effective strength relative to the load,
+``s g m0 / m``, they should reveal. Fits the estimator (a supervised MLP, torch) on four fifths of the seeds,
+reports it on the last fifth, then fits it on all and writes it (by default over the shipped package data).
 """
 
 from __future__ import annotations
@@ -14,21 +15,23 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.rl.gain_adaptation import GAIN_BOUNDS, START_TIME
-from agents.rl.strength_estimator import (
+from agents.control.adaptation.knee import GAIN_BOUNDS, START_TIME
+from agents.control.adaptation.learned import (
     DEFAULT_ESTIMATOR,
     FEATURE_NAMES,
     JOINT_KIND,
+    N_KINDS,
     WARMUP,
     JointStatistics,
-    fit_estimator,
+    StrengthEstimator,
 )
 from quad_uneven_env import constants as C
 
 
 class FixedGainRecorder:
     """Data collection: fixed gains on the expert's torques (set after each reset), and the features of every
-    ``stride``-th control step from ``START_TIME + WARMUP`` on (the interface of :class:`LearnedGainAdaptation`)."""
+    ``stride``-th control step from ``START_TIME + WARMUP`` on (the interface of
+    :class:`~agents.control.adaptation.learned.LearnedGainAdaptation`)."""
 
     def __init__(self, period: float, stride: int = 5) -> None:
         self.stats = JointStatistics(period)
@@ -42,7 +45,8 @@ class FixedGainRecorder:
         self.samples = []
 
     def update(self, joint_pos_error: np.ndarray, expert_torque: np.ndarray, time_since_reset: float) -> None:
-        """One control step (see :meth:`LearnedGainAdaptation.update`); the gains do not move."""
+        """One control step (see :meth:`~agents.control.adaptation.learned.LearnedGainAdaptation.update`); the gains
+        do not move."""
         if time_since_reset < START_TIME:
             return
         self.stats.update(joint_pos_error, expert_torque)
@@ -76,17 +80,15 @@ def collect_episode(job: tuple[str, int, float]) -> tuple[np.ndarray, np.ndarray
     import gymnasium as gym
 
     import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
-    from agents.expert import ExpertPolicy
-    from agents.rl.residual_env import ResidualController
+    from agents.control.adaptation import AdaptiveGains
+    from agents.expert import attach_expert
 
     entry, seed, seconds = job
     env = gym.make("QuadUneven-v0", terrain=ENTRIES[entry], randomization="extreme", max_episode_steps=10**6)
     base = env.unwrapped
     recorder = FixedGainRecorder(base.dt)
-    controller = ResidualController(
-        ExpertPolicy(env), base.idx.torque_limit, update_period=base.dt, adaptation=recorder
-    )
-    base.set_controller(controller)
+    expert = attach_expert(env)
+    expert.adaptation = AdaptiveGains(recorder, base.idx.torque_limit)  # its gains on the expert's torques
     nominal_mass = float(base.model.body_subtreemass[base.idx.trunk_body])  # before the first draw
     env.reset(seed=seed)
     strength = base.episode_draw.motor_strength.copy()
@@ -168,6 +170,52 @@ def plot_fit(target: np.ndarray, estimate: np.ndarray, kind: np.ndarray, path: P
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def fit_estimator(
+    features: np.ndarray,
+    target: np.ndarray,
+    kind: np.ndarray,
+    hidden: tuple[int, ...] = (64, 64),
+    epochs: int = 40,
+    seed: int = 0,
+) -> StrengthEstimator:
+    """Fit the MLP by Adam on the squared error (torch, CPU, seeded; weight decay 1e-4, batches of 1024).
+
+    :param features: (N, F) samples; ``target`` (N,) log(effective strength relative to the load); ``kind`` (N,)
+        joint kind index.
+    :param hidden: widths of the hidden layers.
+    :param epochs: passes over the samples.
+    """
+    import torch
+
+    if len(target) < 10 * features.shape[1]:
+        raise ValueError(f"fit_estimator: {len(target)} samples are too few for {features.shape[1]} features")
+    mean, scale = features.mean(axis=0), np.maximum(features.std(axis=0), 1e-9)
+    x = np.concatenate([(features - mean) / scale, np.eye(N_KINDS)[kind]], axis=1)
+    gen = torch.Generator().manual_seed(seed)
+    torch.manual_seed(seed)
+    sizes = (x.shape[1], *hidden, 1)
+    layers: list[torch.nn.Module] = []
+    for i in range(len(sizes) - 1):
+        layers.append(torch.nn.Linear(sizes[i], sizes[i + 1]))
+        if i < len(sizes) - 2:
+            layers.append(torch.nn.Tanh())
+    net = torch.nn.Sequential(*layers).double()
+    opt = torch.optim.Adam(net.parameters(), lr=1e-3, weight_decay=1e-4)
+    xt, yt = torch.from_numpy(x), torch.from_numpy(np.asarray(target, dtype=float))
+    for _ in range(epochs):
+        perm = torch.randperm(len(yt), generator=gen)
+        for i in range(0, len(yt), 1024):
+            batch = perm[i : i + 1024]
+            loss = ((net(xt[batch])[:, 0] - yt[batch]) ** 2).mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+    linear = [m for m in net if isinstance(m, torch.nn.Linear)]
+    weights = tuple(m.weight.detach().numpy().T.copy() for m in linear)
+    biases = tuple(m.bias.detach().numpy().copy() for m in linear)
+    return StrengthEstimator(mean, scale, weights, biases)
 
 
 def fit_strength_estimator(
