@@ -66,25 +66,25 @@ define against_expert
 	  --out runs/compare_robust_extreme_pooled_$(2)
 endef
 
-# The learned strength estimator (agents/rl/data/strength_estimator.npz, gain_adaptation: learned; docs/rl.md,
+# The learned strength estimator (agents/control/adaptation/data/strength_estimator.npz, the expert's adaptation: learned; docs/rl.md,
 # session 20): 600 episodes of the expert in the extreme world on training seeds 1000-1199, then the fit; about
 # 15 min on 2 cores, seeded.
 strength-estimator: venv
 	$(PY) -m agents.cli fit-strength --seeds 1000-1199 --workers 2 --plot docs/rl_strength_estimator_fit.png
 
 # The residual agent over the learned adaptation (models/learned_adaptation; docs/rl.md, session 20): the strength
-# estimator above, then run 7's config with gain_adaptation: learned stopped before its first update (its PPO
+# estimator above, then run 7's config with the expert's adaptation: learned stopped before its first update (its PPO
 # residual is zero: what it adds to the expert is the estimator's gains), then the expert and it on every HELD_OUT
 # set with their paired comparisons (runs/compare_*_learned). About 1 h 45 min on 2 cores.
 learned-adaptation: strength-estimator
-	$(PY) -m agents.cli train --config configs/rl/ppo_residual_adaptive.yaml --gain-adaptation learned \
+	$(PY) -m agents.cli train --config configs/rl/ppo_residual_adaptive.yaml --expert-config '{"adaptation": "learned"}' \
 	  --out runs/ppo_residual_learned_prior --time-limit-min 0.0001 --overwrite
 	$(call ship,runs/ppo_residual_learned_prior,models/learned_adaptation)
 	$(call against_expert,models/learned_adaptation,learned)
 
 # The shipped residual baseline (docs/rl.md, models/ppo_residual_adaptive, run 7): PPO on the extreme world (motors
 # down to half their torque, payloads to +50 %, the rest of robust_hard's randomization) over a mix of six
-# terrains, on top of the expert with adaptive knee gains (agents/rl/gain_adaptation.py), the residual a gain on
+# terrains, on top of the expert with adaptive knee gains (agents/control/adaptation/knee.py), the residual a gain on
 # the stance legs' torques; 75 min of training on 2 cores, seeded; then the expert and expert + residual on the
 # held-out seeds of robust_extreme (100-119, 300-319, 400-419, 500-519 and 600-619) and robust_hard (100-109), and on
 # targets, with their paired comparisons (runs/compare_*_residual; runs/compare_robust_extreme_pooled_residual pools

@@ -208,6 +208,17 @@ CASES: dict[str, Case] = {
         lambda t, m: ["train", "--out", str(non_empty(t, "rl_meta.json")), "--no-progress"],
         ("--out", "rl_meta.json", "--overwrite"),
     ),
+    "train expert config not JSON": Case(
+        lambda t, m: ["train", "--expert-config", "{adaptation", "--out", str(t / "run")], ("--expert-config", "JSON")
+    ),
+    "train expert adaptation": Case(
+        lambda t, m: ["train", "--expert-config", '{"adaptation": "hips"}', "--out", str(t / "run")],
+        ("expert.adaptation", "'none', 'knee', 'learned'", "hips"),
+    ),
+    "evaluate expert adaptation": Case(
+        lambda t, m: evaluate_argv(t, "--expert-config", '{"adaptation": "hips"}', policy="expert"),
+        ("adaptation", "'none', 'knee', 'learned'", "hips"),
+    ),
 }
 
 

@@ -1,8 +1,6 @@
-"""The shipped models (models/ppo_residual_adaptive, the baseline; models/sac_residual_adaptive, its SAC
-comparison, models/sac_residual_adaptive_continued, that run trained further, and
-models/sac_residual_adaptive_features, with the adapted gains in its observation; models/ppo_residual_gain,
-models/ppo_residual_extreme and models/ppo_residual_hard, its predecessors; models/ppo_scratch): load as data,
-run, match their configs."""
+"""The shipped models (models/ppo_residual_adaptive, the baseline, over the expert with the knee adaptation;
+models/ppo_residual_gain, models/ppo_residual_extreme and models/ppo_residual_hard, residual agents over the plain
+expert; models/ppo_scratch): load as data, run, match their configs."""
 
 from __future__ import annotations
 
@@ -16,16 +14,13 @@ import pytest
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.evaluation.policies import make_policy, policy_env_kwargs
 from agents.rl.config import load_train_config
-from agents.rl.expert_features import ADAPTATION_FEATURE_SIZE, EXPERT_FEATURE_SIZE
+from agents.rl.expert_features import EXPERT_FEATURE_SIZE
 from agents.rl.model_io import SB3Policy, read_metadata
 from agents.rl.residual_env import ResidualController
 
 ROOT = Path(__file__).resolve().parents[2]
 RESIDUAL_MODELS = {
     "ppo_residual_adaptive": ("extreme", "stance", "expert_torque"),
-    "sac_residual_adaptive": ("extreme", "stance", "expert_torque"),
-    "sac_residual_adaptive_continued": ("extreme", "stance", "expert_torque"),
-    "sac_residual_adaptive_features": ("extreme", "stance", "expert_torque"),
     "ppo_residual_gain": ("extreme", "stance", "expert_torque"),
     "ppo_residual_extreme": ("extreme", "stance", "torque_limit"),
     "ppo_residual_hard": ("hard", "all", "torque_limit"),
@@ -49,7 +44,7 @@ def test_the_shipped_model_was_trained_with_the_shipped_config(name):
     assert meta["residual"] and meta["expert_features"] and meta["randomization"] == world
     assert meta.get("residual_legs", "all") == legs
     assert meta.get("residual_basis", "torque_limit") == basis
-    assert meta.get("gain_adaptation", "none") == ("knee" if "_adaptive" in name else "none")
+    assert meta.get("expert", {}) == ({"adaptation": "knee"} if "_adaptive" in name else {})
     assert meta["algo"] == name.split("_")[0]
     assert not list(model.parent.glob("*.pkl"))
 
@@ -63,10 +58,10 @@ def test_the_shipped_model_drives_the_expert_in_a_randomized_world(name):
     assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
     assert env.unwrapped.controller.residual_legs == legs
     assert env.unwrapped.controller.residual_basis == basis
-    assert (env.unwrapped.controller.adaptation is not None) == ("_adaptive" in name)
+    assert policy.expert is env.unwrapped.controller.expert
+    assert policy.expert.config.adaptation == ("knee" if "_adaptive" in name else "none")
     assert type(policy.model).__name__ == name.split("_")[0].upper()  # the class rl_meta.json records
-    adapted = ADAPTATION_FEATURE_SIZE if read_metadata(model).get("adaptation_features") else 0
-    assert policy.model.observation_space.shape == (env.observation_space.shape[0] + EXPERT_FEATURE_SIZE + adapted,)
+    assert policy.model.observation_space.shape == (env.observation_space.shape[0] + EXPERT_FEATURE_SIZE,)
     obs, _ = env.reset(seed=100)
     x0 = env.unwrapped.data.qpos[0]
     actions = []

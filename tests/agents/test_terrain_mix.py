@@ -64,7 +64,10 @@ def test_weights_and_bad_mixes():
 
 
 def test_training_env_of_a_terrain_list_with_randomization():
-    env = make_train_env(["flat", {"kind": "stairs", "params": {"riser": 0.05}}], 0.1, 5, {}, "mild", True)
+    from agents.rl.residual_env import ResidualConfig
+
+    terrains = ["flat", {"kind": "stairs", "params": {"riser": 0.05}}]
+    env = make_train_env(terrains, 5, {}, "mild", ResidualConfig(residual_scale=0.1))
     _, info = env.reset(seed=0)
     seen = set()
     for _ in range(6):

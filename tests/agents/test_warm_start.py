@@ -107,7 +107,7 @@ def test_a_warm_started_run_trains_and_records_its_origin(saved_run, tmp_path):
     ("changes", "message"),
     [
         ({"residual_scale": 0.2}, "residual_scale"),
-        ({"gain_adaptation": "knee"}, "gain_adaptation"),
+        ({"expert": {"adaptation": "knee"}}, "expert"),
         ({"expert_features": False}, "expert_features"),
         ({"policy_kwargs": {"net_arch": [8]}}, "does not fit"),
     ],
