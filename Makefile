@@ -7,7 +7,7 @@ OUT ?= out/demo
 
 .PHONY: venv demo test test-slow lint bench strength-estimator learned-adaptation rl-baseline rl-sac rl-sac-continued rl-sac-features rl-sac-warmup rl-scratch clean
 
-$(STAMP): pyproject.toml Makefile
+$(STAMP): pyproject.toml setup.py Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	# The CPU build of torch first: a bare `torch` requirement would pull a multi-GB CUDA build.

@@ -25,6 +25,7 @@ from typing import Any
 
 import numba as nb
 from numba.core import config as _numba_config
+from numba.core.caching import UserProvidedCacheLocator
 
 _PACKAGES = ("quad_uneven_env", "planners", "agents")
 _ROOT = Path(__file__).resolve().parent.parent
@@ -74,15 +75,32 @@ CACHE_DIR: Path | None = _cache_dir()
 """Where this package's compiled kernels are cached (None: not cached, the folder is not writable)."""
 
 
+class PackageCacheLocator(UserProvidedCacheLocator):
+    """numba's locator for a user-given cache folder, with a kernel's subfolder named by its module's place in the
+    package (``agents.control``) instead of a hash of its absolute path: a copy of the same sources elsewhere (a
+    wheel installed after a checkout, a second virtual environment) finds the machine code already compiled.
+    numba still checks each source file's content hash before it loads anything."""
+
+    @classmethod
+    def get_suitable_cache_subpath(cls, py_file: str) -> str:
+        folder = Path(py_file).resolve().parent
+        try:
+            return ".".join(folder.relative_to(_ROOT).parts)
+        except ValueError:  # not one of this package's files
+            return super().get_suitable_cache_subpath(py_file)
+
+
 @contextlib.contextmanager
 def _numba_cache_dir(folder: Path) -> Iterator[None]:
-    """numba reads its cache folder when a function is decorated: point it at ``folder`` for that moment only."""
-    saved = _numba_config.CACHE_DIR
+    """numba reads its cache settings when a function is decorated: point them at ``folder`` and
+    :class:`PackageCacheLocator` for that moment only."""
+    saved = _numba_config.CACHE_DIR, _numba_config.CACHE_LOCATOR_CLASSES
     _numba_config.CACHE_DIR = str(folder)
+    _numba_config.CACHE_LOCATOR_CLASSES = f"{__name__}.{PackageCacheLocator.__name__}"
     try:
         yield
     finally:
-        _numba_config.CACHE_DIR = saved
+        _numba_config.CACHE_DIR, _numba_config.CACHE_LOCATOR_CLASSES = saved
 
 
 def njit(*signature: Any, **options: Any) -> Callable[[Callable[..., Any]], Any]:
@@ -96,10 +114,13 @@ def njit(*signature: Any, **options: Any) -> Callable[[Callable[..., Any]], Any]
     def decorate(func: Callable[..., Any]) -> Any:
         if CACHE_DIR is None:
             return nb.njit(*signature, cache=False, **options)(func)
-        with _numba_cache_dir(CACHE_DIR):
-            return nb.njit(*signature, cache=True, **options)(func)
+        try:
+            with _numba_cache_dir(CACHE_DIR):
+                return nb.njit(*signature, cache=True, **options)(func)
+        except RuntimeError:  # numba found no usable cache folder for this file after all
+            return nb.njit(*signature, cache=False, **options)(func)
 
     return decorate
 
 
-__all__ = ["CACHE_DIR", "cache_root", "kernel_fingerprint", "kernel_sources", "njit"]
+__all__ = ["CACHE_DIR", "PackageCacheLocator", "cache_root", "kernel_fingerprint", "kernel_sources", "njit"]
