@@ -21,7 +21,6 @@ import yaml
 from quad_uneven_env.fields import Param, check_fields, param
 
 
-
 def shipped_config_dir() -> Path:
     """The folder of the shipped YAML configs: ``$QUAD_UNEVEN_CONFIGS`` if set; else, in a source checkout, the
     repository's ``configs/`` beside the packages; else the installed package data ``quad_uneven_env.configs``."""

@@ -114,18 +114,14 @@ def arguments_table() -> str:
     return "\n".join(rows)
 
 
-def check_display(render_mode: str | None) -> None:
-    """Refuse ``render_mode="human"`` where no window can open (Linux without ``DISPLAY``/``WAYLAND_DISPLAY``).
+def display_missing(render_mode: str | None) -> bool:
+    """True when ``render_mode="human"`` cannot open a window here (Linux without ``DISPLAY``/``WAYLAND_DISPLAY``).
 
-    Runs before any window or GLFW code: without a display GLFW aborts the process instead of raising.
+    Asked before any window or GLFW code: without a display GLFW aborts the process instead of raising.
     """
     if render_mode != "human" or not sys.platform.startswith("linux"):
-        return
-    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise ValueError(
-            "render_mode='human' needs a display, but neither DISPLAY nor WAYLAND_DISPLAY is set; "
-            "use render_mode='rgb_array' (offscreen) on a headless machine"
-        )
+        return False
+    return not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
 class PhysicsController(Protocol):
@@ -294,7 +290,6 @@ class QuadUnevenEnv(gym.Env):
         )  # fmt: skip
         args = {q.name: q.check(given[q.name], "") for q in ENV_ARGS}
         frame_skip, timestep, action_mode = args["frame_skip"], args["timestep"], args["action_mode"]
-        check_display(render_mode)
         if not isinstance(robot, str | os.PathLike):
             raise ValueError(
                 f"robot must be a config name or a .yaml path, got {robot!r} of type {type(robot).__name__}"
@@ -340,10 +335,7 @@ class QuadUnevenEnv(gym.Env):
         vis.offwidth, vis.offheight = max(vis.offwidth, args["width"]), max(vis.offheight, args["height"])
         self.data = mujoco.MjData(self.model)
         self._saved_state = np.empty(mujoco.mj_stateSize(self.model, _STATE))
-        self._warning_counts = self.data.warning.number  # live view of MuJoCo's warning counters
-        # the same counters as Python ints at a fraction of numpy's indexing cost (read every physics step)
-        self._warning_view = memoryview(self._warning_counts)
-        self._qvel_joints = self.data.qvel[6:]  # MuJoCo never reallocates data's buffers
+        self._bind_data_views()
         self._dt = float(self.model.opt.timestep) * self.frame_skip
         self.idx = RobotIndex.from_model(self.model)
         self._mass = self.idx.total_mass
@@ -369,6 +361,7 @@ class QuadUnevenEnv(gym.Env):
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.dt))
         self._width, self._height = args["width"], args["height"]
         self._renderer = None
+        self._warned_no_display = False
 
         self._prev_action = np.zeros(C.N_JOINTS)
         self._unit_bounds = np.ones(C.N_JOINTS)
@@ -889,6 +882,28 @@ class QuadUnevenEnv(gym.Env):
             m.actuator_ctrlrange[i] = (self._joint_lo[i], self._joint_hi[i])
 
     # ------------------------------------------------------------------ rendering
+    def _bind_data_views(self) -> None:
+        """Views of ``self.data``'s buffers read every physics step (MuJoCo never reallocates them)."""
+        self._warning_counts = self.data.warning.number  # live view of MuJoCo's warning counters
+        # the same counters as Python ints at a fraction of numpy's indexing cost (read every physics step)
+        self._warning_view = memoryview(self._warning_counts)
+        self._qvel_joints = self.data.qvel[6:]
+
+    _DATA_VIEWS = ("_warning_counts", "_warning_view", "_qvel_joints")
+
+    def __getstate__(self) -> dict[str, Any]:
+        """``copy.deepcopy`` and pickle: everything but the views of ``data`` (rebound to the copy's own ``data``)
+        and the renderer (a GL context; a copy opens its own at its first ``render``). The model, the data, the
+        terrain, the random generator and the episode's state are copied, so the copy steps exactly as the
+        original would from here. A physics-rate controller is copied with it and must support copying too."""
+        state = {k: v for k, v in self.__dict__.items() if k not in self._DATA_VIEWS}
+        state["_renderer"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._bind_data_views()
+
     def _upload_terrain_to_renderer(self) -> None:
         if self._renderer is None:
             return
@@ -902,6 +917,14 @@ class QuadUnevenEnv(gym.Env):
             gym.logger.warn("render() called without a render_mode; pass render_mode to gym.make")
             return None
         if self._renderer is None:
+            if display_missing(self.render_mode):
+                if not self._warned_no_display:
+                    gym.logger.warn(
+                        "render_mode='human' needs a display, but neither DISPLAY nor WAYLAND_DISPLAY is set: no "
+                        "window is opened; use render_mode='rgb_array' (offscreen) on a headless machine"
+                    )
+                    self._warned_no_display = True
+                return None
             from gymnasium.envs.mujoco.mujoco_rendering import MujocoRenderer
 
             self._renderer = MujocoRenderer(
