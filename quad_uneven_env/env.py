@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 import reprlib
@@ -112,6 +113,24 @@ def arguments_table() -> str:
         default = "None" if q.default is None else f"{q.default!r}"
         rows.append(f"| ``{q.name}`` | ``{default}`` | {q.allowed()} | {q.unit} | {q.doc} |")
     return "\n".join(rows)
+
+
+MUJOCO_LOGGER = logging.getLogger("mujoco")
+"""Where MuJoCo's warnings go (level INFO) instead of ``MUJOCO_LOG.TXT`` in the working directory: the env
+installs :func:`route_mujoco_warnings` unless a warning handler is already set. The env reports what they mean
+(``info["diverged"]``, ``info["termination_reason"]``)."""
+
+
+def _log_mujoco_warning(message: str) -> None:
+    MUJOCO_LOGGER.info(message)
+
+
+def route_mujoco_warnings() -> None:
+    """Send MuJoCo's warnings to :data:`MUJOCO_LOGGER` (process-wide; a handler set before, by the user or another
+    library, is kept). Without a handler MuJoCo prints them and appends them to ``MUJOCO_LOG.TXT`` in the current
+    directory."""
+    if mujoco.get_mju_user_warning() is None:
+        mujoco.set_mju_user_warning(_log_mujoco_warning)
 
 
 def display_missing(render_mode: str | None) -> bool:
@@ -328,6 +347,7 @@ class QuadUnevenEnv(gym.Env):
             self.terrain.hfield_geom_xml(self.robot_cfg.friction),
             PhysicsOptions(timestep=float(timestep)),
         )
+        route_mujoco_warnings()
         self.model = mujoco.MjModel.from_xml_string(xml)
         # Divergence must end the episode visibly, not be hidden by MuJoCo's automatic reset.
         self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET

@@ -310,3 +310,23 @@ def test_a_fast_lane_replaces_the_call_only_where_it_answers():
         assert runs[fail][2].calls == 30 and runs[fail][2].lane_steps == 0
         np.testing.assert_array_equal(runs[fail][0], runs["decline"][0])
     assert not np.array_equal(runs[""][0], runs["decline"][0])
+
+
+def test_mujoco_warnings_go_to_the_logger_not_to_a_file_in_the_working_directory(tmp_path):
+    """A diverging step (MuJoCo warns of a NaN) in a child process started in an empty folder: the warning reaches
+    the "mujoco" logger, the episode ends as diverged, and no MUJOCO_LOG.TXT appears."""
+    code = (
+        "import logging, numpy as np, gymnasium as gym, quad_uneven_env\n"
+        "records = []\n"
+        "logging.getLogger('mujoco').addHandler(type('H', (logging.Handler,), {'emit': lambda s, r: records.append(r)})())\n"
+        "logging.getLogger('mujoco').setLevel(logging.INFO)\n"
+        "env = gym.make('QuadUneven-v0', terrain='flat')\n"
+        "env.reset(seed=0)\n"
+        "env.unwrapped.data.qvel[6] = 1e12\n"
+        "obs, r, term, trunc, info = env.step(np.zeros(12, dtype=np.float32))\n"
+        "print('diverged:', info['diverged'], 'logged:', len(records))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "diverged: True logged:" in out.stdout and "logged: 0" not in out.stdout
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
