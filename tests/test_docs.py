@@ -115,8 +115,9 @@ def test_the_checker_finds_what_breaks_a_page(tmp_path):
     )
     problems = "\n".join(markdown_problems(broken, tmp_path))
     assert "'## Architecture' is not rendered as a heading" in problems
-    assert "line 16: the fence opened here is not closed" in problems
-    assert "line 16: a fence without a language" in problems
+    assert "line 15: the fence opened here is not closed" in problems
+    assert "line 15: a fence without a language" in problems
+    assert "line 11: an indented code block" in problems
     assert "docs/missing.md: no such file" in problems and "missing.png: no such file" in problems
     assert "there.md" not in problems and "example.org" not in problems
     fixed = "# Title\n\n```python\nx = 1\n```\n\n## Architecture\n\n[here](there.md)\n"
