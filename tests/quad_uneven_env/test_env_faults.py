@@ -318,7 +318,8 @@ def test_mujoco_warnings_go_to_the_logger_not_to_a_file_in_the_working_directory
     code = (
         "import logging, numpy as np, gymnasium as gym, quad_uneven_env\n"
         "records = []\n"
-        "logging.getLogger('mujoco').addHandler(type('H', (logging.Handler,), {'emit': lambda s, r: records.append(r)})())\n"
+        "handler = type('H', (logging.Handler,), {'emit': lambda s, r: records.append(r)})()\n"
+        "logging.getLogger('mujoco').addHandler(handler)\n"
         "logging.getLogger('mujoco').setLevel(logging.INFO)\n"
         "env = gym.make('QuadUneven-v0', terrain='flat')\n"
         "env.reset(seed=0)\n"
