@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import logging
 import math
@@ -384,6 +385,7 @@ class QuadUnevenEnv(gym.Env):
         self._warned_no_display = False
 
         self._prev_action = np.zeros(C.N_JOINTS)
+        self._needs_reset = True
         self._unit_bounds = np.ones(C.N_JOINTS)
         self._tau_frac = np.zeros(C.N_JOINTS)  # the reward's scratch buffers
         self._joint_power = np.zeros(C.N_JOINTS)
@@ -402,6 +404,8 @@ class QuadUnevenEnv(gym.Env):
         self._last_index_norm = 0.0
         self._start_x = 0.0
         self._warnings_at_reset = 0
+        self._pristine_model: mujoco.MjModel | None = None  # the model at the first reset (see _restore_model)
+        self._model_views: list[tuple[np.ndarray, np.ndarray]] = []
 
     # ------------------------------------------------------------------ properties
     @property
@@ -476,6 +480,12 @@ class QuadUnevenEnv(gym.Env):
                 f"controller must be None or a callable (model, data, action) -> 12 torques (N m), "
                 f"got {reprlib.repr(controller)} of type {type(controller).__name__}"
             )
+        for hook in ("reset", "torques_into"):
+            if hasattr(controller, hook) and not callable(getattr(controller, hook)):
+                raise ValueError(
+                    f"controller.{hook} must be a method (see PhysicsController), got "
+                    f"{reprlib.repr(getattr(controller, hook))} of type {type(getattr(controller, hook)).__name__}"
+                )
         if self.action_mode != "torque":
             raise ValueError(
                 f"controller must be None with action_mode={self.action_mode!r}: a physics-rate controller returns "
@@ -495,6 +505,7 @@ class QuadUnevenEnv(gym.Env):
         super().reset(seed=None if seed is None else int(seed))
         if options:
             raise ValueError(f"reset options are not supported (got keys {sorted(options)}); pass terrain to make()")
+        self._restore_model()
         self.terrain.generate(self.np_random)
         self.terrain.upload(self.model)
         (xmin, xmax), (ymin, ymax) = self.terrain.heightfield.extent
@@ -527,6 +538,7 @@ class QuadUnevenEnv(gym.Env):
 
         self._prev_action[:] = 0.0
         self._episode_steps = 0
+        self._needs_reset = False
         meas = self._measure()
         self._start_x = float(meas.cog[0])
         self._last_index_norm = meas.index / (self._mass * self._g)
@@ -554,15 +566,20 @@ class QuadUnevenEnv(gym.Env):
     # ------------------------------------------------------------------ step
     def step(self, action: np.ndarray):
         """Advance ``frame_skip`` physics steps under ``action``; see the class docstring."""
-        a = np.asarray(action, dtype=np.float64)
+        if self._needs_reset:
+            raise gym.error.ResetNeeded("call reset before step: the env has no episode yet")
+        a = np.asarray(action)
+        if a.dtype.kind not in "iuf":
+            raise ValueError(f"action must hold real numbers (float or int), got dtype {a.dtype}")
         if a.shape != (C.N_JOINTS,):
             raise ValueError(f"action must have shape ({C.N_JOINTS},), got {a.shape}")
         clipped = np.empty(C.N_JOINTS)
-        if not clip_finite_into(a, self._unit_bounds, clipped):  # = np.clip to [-1, 1], compiled
+        if not clip_finite_into(a.astype(np.float64, copy=False), self._unit_bounds, clipped):  # np.clip, compiled
             raise ValueError(
                 f"action must be finite, got NaN/Inf at indices {np.flatnonzero(~np.isfinite(a)).tolist()}"
             )
         a = clipped
+        a.setflags(write=False)  # a controller is handed this array: it may read it, not change the step's action
         m, d = self.model, self.data
         x_before = float(self._meas.cog[0])
 
@@ -726,7 +743,15 @@ class QuadUnevenEnv(gym.Env):
                 fast = lane is not None and lane(m, d, a, out, limit)
             except Exception:  # the lane declines; the call below decides
                 fast = False
-            if not fast:
+            if type(fast) is not bool:
+                if not isinstance(fast, np.bool_):
+                    return f"diverged: controller's torques_into returned {_describe(fast)}, not True or False"
+                fast = bool(fast)
+            if fast:
+                if not clip_finite_into(out, limit, out):  # the lane's torques pass the call's checks too
+                    bad = np.flatnonzero(~np.isfinite(out)).tolist()
+                    return f"diverged: controller's torques_into wrote non-finite torques (NaN/Inf at indices {bad})"
+            else:
                 reason = self._controller_torques_into(a, out)
                 if reason is not None:
                     return reason
@@ -909,7 +934,37 @@ class QuadUnevenEnv(gym.Env):
         self._warning_view = memoryview(self._warning_counts)
         self._qvel_joints = self.data.qvel[6:]
 
-    _DATA_VIEWS = ("_warning_counts", "_warning_view", "_qvel_joints")
+    # Rewritten at every reset anyway (the terrain) or read only by the renderer (textures).
+    _NOT_RESTORED = ("hfield_data", "tex_data")
+
+    def _bind_model_views(self) -> None:
+        """Pairs (the model's array, the pristine copy's) that :meth:`_restore_model` copies, and the option names."""
+        m, p = self.model, self._pristine_model
+        if p is None:
+            return
+        names = [
+            n for n in dir(m) if not n.startswith("_") and n not in self._NOT_RESTORED
+            and isinstance(getattr(m, n), np.ndarray) and getattr(m, n).size
+        ]  # fmt: skip
+        self._model_views = [(getattr(m, n), getattr(p, n)) for n in names]
+        self._option_names = [n for n in dir(m.opt) if not n.startswith("_")]
+
+    def _restore_model(self) -> None:
+        """Every numeric field of the model back to its value at the first reset (~0.25 ms): whatever a physics-rate
+        controller or other code changes in ``env.unwrapped.model`` during an episode (a body mass, the timestep)
+        lasts until the next reset, not beyond. Changes made between ``make`` and the first reset are kept for every
+        episode. The randomized world is drawn after this."""
+        if self._pristine_model is None:
+            self._pristine_model = copy.deepcopy(self.model)
+            self._bind_model_views()
+            return
+        for live, pristine in self._model_views:
+            live[...] = pristine
+        opt, saved = self.model.opt, self._pristine_model.opt
+        for name in self._option_names:
+            setattr(opt, name, getattr(saved, name))
+
+    _DATA_VIEWS = ("_warning_counts", "_warning_view", "_qvel_joints", "_model_views")
 
     def __getstate__(self) -> dict[str, Any]:
         """``copy.deepcopy`` and pickle: everything but the views of ``data`` (rebound to the copy's own ``data``)
@@ -923,6 +978,7 @@ class QuadUnevenEnv(gym.Env):
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self._bind_data_views()
+        self._bind_model_views()
 
     def _upload_terrain_to_renderer(self) -> None:
         if self._renderer is None:

@@ -141,6 +141,9 @@ def test_the_version_is_one_in_pyproject_citation_and_changelog():
     citation = yaml.safe_load((ROOT / "CITATION.cff").read_text())
     assert str(citation["version"]) == version
     assert f"## [{version}] - " in (ROOT / "CHANGELOG.md").read_text()
+    import quad_uneven_env
+
+    assert quad_uneven_env.__version__ == version
     paper = citation["references"][0]["title"]
     assert paper in README.read_text(), "the README cites the paper CITATION.cff references, by the same title"
     assert "MIT" in (ROOT / "LICENSE").read_text().splitlines()[0] and citation["license"] == "MIT"
