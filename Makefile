@@ -5,14 +5,14 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out/demo
 
-.PHONY: venv demo test test-slow lint bench strength-estimator learned-adaptation rl-baseline rl-sac rl-sac-continued rl-sac-features rl-sac-warmup rl-scratch clean
+.PHONY: venv demo test test-slow lint bench docs strength-estimator learned-adaptation rl-baseline rl-sac rl-sac-continued rl-sac-features rl-sac-warmup rl-scratch clean
 
-$(STAMP): pyproject.toml Makefile
+$(STAMP): pyproject.toml setup.py Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	# The CPU build of torch first: a bare `torch` requirement would pull a multi-GB CUDA build.
 	$(PY) -m pip install -q "torch==2.13.0"
-	$(PY) -m pip install -q -e ".[dev,export,tensorboard,distributed]"
+	$(PY) -m pip install -q -e ".[dev,export,tensorboard,distributed,docs]"
 	@# Headless rendering needs an EGL (or OSMesa) library; install it from Debian if missing.
 	@MUJOCO_GL=egl $(PY) -c "import mujoco; mujoco.GLContext(16, 16).make_current()" 2>/dev/null || \
 	  (command -v apt-get >/dev/null && (apt-get update -qq && apt-get install -y -qq libegl1 libgl1 libosmesa6 >/dev/null) || \
@@ -33,6 +33,10 @@ test-slow: venv
 lint: venv
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+
+# The user guide (docs/, mkdocs.yml) as a static site in site/; a broken link or page fails the build.
+docs: venv
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
 
 bench: venv
 	$(PY) benchmarks/env_throughput.py
@@ -142,4 +146,4 @@ rl-scratch: venv
 	$(EVAL) --policy models/ppo_scratch/model.zip --suite rough --out runs/eval_scratch_rough
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out site .pytest_cache

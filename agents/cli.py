@@ -25,6 +25,7 @@ from agents.evaluation.suites import Suite, SuiteError, load_suite, suite_from_d
 from agents.interrupts import sigterm_as_keyboard_interrupt
 from agents.outputs import prepare_output_dir
 from agents.paper.simulation import DISTRIBUTIONS as PAPER_DISTRIBUTIONS
+from agents.plotting import video_to_gif
 from agents.rl.config import ALGOS, load_train_config, validate
 
 EXIT_USAGE = 2
@@ -77,12 +78,21 @@ def add_demo_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="terrain seed")
     p.add_argument("--distance", type=float, default=2.0, help="goal distance along +x (m)")
     p.add_argument("--no-video", action="store_true", help="skip the MP4 (rendering is the slow part)")
+    p.add_argument(
+        "--gif",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="also write the walk as a small time-lapse GIF to PATH (320x240, 10 fps, 4 s; made from the MP4)",
+    )
     p.set_defaults(func=run_demo_command)
     return p
 
 
 def run_demo_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven demo``."""
+    if args.gif is not None and args.no_video:
+        raise ValueError(f"--gif is made from the video: drop --no-video, got --gif {args.gif} --no-video")
     try:
         ep = demo(args.out, args.terrain, args.seed, args.distance, not args.no_video)
     except SuiteError as err:  # name the demo's options, not the suite fields it builds from them
@@ -98,6 +108,8 @@ def run_demo_command(args: argparse.Namespace) -> int:
     print(f"report: {(args.out / 'report.md').resolve()}")
     for video in sorted((args.out / "videos").glob("*.mp4")):
         print(f"video:  {video.resolve()}")
+        if args.gif is not None:
+            print(f"gif:    {video_to_gif(video, args.gif).resolve()}")
     return 0
 
 
