@@ -191,7 +191,7 @@ def test_tiny_run_from_scratch_evaluates_on_the_plain_env(tmp_path):
     from agents.rl.training import train
 
     shipped = load_train_config(Path("configs/rl/ppo_scratch.yaml"))
-    assert shipped.residual is False and shipped.time_limit_min == 50
+    assert shipped.residual is False and shipped.time_limit_min == 35
     cfg = load_train_config(
         write_config(tmp_path / "c.yaml", residual=False, expert_features=False, residual_penalty=0.0)
     )
