@@ -87,10 +87,6 @@ class TrainConfig:
     """fields of :class:`agents.expert.ExpertConfig` for the expert under the residual, e.g. ``{adaptation: knee}``
     (adaptive gains on its knee torques, :mod:`agents.control.adaptation`: the residual then acts on the adapted
     torques); ``{}``: its defaults."""
-    initial_action: float = param(0.0, "action units", lo=-1.0, hi=1.0)
-    """the untrained policy's mean action, every joint (0: the expert exactly). With ``expert_torque`` and
-    ``stance`` legs, ``initial_action x residual_scale`` is a hand-made prior: e.g. 0.6 x 0.5 = +30 % torque
-    on stance legs (benchmarks/stance_torque_boost.py); PPO refines from there."""
     max_episode_steps: int = param(1000, "steps", kind="int", lo=1)
     """control steps per training episode (1000 = 20 s)."""
     env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
@@ -109,17 +105,6 @@ class TrainConfig:
     """keyword arguments of the SB3 algorithm class (``learning_rate``, ``n_steps``, ...)."""
     policy_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
     """SB3 ``policy_kwargs`` (``net_arch``, ``log_std_init``, ...)."""
-    actor_warmup_steps: int = param(0, "steps", kind="int", lo=0)
-    """SAC only: for this many env steps (all envs) only the critics learn; the actor and the entropy temperature
-    keep their starting values, the untrained agent's or a warm start's
-    (:class:`agents.rl.training.ActorWarmupCallback`). 0: the actor learns from the first update, on critics that
-    know nothing yet."""
-    initial_std: float | None = param(None, "action units", lo=0.0, hi=7.0, lo_open=True, none_ok=True)
-    """SAC only: the untrained actor's exploration std per action (before the tanh), the same in every state: its
-    log-std layer starts with zero weights and the bias log(initial_std), as the mean layer starts at
-    ``initial_action`` (at most 7: SB3 clamps the log std to 2). None: SB3's random layer, a std of about 1 in
-    every state (SB3 ignores ``policy_kwargs.log_std_init`` for SAC unless ``use_sde``; PPO takes that field and
-    refuses this one)."""
     init_from: str | None = None
     """a warm start: a saved model (a training run's folder or its ``.zip``) whose weights, optimizer states and
     observation statistics this run starts from (:mod:`agents.rl.warm_start`); it must have been trained for the
@@ -181,16 +166,12 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         or cfg.residual_legs != "all"
         or cfg.residual_basis != "torque_limit"
         or cfg.expert
-        or cfg.initial_action
     ):
         raise TrainConfigError(
             "residual: false trains from scratch without the expert, so expert_features must be false, "
-            "residual_penalty 0, residual_legs 'all', residual_basis 'torque_limit', expert {} and "
-            "initial_action 0, got "
+            "residual_penalty 0, residual_legs 'all', residual_basis 'torque_limit' and expert {}, got "
             f"expert_features={cfg.expert_features}, residual_penalty={cfg.residual_penalty}, "
-            f"residual_legs={cfg.residual_legs!r}, residual_basis={cfg.residual_basis!r}, "
-            f"expert={cfg.expert!r}, "
-            f"initial_action={cfg.initial_action}"
+            f"residual_legs={cfg.residual_legs!r}, residual_basis={cfg.residual_basis!r}, expert={cfg.expert!r}"
         )
     if cfg.init_from is not None and (not isinstance(cfg.init_from, str) or not cfg.init_from):
         raise TrainConfigError(
@@ -204,26 +185,11 @@ def validate(cfg: TrainConfig) -> TrainConfig:
             expert_config(expert, "expert")
         except ValueError as err:
             raise TrainConfigError(str(err)) from None
-    if cfg.actor_warmup_steps and cfg.algo != "sac":
-        raise TrainConfigError(
-            f"actor_warmup_steps needs algo: sac (PPO's actor and critic share one optimizer), got algo "
-            f"{cfg.algo!r} with actor_warmup_steps={cfg.actor_warmup_steps}"
-        )
-    if cfg.initial_std is not None and cfg.hyperparams.get("use_sde"):
-        raise TrainConfigError(
-            "initial_std is for SAC without use_sde; with use_sde set policy_kwargs.log_std_init, got "
-            f"initial_std={cfg.initial_std} and hyperparams.use_sde=true"
-        )
     if cfg.algo == "sac" and "log_std_init" in cfg.policy_kwargs and not cfg.hyperparams.get("use_sde"):
         warnings.warn(
             "policy_kwargs.log_std_init has no effect on SAC without use_sde (SB3): the untrained actor explores "
-            "with a std of about 1 unless initial_std is set",
+            "with a std of about 1",
             stacklevel=2,
-        )
-    if cfg.initial_std is not None and cfg.algo != "sac":
-        raise TrainConfigError(
-            f"initial_std needs algo: sac (PPO's exploration std is policy_kwargs.log_std_init), got algo "
-            f"{cfg.algo!r} with initial_std={cfg.initial_std}"
         )
     _mapping("hyperparams", cfg.hyperparams)
     _mapping("policy_kwargs", cfg.policy_kwargs)

@@ -93,5 +93,5 @@ def test_config_terrain_list_and_randomization_are_validated():
         validate(TrainConfig(randomization="stormy"))
     with pytest.raises(TrainConfigError, match="env_kwargs may not set"):
         validate(TrainConfig(env_kwargs={"randomization": "hard"}))
-    shipped = load_train_config("configs/rl/ppo_residual_hard.yaml")
-    assert len(shipped.terrain) == 3 and shipped.randomization == "hard" and shipped.expert_features
+    shipped = load_train_config("configs/rl/ppo_residual_adaptive.yaml")
+    assert len(shipped.terrain) == 6 and shipped.randomization == "extreme" and shipped.expert_features
