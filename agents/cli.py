@@ -406,6 +406,7 @@ def add_export_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--out", type=Path, required=True, help="the .onnx file to write")
     p.add_argument("--algo", choices=SB3_ALGOS, default=None, help="SB3 class (default: the run's metadata)")
     p.add_argument("--allow-pickle", action="store_true", help="load pickled files of older runs (trusted only)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     p.set_defaults(func=run_export_command)
     return p
 
@@ -417,6 +418,8 @@ def run_export_command(args: argparse.Namespace) -> int:
 
     if args.out.is_dir():
         raise ModelError(f"--out {str(args.out)!r} is a directory; give the .onnx file to write")
+    if args.out.exists() and not args.overwrite:
+        raise ModelError(f"--out {str(args.out)!r} exists; pass --overwrite to replace it")
     prepare_output_dir(args.out.parent, keep=True, field="--out's folder")
     try:
         path = export_onnx(args.policy, args.out, args.algo, args.allow_pickle)

@@ -200,6 +200,9 @@ CASES: dict[str, Case] = {
     "export out is a directory": Case(
         lambda t, m: ["export", "--policy", str(m / "flat.zip"), "--out", str(t)], ("--out", "directory")
     ),
+    "export out exists": Case(
+        lambda t, m: ["export", "--policy", str(m / "flat.zip"), "--out", str(a_file(t))], ("--out", "--overwrite")
+    ),
     "export out under a file": Case(
         lambda t, m: ["export", "--policy", str(m / "flat.zip"), "--out", str(a_file(t) / "p.onnx")], ("--out",)
     ),
