@@ -25,6 +25,7 @@ from agents.evaluation.suites import Suite, SuiteError, load_suite, suite_from_d
 from agents.interrupts import sigterm_as_keyboard_interrupt
 from agents.outputs import prepare_output_dir
 from agents.paper.simulation import DISTRIBUTIONS as PAPER_DISTRIBUTIONS
+from agents.plotting import video_to_gif
 from agents.rl.config import ALGOS, load_train_config, validate
 
 EXIT_USAGE = 2
@@ -77,12 +78,21 @@ def add_demo_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="terrain seed")
     p.add_argument("--distance", type=float, default=2.0, help="goal distance along +x (m)")
     p.add_argument("--no-video", action="store_true", help="skip the MP4 (rendering is the slow part)")
+    p.add_argument(
+        "--gif",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="also write the walk as a small time-lapse GIF to PATH (320x240, 10 fps, 4 s; made from the MP4)",
+    )
     p.set_defaults(func=run_demo_command)
     return p
 
 
 def run_demo_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven demo``."""
+    if args.gif is not None and args.no_video:
+        raise ValueError(f"--gif is made from the video: drop --no-video, got --gif {args.gif} --no-video")
     try:
         ep = demo(args.out, args.terrain, args.seed, args.distance, not args.no_video)
     except SuiteError as err:  # name the demo's options, not the suite fields it builds from them
@@ -98,6 +108,8 @@ def run_demo_command(args: argparse.Namespace) -> int:
     print(f"report: {(args.out / 'report.md').resolve()}")
     for video in sorted((args.out / "videos").glob("*.mp4")):
         print(f"video:  {video.resolve()}")
+        if args.gif is not None:
+            print(f"gif:    {video_to_gif(video, args.gif).resolve()}")
     return 0
 
 
@@ -316,11 +328,10 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         "(default: the config's)",
     )
     p.add_argument(
-        "--gain-adaptation",
-        choices=("none", "knee", "learned"),
+        "--expert-config",
         default=None,
-        help="adaptive gains on the expert under the residual: knees by the hand-made law, or every joint by the "
-        "learned strength estimator (default: the config's)",
+        help="JSON object of agents.expert.ExpertConfig fields for the expert under the residual, e.g. "
+        "'{\"adaptation\": \"knee\"}' (replaces the config's expert:; default: the config's)",
     )
     p.add_argument(
         "--time-limit-min", type=float, default=None, help="stop (and save) after this many minutes of training"
@@ -358,7 +369,7 @@ def run_train_command(args: argparse.Namespace) -> int:
         "residual_scale": args.residual_scale,
         "residual_legs": args.residual_legs,
         "residual_basis": args.residual_basis,
-        "gain_adaptation": args.gain_adaptation,
+        "expert": None if args.expert_config is None else _json_object(args.expert_config, "--expert-config"),
         "time_limit_min": args.time_limit_min,
         "init_from": args.init_from,
     }
@@ -395,6 +406,7 @@ def add_export_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--out", type=Path, required=True, help="the .onnx file to write")
     p.add_argument("--algo", choices=SB3_ALGOS, default=None, help="SB3 class (default: the run's metadata)")
     p.add_argument("--allow-pickle", action="store_true", help="load pickled files of older runs (trusted only)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     p.set_defaults(func=run_export_command)
     return p
 
@@ -406,6 +418,8 @@ def run_export_command(args: argparse.Namespace) -> int:
 
     if args.out.is_dir():
         raise ModelError(f"--out {str(args.out)!r} is a directory; give the .onnx file to write")
+    if args.out.exists() and not args.overwrite:
+        raise ModelError(f"--out {str(args.out)!r} exists; pass --overwrite to replace it")
     prepare_output_dir(args.out.parent, keep=True, field="--out's folder")
     try:
         path = export_onnx(args.policy, args.out, args.algo, args.allow_pickle)
@@ -660,9 +674,10 @@ def add_fit_strength_parser(sub: argparse._SubParsersAction) -> argparse.Argumen
         "fit-strength",
         help="collect expert episodes in the extreme world and fit the learned strength estimator",
         description="Run the expert with fixed gains drawn around each joint's ideal one on training seeds of "
-        "robust_extreme's terrains, fit the strength estimator of gain_adaptation 'learned' on four fifths of the "
-        "seeds, report it on the rest, then fit it on all and write it (default: over the shipped one, "
-        "agents/rl/data/strength_estimator.npz). Models made with the previous estimator then refuse to load. "
+        "robust_extreme's terrains, fit the strength estimator of the expert's adaptation 'learned' on four fifths "
+        "of the seeds, report it on the rest, then fit it on all and write it (default: over the shipped one, "
+        "agents/control/adaptation/data/strength_estimator.npz). Models made with another estimator then refuse to "
+        "load. "
         "Exit code 2 on a bad option.",
     )
     p.add_argument("--seeds", default="1000-1199", help="FIRST-LAST: world seeds per terrain entry (default 1000-1199)")
@@ -681,8 +696,8 @@ def run_fit_strength_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven fit-strength``: 0 on success, 2 on a bad option."""
     import json
 
-    from agents.rl.strength_data import fit_strength_estimator, parse_seeds
-    from agents.rl.strength_estimator import DEFAULT_ESTIMATOR
+    from agents.control.adaptation.learned import DEFAULT_ESTIMATOR
+    from agents.rl.strength_fit import fit_strength_estimator, parse_seeds
 
     out = DEFAULT_ESTIMATOR if args.out is None else args.out
     seeds = parse_seeds(args.seeds)

@@ -1,6 +1,6 @@
 """Diagnostic: how close an adaptation's gains come to the ideal gain of each joint, in closed loop.
 
-Runs the residual env with zero action (the expert under the adaptation alone) in the extreme world on
+Runs the expert with ``ExpertConfig(adaptation=...)`` in the extreme world on
 ``robust_extreme``'s three terrains and, from 5 s to 10 s of each episode, averages per joint |log(g / g_ideal)|
 with g_ideal = 1/s (``--ideal strength``: undo the motor) or (m / m0) / s (``--ideal load``: undo the motor and the
 extra mass, the learned estimator's target). Prints the mean per joint kind, and the same for gain 1 (the expert's
@@ -17,19 +17,20 @@ from multiprocessing import get_context
 
 import numpy as np
 
-from agents.rl.strength_data import ENTRIES
+from agents.rl.strength_fit import ENTRIES
 from quad_uneven_env import constants as C
 
 
 def episode(job: tuple[str, str, int, str]) -> tuple[np.ndarray, np.ndarray] | None:
     """Mean |log(g / g_ideal)| over 5-10 s (12,) and |log g_ideal| (12,), or None after a fall."""
-    from agents.rl.residual_env import make_residual_env
+    import gymnasium as gym
+
+    import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+    from agents.expert import ExpertConfig, attach_expert
 
     adaptation, entry, seed, ideal = job
-    env = make_residual_env(
-        terrain=ENTRIES[entry], randomization="extreme", residual_scale=0.5, residual_legs="stance",
-        residual_basis="expert_torque", gain_adaptation=adaptation,
-    )  # fmt: skip
+    env = gym.make("QuadUneven-v0", terrain=ENTRIES[entry], randomization="extreme", max_episode_steps=10**6)
+    expert = attach_expert(env, ExpertConfig(adaptation=adaptation))
     nominal_mass = float(env.unwrapped.model.body_subtreemass[env.unwrapped.idx.trunk_body])
     env.reset(seed=seed)
     draw = env.unwrapped.episode_draw
@@ -42,7 +43,7 @@ def episode(job: tuple[str, str, int, str]) -> tuple[np.ndarray, np.ndarray] | N
         if terminated:
             return None
         if k >= 250:
-            errors.append(np.abs(np.log(env.unwrapped.controller.adaptation.gain) - log_ideal))
+            errors.append(np.abs(np.log(expert.adaptation.gain) - log_ideal))
     return np.mean(errors, axis=0), np.abs(log_ideal)
 
 

@@ -214,10 +214,11 @@ def measure_ppo(env_id: str, steps: int, seed: int = RANDOM_SEED, **kwargs) -> d
     model = PPO(
         "MlpPolicy",
         venv,
-        learning_rate=3e-4,
+        learning_rate=5e-5,
         n_steps=n_steps,
         batch_size=min(256, 2 * n_steps),
-        n_epochs=10,
+        n_epochs=5,
+        target_kl=0.02,
         gamma=0.99,
         gae_lambda=0.95,
         clip_range=0.2,

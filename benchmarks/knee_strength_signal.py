@@ -3,7 +3,7 @@
 Runs the expert alone in the extreme world (robust_extreme's terrains) and, per joint, forms the running
 regression slope of its tracking error on its load, B / A with A = mean(u^2), B = mean(u e) over a window of
 ``--window`` s (u: the expert's torque over the torque limit, e: planned minus measured angle, once per control
-step), the quantity ``agents.rl.gain_adaptation`` integrates. Prints, per joint type, the correlation of that
+step), the quantity ``agents.control.adaptation.knee`` integrates. Prints, per joint type, the correlation of that
 slope (from 2 s into each episode on) with the strength drawn for the joint's motor, and the least-squares line
 strength ~ w0 + w1 x slope: a joint type whose correlation is near 0 gives the adaptation nothing to follow.
 

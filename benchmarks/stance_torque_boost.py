@@ -22,9 +22,9 @@ import gymnasium as gym
 import numpy as np
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.control.adaptation.knee import KNEE_JOINTS
 from agents.evaluation.suites import load_suite
 from agents.expert import ExpertConfig, attach_expert
-from agents.rl.gain_adaptation import KNEE_JOINTS
 
 ENTRIES = {
     "rough": {"kind": "rough", "amplitude": 0.05, "wavelength": 0.6},

@@ -33,6 +33,7 @@ import scipy.linalg
 import scipy.optimize
 
 from planners import cog_kernels as CK
+from planners.blas import single_blas_thread
 from planners.cog_qp import WarmStartQP, whitening
 from planners.polynomial import N_COEF, PiecewisePolynomial, accel_gram, basis_rows
 from planners.types import PlanningError
@@ -409,6 +410,7 @@ def _slsqp(red: _Reduced, z: np.ndarray, bound: float, stats: CogStats, finite_d
     return res.x
 
 
+@single_blas_thread
 def plan_cog(
     prob: CogProblem,
     method: str = "sqp",

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
+from quad_uneven_env.jit import njit
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def stability_rows_into(P0, A0, Bv, Ba, coef, p, kappa, mass, gravity, h_out, J_out):  # pragma: no cover - compiled
     """Tumbling moments and their Jacobian of one phase, written into ``h_out`` (S E,) and ``J_out`` (S E, 3 m).
 
@@ -55,7 +55,7 @@ def stability_rows_into(P0, A0, Bv, Ba, coef, p, kappa, mass, gravity, h_out, J_
                 J_out[row, 2 * m + j] = gp2 * bv + ga2 * ba
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def reach_rows_into(P0, Bv, coef, offsets, sites, max_reach, bound, scale, h_out, J_out):  # pragma: no cover - compiled
     """Stance-leg reach rows of one phase, ``bound + scale (max_reach - |d|) >= bound``, written into
     ``h_out`` (S L,) and ``J_out`` (S L, 3 m), with ``d`` the hip-to-foot-site vector.

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from planners.blas import single_blas_thread
 from planners.cog import CogProblem, CogStats, plan_cog
 from planners.footholds import choose_footholds
 from planners.gait import Phase, phase_index, walk_cycle
@@ -121,6 +122,7 @@ def _junction_targets(phases, feet_phase, cog_height: float) -> np.ndarray:
     return np.array(out)
 
 
+@single_blas_thread
 def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
     """Plan one walk cycle: footholds (given or chosen), stable COG path, collision-free swings.
 

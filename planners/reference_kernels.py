@@ -3,10 +3,10 @@ physics step; ``tests/planners/test_reference.py`` checks the two agree, at half
 
 from __future__ import annotations
 
-import numba as nb
+from quad_uneven_env.jit import njit
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def grid_index(t, grid_t, dt, t_end):  # pragma: no cover - compiled
     """Index of the grid time equal to ``t`` (s from the cycle start, clipped to [0, ``t_end``]) to 1e-9 s, or -1.
 

@@ -4,10 +4,10 @@ arithmetic in its order, so the floats are the same (``tests/planners/test_gait_
 
 from __future__ import annotations
 
-import numba as nb
+from quad_uneven_env.jit import njit
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def hermite_into(tau, y, v, t, pos, vel, acc):  # pragma: no cover - compiled
     """Clamped cubic spline through ``y`` (N, D) with knot slopes ``v`` (N, D) at knot times ``tau`` (N,) (s),
     evaluated at times ``t`` (T,) (s) into ``pos``, ``vel``, ``acc`` (T, D): value, first and second derivative

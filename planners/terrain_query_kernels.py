@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
-
+from quad_uneven_env.jit import njit
 from quad_uneven_env.terrain.heightfield_kernels import height_at
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def max_height_in_disk_into(flat, nrow, ncol, ox, oy, inv_cell, xy, radius, disk, out):  # pragma: no cover - compiled
     """Highest sampled surface point (m) within ``radius`` of each ``xy[n]`` into ``out[n]``; ``disk`` (D, 2) the
     unit-disk sample pattern (:data:`planners.terrain_query._DISK`)."""
@@ -30,7 +29,7 @@ def max_height_in_disk_into(flat, nrow, ncol, ox, oy, inv_cell, xy, radius, disk
         out[n] = best
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def capsule_clearance_into(
     flat, nrow, ncol, ox, oy, inv_cell, a, b, radius, n_u, n_v, out
 ):  # fmt: skip  # pragma: no cover - compiled

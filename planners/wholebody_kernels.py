@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from quad_uneven_env.jit import njit
 from quad_uneven_env.spatial_kernels import inv3_into
 
 
-@nb.njit(cache=False, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _ik(ex, ey, ez, l1, l2, knee_sign):  # pragma: no cover - compiled
     """:func:`quad_uneven_env.robot.kinematics.leg_ik_hip` of one foot point (hip frame)."""
     q1 = math.atan2(ey, -ez)
@@ -30,7 +30,7 @@ def _ik(ex, ey, ez, l1, l2, knee_sign):  # pragma: no cover - compiled
     return q1, phi - alpha, q3
 
 
-@nb.njit(cache=False, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _point_jac(s1, c1, s2, c2, s23, c23, a, b, p, J):  # pragma: no cover - compiled
     """:func:`planners.wholebody.leg_point` position p (3,) and Jacobian J (3, 3) from the angles' sin/cos."""
     u = -a * s2 - b * s23
@@ -43,7 +43,7 @@ def _point_jac(s1, c1, s2, c2, s23, c23, a, b, p, J):  # pragma: no cover - comp
     J[2, 0], J[2, 1], J[2, 2] = -s1 * w, c1 * w2, c1 * w3
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def _leg_jd(trig, d1, d2, d3, a, b, out):  # pragma: no cover - compiled
     """(dJ/dt) qd of :func:`planners.wholebody.leg_point` into out (3,); ``trig``: (6,) sin, cos of q1, q2 and
     q2 + q3 (as :func:`_legs` stores them)."""
@@ -59,7 +59,7 @@ def _leg_jd(trig, d1, d2, d3, a, b, out):  # pragma: no cover - compiled
     out[2] = -c1 * d1**2 * w - 2 * s1 * d1 * w_dot + c1 * w_vv
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def _legs(x, p, hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A, trig):  # pragma: no cover - compiled
     """IK of the four legs for base position p, then f, F (COM moment), J, J^-1 and A = F J^-1 per leg; ``trig``
     (4, 6): sin, cos of q1, q2 and q2 + q3 per leg."""
@@ -88,7 +88,7 @@ def _legs(x, p, hips, l1, l2, ma, mb, knee_sign, q, f, F, J, Jinv, A, trig):  # 
                 A[leg, r, s] = acc
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def place_base_grid(
     c, cd, cdd, x, xd, xdd, hips, l1, l2, ma, mb, knee_sign, hip_moment, mass, newton_steps,
     p_out, pd_out, pdd_out, q_out, qd_out, qdd_out,

@@ -13,7 +13,7 @@ import sys
 # Headless rendering by default; must be set before mujoco creates a GL context.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = ["ENV_ID", "__version__", "register_envs"]
 

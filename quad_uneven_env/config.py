@@ -1,13 +1,15 @@
 """Frozen configuration dataclasses and the one place YAML is read.
 
-Configs live in the repository's ``configs/`` directory (``CONFIG_DIR``); a config can be
-named (``"paper"`` -> ``configs/robot/paper.yaml``) or given as a path.
+The shipped configs live in the repository's ``configs/`` folder, which the wheel installs as the package data
+``quad_uneven_env.configs`` (:data:`CONFIG_DIR` is whichever of the two this copy of the package has); a config
+is named (``"paper"`` -> ``configs/robot/paper.yaml``) or given as a path.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import importlib.resources
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -18,8 +20,21 @@ import yaml
 
 from quad_uneven_env.fields import Param, check_fields, param
 
-CONFIG_DIR = Path(os.environ.get("QUAD_UNEVEN_CONFIGS", Path(__file__).resolve().parents[1] / "configs"))
-"""Directory of the shipped YAML configs (override with ``$QUAD_UNEVEN_CONFIGS``)."""
+
+def shipped_config_dir() -> Path:
+    """The folder of the shipped YAML configs: ``$QUAD_UNEVEN_CONFIGS`` if set; else, in a source checkout, the
+    repository's ``configs/`` beside the packages; else the installed package data ``quad_uneven_env.configs``."""
+    explicit = os.environ.get("QUAD_UNEVEN_CONFIGS")
+    if explicit:
+        return Path(explicit)
+    checkout = Path(__file__).resolve().parents[1] / "configs"
+    if (checkout / "robot" / "paper.yaml").is_file():
+        return checkout
+    return Path(str(importlib.resources.files("quad_uneven_env.configs")))
+
+
+CONFIG_DIR = shipped_config_dir()
+"""Directory of the shipped YAML configs (:func:`shipped_config_dir`)."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import logging
 import math
 import os
 import reprlib
@@ -114,18 +116,32 @@ def arguments_table() -> str:
     return "\n".join(rows)
 
 
-def check_display(render_mode: str | None) -> None:
-    """Refuse ``render_mode="human"`` where no window can open (Linux without ``DISPLAY``/``WAYLAND_DISPLAY``).
+MUJOCO_LOGGER = logging.getLogger("mujoco")
+"""Where MuJoCo's warnings go (level INFO) instead of ``MUJOCO_LOG.TXT`` in the working directory: the env
+installs :func:`route_mujoco_warnings` unless a warning handler is already set. The env reports what they mean
+(``info["diverged"]``, ``info["termination_reason"]``)."""
 
-    Runs before any window or GLFW code: without a display GLFW aborts the process instead of raising.
+
+def _log_mujoco_warning(message: str) -> None:
+    MUJOCO_LOGGER.info(message)
+
+
+def route_mujoco_warnings() -> None:
+    """Send MuJoCo's warnings to :data:`MUJOCO_LOGGER` (process-wide; a handler set before, by the user or another
+    library, is kept). Without a handler MuJoCo prints them and appends them to ``MUJOCO_LOG.TXT`` in the current
+    directory."""
+    if mujoco.get_mju_user_warning() is None:
+        mujoco.set_mju_user_warning(_log_mujoco_warning)
+
+
+def display_missing(render_mode: str | None) -> bool:
+    """True when ``render_mode="human"`` cannot open a window here (Linux without ``DISPLAY``/``WAYLAND_DISPLAY``).
+
+    Asked before any window or GLFW code: without a display GLFW aborts the process instead of raising.
     """
     if render_mode != "human" or not sys.platform.startswith("linux"):
-        return
-    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise ValueError(
-            "render_mode='human' needs a display, but neither DISPLAY nor WAYLAND_DISPLAY is set; "
-            "use render_mode='rgb_array' (offscreen) on a headless machine"
-        )
+        return False
+    return not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
 class PhysicsController(Protocol):
@@ -294,7 +310,6 @@ class QuadUnevenEnv(gym.Env):
         )  # fmt: skip
         args = {q.name: q.check(given[q.name], "") for q in ENV_ARGS}
         frame_skip, timestep, action_mode = args["frame_skip"], args["timestep"], args["action_mode"]
-        check_display(render_mode)
         if not isinstance(robot, str | os.PathLike):
             raise ValueError(
                 f"robot must be a config name or a .yaml path, got {robot!r} of type {type(robot).__name__}"
@@ -333,6 +348,7 @@ class QuadUnevenEnv(gym.Env):
             self.terrain.hfield_geom_xml(self.robot_cfg.friction),
             PhysicsOptions(timestep=float(timestep)),
         )
+        route_mujoco_warnings()
         self.model = mujoco.MjModel.from_xml_string(xml)
         # Divergence must end the episode visibly, not be hidden by MuJoCo's automatic reset.
         self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
@@ -340,10 +356,7 @@ class QuadUnevenEnv(gym.Env):
         vis.offwidth, vis.offheight = max(vis.offwidth, args["width"]), max(vis.offheight, args["height"])
         self.data = mujoco.MjData(self.model)
         self._saved_state = np.empty(mujoco.mj_stateSize(self.model, _STATE))
-        self._warning_counts = self.data.warning.number  # live view of MuJoCo's warning counters
-        # the same counters as Python ints at a fraction of numpy's indexing cost (read every physics step)
-        self._warning_view = memoryview(self._warning_counts)
-        self._qvel_joints = self.data.qvel[6:]  # MuJoCo never reallocates data's buffers
+        self._bind_data_views()
         self._dt = float(self.model.opt.timestep) * self.frame_skip
         self.idx = RobotIndex.from_model(self.model)
         self._mass = self.idx.total_mass
@@ -369,8 +382,10 @@ class QuadUnevenEnv(gym.Env):
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.dt))
         self._width, self._height = args["width"], args["height"]
         self._renderer = None
+        self._warned_no_display = False
 
         self._prev_action = np.zeros(C.N_JOINTS)
+        self._needs_reset = True
         self._unit_bounds = np.ones(C.N_JOINTS)
         self._tau_frac = np.zeros(C.N_JOINTS)  # the reward's scratch buffers
         self._joint_power = np.zeros(C.N_JOINTS)
@@ -389,6 +404,8 @@ class QuadUnevenEnv(gym.Env):
         self._last_index_norm = 0.0
         self._start_x = 0.0
         self._warnings_at_reset = 0
+        self._pristine_model: mujoco.MjModel | None = None  # the model at the first reset (see _restore_model)
+        self._model_views: list[tuple[np.ndarray, np.ndarray]] = []
 
     # ------------------------------------------------------------------ properties
     @property
@@ -463,6 +480,12 @@ class QuadUnevenEnv(gym.Env):
                 f"controller must be None or a callable (model, data, action) -> 12 torques (N m), "
                 f"got {reprlib.repr(controller)} of type {type(controller).__name__}"
             )
+        for hook in ("reset", "torques_into"):
+            if hasattr(controller, hook) and not callable(getattr(controller, hook)):
+                raise ValueError(
+                    f"controller.{hook} must be a method (see PhysicsController), got "
+                    f"{reprlib.repr(getattr(controller, hook))} of type {type(getattr(controller, hook)).__name__}"
+                )
         if self.action_mode != "torque":
             raise ValueError(
                 f"controller must be None with action_mode={self.action_mode!r}: a physics-rate controller returns "
@@ -482,6 +505,7 @@ class QuadUnevenEnv(gym.Env):
         super().reset(seed=None if seed is None else int(seed))
         if options:
             raise ValueError(f"reset options are not supported (got keys {sorted(options)}); pass terrain to make()")
+        self._restore_model()
         self.terrain.generate(self.np_random)
         self.terrain.upload(self.model)
         (xmin, xmax), (ymin, ymax) = self.terrain.heightfield.extent
@@ -514,6 +538,7 @@ class QuadUnevenEnv(gym.Env):
 
         self._prev_action[:] = 0.0
         self._episode_steps = 0
+        self._needs_reset = False
         meas = self._measure()
         self._start_x = float(meas.cog[0])
         self._last_index_norm = meas.index / (self._mass * self._g)
@@ -541,15 +566,20 @@ class QuadUnevenEnv(gym.Env):
     # ------------------------------------------------------------------ step
     def step(self, action: np.ndarray):
         """Advance ``frame_skip`` physics steps under ``action``; see the class docstring."""
-        a = np.asarray(action, dtype=np.float64)
+        if self._needs_reset:
+            raise gym.error.ResetNeeded("call reset before step: the env has no episode yet")
+        a = np.asarray(action)
+        if a.dtype.kind not in "iuf":
+            raise ValueError(f"action must hold real numbers (float or int), got dtype {a.dtype}")
         if a.shape != (C.N_JOINTS,):
             raise ValueError(f"action must have shape ({C.N_JOINTS},), got {a.shape}")
         clipped = np.empty(C.N_JOINTS)
-        if not clip_finite_into(a, self._unit_bounds, clipped):  # = np.clip to [-1, 1], compiled
+        if not clip_finite_into(a.astype(np.float64, copy=False), self._unit_bounds, clipped):  # np.clip, compiled
             raise ValueError(
                 f"action must be finite, got NaN/Inf at indices {np.flatnonzero(~np.isfinite(a)).tolist()}"
             )
         a = clipped
+        a.setflags(write=False)  # a controller is handed this array: it may read it, not change the step's action
         m, d = self.model, self.data
         x_before = float(self._meas.cog[0])
 
@@ -713,7 +743,15 @@ class QuadUnevenEnv(gym.Env):
                 fast = lane is not None and lane(m, d, a, out, limit)
             except Exception:  # the lane declines; the call below decides
                 fast = False
-            if not fast:
+            if type(fast) is not bool:
+                if not isinstance(fast, np.bool_):
+                    return f"diverged: controller's torques_into returned {_describe(fast)}, not True or False"
+                fast = bool(fast)
+            if fast:
+                if not clip_finite_into(out, limit, out):  # the lane's torques pass the call's checks too
+                    bad = np.flatnonzero(~np.isfinite(out)).tolist()
+                    return f"diverged: controller's torques_into wrote non-finite torques (NaN/Inf at indices {bad})"
+            else:
                 reason = self._controller_torques_into(a, out)
                 if reason is not None:
                     return reason
@@ -889,6 +927,59 @@ class QuadUnevenEnv(gym.Env):
             m.actuator_ctrlrange[i] = (self._joint_lo[i], self._joint_hi[i])
 
     # ------------------------------------------------------------------ rendering
+    def _bind_data_views(self) -> None:
+        """Views of ``self.data``'s buffers read every physics step (MuJoCo never reallocates them)."""
+        self._warning_counts = self.data.warning.number  # live view of MuJoCo's warning counters
+        # the same counters as Python ints at a fraction of numpy's indexing cost (read every physics step)
+        self._warning_view = memoryview(self._warning_counts)
+        self._qvel_joints = self.data.qvel[6:]
+
+    # Rewritten at every reset anyway (the terrain) or read only by the renderer (textures).
+    _NOT_RESTORED = ("hfield_data", "tex_data")
+
+    def _bind_model_views(self) -> None:
+        """Pairs (the model's array, the pristine copy's) that :meth:`_restore_model` copies, and the option names."""
+        m, p = self.model, self._pristine_model
+        if p is None:
+            return
+        names = [
+            n for n in dir(m) if not n.startswith("_") and n not in self._NOT_RESTORED
+            and isinstance(getattr(m, n), np.ndarray) and getattr(m, n).size
+        ]  # fmt: skip
+        self._model_views = [(getattr(m, n), getattr(p, n)) for n in names]
+        self._option_names = [n for n in dir(m.opt) if not n.startswith("_")]
+
+    def _restore_model(self) -> None:
+        """Every numeric field of the model back to its value at the first reset (~0.25 ms): whatever a physics-rate
+        controller or other code changes in ``env.unwrapped.model`` during an episode (a body mass, the timestep)
+        lasts until the next reset, not beyond. Changes made between ``make`` and the first reset are kept for every
+        episode. The randomized world is drawn after this."""
+        if self._pristine_model is None:
+            self._pristine_model = copy.deepcopy(self.model)
+            self._bind_model_views()
+            return
+        for live, pristine in self._model_views:
+            live[...] = pristine
+        opt, saved = self.model.opt, self._pristine_model.opt
+        for name in self._option_names:
+            setattr(opt, name, getattr(saved, name))
+
+    _DATA_VIEWS = ("_warning_counts", "_warning_view", "_qvel_joints", "_model_views")
+
+    def __getstate__(self) -> dict[str, Any]:
+        """``copy.deepcopy`` and pickle: everything but the views of ``data`` (rebound to the copy's own ``data``)
+        and the renderer (a GL context; a copy opens its own at its first ``render``). The model, the data, the
+        terrain, the random generator and the episode's state are copied, so the copy steps exactly as the
+        original would from here. A physics-rate controller is copied with it and must support copying too."""
+        state = {k: v for k, v in self.__dict__.items() if k not in self._DATA_VIEWS}
+        state["_renderer"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._bind_data_views()
+        self._bind_model_views()
+
     def _upload_terrain_to_renderer(self) -> None:
         if self._renderer is None:
             return
@@ -902,6 +993,14 @@ class QuadUnevenEnv(gym.Env):
             gym.logger.warn("render() called without a render_mode; pass render_mode to gym.make")
             return None
         if self._renderer is None:
+            if display_missing(self.render_mode):
+                if not self._warned_no_display:
+                    gym.logger.warn(
+                        "render_mode='human' needs a display, but neither DISPLAY nor WAYLAND_DISPLAY is set: no "
+                        "window is opened; use render_mode='rgb_array' (offscreen) on a headless machine"
+                    )
+                    self._warned_no_display = True
+                return None
             from gymnasium.envs.mujoco.mujoco_rendering import MujocoRenderer
 
             self._renderer = MujocoRenderer(

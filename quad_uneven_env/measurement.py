@@ -15,6 +15,7 @@ The arithmetic is that of :func:`quad_uneven_env.physics.measure_contacts`,
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -88,12 +89,7 @@ class StepMeasurement:
         self._obs_low = np.ascontiguousarray(obs_low, dtype=np.float64)
         self._obs_high = np.ascontiguousarray(obs_high, dtype=np.float64)
         self._data = data
-        self._sensordata = data.sensordata
-        self._site_xpos = data.site_xpos
-        self._subtree_com = data.subtree_com
-        self._subtree_linvel = data.subtree_linvel
-        self._qpos = data.qpos
-        self._qvel = data.qvel
+        self._bind(data)
         self._ints = np.array(
             [idx.trunk_body, idx.robot_sensor_adr, idx.trunk_sensor_adr, *idx.foot_sensor_adr, *idx.foot_sites],
             dtype=np.int64,
@@ -134,6 +130,24 @@ class StepMeasurement:
         # (the kernel's compiled entry point, the height field, action and gravity arrays it was resolved with, the
         # height field's numba type): every other array argument is a buffer of this object; a new terrain's heights
         # of the same type keep the entry point (see quad_uneven_env.compiled_call)
+
+    _DATA_VIEWS = ("_sensordata", "_site_xpos", "_subtree_com", "_subtree_linvel", "_qpos", "_qvel")
+    """The views of ``data``'s buffers the kernel reads (bound once: MuJoCo never reallocates them)."""
+
+    def _bind(self, data: mujoco.MjData) -> None:
+        for name in self._DATA_VIEWS:
+            setattr(self, name, getattr(data, name[1:]))
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled and copied without its views of ``data`` (a copy gets views of its own copy of ``data``) and
+        without the kernel's entry point (bound to this process; resolved again at the first call)."""
+        state = {k: v for k, v in self.__dict__.items() if k not in self._DATA_VIEWS}
+        state["_call"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._bind(self._data)
 
     # ------------------------------------------------------------------ outputs
     @property

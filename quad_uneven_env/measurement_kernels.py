@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from quad_uneven_env.jit import njit
 from quad_uneven_env.observations import STABILITY_CLIP
 from quad_uneven_env.physics import MIN_FOOT_FORCE
 from quad_uneven_env.spatial_kernels import quat_to_matrix_into
@@ -21,7 +21,7 @@ from quad_uneven_env.terrain.heightfield_kernels import heights_into
 _MIN_FOOT_FORCE_SQ = MIN_FOOT_FORCE * MIN_FOOT_FORCE
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def measure_observe_into(  # pragma: no cover - compiled
     sd,
     site_xpos,
@@ -157,7 +157,7 @@ def measure_observe_into(  # pragma: no cover - compiled
         obs[i] = min(max(obs[i], obs_low[i]), obs_high[i])
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def clip_finite_into(x, limit, out):  # pragma: no cover - compiled
     """out = clip(x, -limit, limit) if every x is finite (returns True); else False and out untouched."""
     for i in range(x.shape[0]):

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import numba as nb
 
+from quad_uneven_env.jit import njit
+
 _f1 = nb.float64[:]
 _f2 = nb.float64[:, :]
 
 
-@nb.njit(nb.boolean(_f2, _f2), cache=False, nogil=True)
+@njit(nb.boolean(_f2, _f2), nogil=True)
 def inv3_into(A, out):  # pragma: no cover - compiled
     """out = A^-1 (3 x 3) by the adjugate, the arithmetic of :func:`~quad_uneven_env.spatial.inv3`;
     False (out untouched) if det(A) == 0."""
@@ -27,7 +29,7 @@ def inv3_into(A, out):  # pragma: no cover - compiled
     return True
 
 
-@nb.njit(nb.void(_f1, _f2), cache=False, nogil=True)
+@njit(nb.void(_f1, _f2), nogil=True)
 def quat_to_matrix_into(q, R):  # pragma: no cover - compiled
     """mju_quat2Mat's arithmetic (unit quaternion w, x, y, z)."""
     if q[0] == 1.0 and q[1] == 0.0 and q[2] == 0.0 and q[3] == 0.0:

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
+
+from quad_uneven_env.jit import njit
 
 MIN_EDGE = 1e-9
 """m: a support polygon edge shorter than this joins coincident feet and is not an edge (see
@@ -19,7 +20,7 @@ MIN_EDGES = 3
 """Real (not zero-length) edges a support polygon needs; with fewer the index is ``-inf`` (no support)."""
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def edge_moments_into(cog, acc, feet, mass, g, out):  # pragma: no cover - compiled
     """Tumbling moment (N m) of every clockwise edge of ``feet`` (n, 3) into ``out`` (n,); returns the index.
 

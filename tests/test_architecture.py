@@ -149,7 +149,7 @@ HISTORY = re.compile(r"\b[Ii]ssue \d+|\(issue|section \d+ of|the first version")
 
 
 def test_no_process_history_in_the_code():
-    """Issue numbers and change histories belong in the git log and docs/results*.md, not the code."""
+    """Issue numbers and change histories belong in the git log and CHANGELOG.md, not the code."""
     hits = []
     for path in [p for _, p in MODULES] + sorted((ROOT / "tests").rglob("*.py")):
         if path == Path(__file__).resolve():
@@ -158,3 +158,66 @@ def test_no_process_history_in_the_code():
             if HISTORY.search(line):
                 hits.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
     assert hits == []
+
+
+USER_HISTORY = re.compile(
+    r"\b(?:sessions? \d+|issues? #?\d+|runs? \d+(?:-\d+)?(?=[ ,.;:)'])|formerly|pre-\d+\b"
+    r"|the (?:first|previous|old) (?:version|code|model|run|commit)"
+    r"|(?:before|after) (?:this|the|that) (?:change|fix|commit|session|switch|merge))"
+    r"|\((?:before|after)[:)]|\| *(?:before|after) *\|",
+    re.IGNORECASE,
+)
+"""Process history as users meet it: numbered work sessions, training runs and issues, "formerly", the previous
+version, and before/after labels of a change. What changed for users goes to CHANGELOG.md, by version."""
+
+
+def user_facing_text() -> list[Path]:
+    """What users read: the README, the guide, configs, the Makefile, model cards and the CLI's help."""
+    paths = [ROOT / "README.md", ROOT / "Makefile", ROOT / "agents" / "cli.py"]
+    paths += sorted((ROOT / "docs").rglob("*.md")) + sorted((ROOT / "configs").rglob("*.yaml"))
+    paths += sorted((ROOT / "models").glob("*/README.md"))
+    return [p for p in paths if p.exists()]
+
+
+def history_hits(paths: list[Path]) -> list[str]:
+    return [
+        f"{path.relative_to(ROOT)}:{i}: {line.strip()}"
+        for path in paths
+        for i, line in enumerate(path.read_text().splitlines(), 1)
+        if USER_HISTORY.search(line)
+    ]
+
+
+def test_no_process_history_where_users_read():
+    assert history_hits(user_facing_text()) == []
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        "the residual baseline (run 7) and runs 8-10",
+        "# Session 20: a learned estimator",
+        "see issue 12 for the targets",
+        "`agents.rl` (formerly `agents.residual`)",
+        "measured on the previous version",
+        "the pre-13 contact model",
+        "| terrain | before | after |",
+        "0 falls (before: 3)",
+        "two episodes moved after this change",
+    ],
+)
+def test_the_history_rule_catches(line):
+    assert USER_HISTORY.search(line)
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        "before the first episode, the env is checked",
+        "a run of 30 episodes; --workers 2",
+        "runs the episodes as Ray tasks",
+        "the first cycle starts from rest",
+    ],
+)
+def test_the_history_rule_lets_ordinary_prose_through(line):
+    assert not USER_HISTORY.search(line)

@@ -2,7 +2,8 @@
 
 The readable numpy path (:mod:`.elimination`, :mod:`.inverse_dynamics`, :mod:`.controller`) is the
 reference; the compiled kernels beside it (``*_kernels.py``) compute the same numbers and are tested
-equal to it.
+equal to it. :mod:`.adaptation` holds the expert's adaptive gains on its torques (the knee law, the learned
+strength estimator).
 """
 
 from agents.control.controller import STANCE_MODES, ComputedTorqueController, Gains

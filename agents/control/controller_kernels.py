@@ -12,8 +12,8 @@ friction cone, the motor limits and a finite check. It calls the same kernels as
 torques (tested); every rare case (1-2 stance feet, a failed Cholesky, a QP the compiled solver gives up on, a late
 touch-down) declines to the readable path. The arguments that outlive a step travel in two records
 (:class:`StepArguments`, :class:`GridArguments`): numba unboxes two arguments instead of ~50. :func:`control_step`
-(its body) and :func:`grid_control_step` compile on their first call (a few seconds per process), the others at
-import.
+(its body) and :func:`grid_control_step` compile on their first call, the others at import, all with the on-disk
+cache of :mod:`quad_uneven_env.jit`.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from numba.experimental import structref
 from agents.control import inverse_dynamics_kernels as K
 from agents.control import qp_kernels as QK
 from planners.reference_kernels import grid_index
+from quad_uneven_env.jit import njit
 from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
 from quad_uneven_env.terrain.heightfield_kernels import normals_into
 
@@ -38,12 +39,12 @@ STANCE_BOTH, STANCE_PLANNED, STANCE_MEASURED = 0, 1, 2
 """``stance_mode`` codes of :func:`control_step` (``ComputedTorqueController.stance_mode``)."""
 
 
-@nb.njit(nb.int64(nb.int64), cache=False, nogil=True)
+@njit(nb.int64(nb.int64), nogil=True)
 def _popcount4(mask):  # pragma: no cover - compiled
     return (mask & 1) + (mask >> 1 & 1) + (mask >> 2 & 1) + (mask >> 3 & 1)
 
 
-@nb.njit(nb.int64(nb.int64, nb.int64, nb.int64), cache=False, nogil=True)
+@njit(nb.int64(nb.int64, nb.int64, nb.int64), nogil=True)
 def select_stance_mask(planned, measured, mode):  # pragma: no cover - compiled
     """Stance bitmask from the planned and measured ones (``ComputedTorqueController.select_stance``)."""
     if mode == STANCE_PLANNED:
@@ -56,7 +57,7 @@ def select_stance_mask(planned, measured, mode):  # pragma: no cover - compiled
     return chosen
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def control_step(
     row, planned, stance_mode, contact_geom, foot_of_geom, terrain_geom, measured,
     qpos, qvel, gains, bdd,
@@ -147,8 +148,17 @@ class StepArguments(structref.StructRefProxy):
     """:data:`STEP_FIELDS` in one compiled record: one argument to unbox per call instead of ~45
     (numba's per-call dispatch and unboxing of every array argument costs ~70 ns each)."""
 
+    def __new__(cls, *args):
+        return _new_step_arguments(*args)
+
 
 structref.define_proxy(StepArguments, _StepArgumentsType, list(STEP_FIELDS))
+
+
+@njit()
+def _new_step_arguments(*args):  # pragma: no cover - compiled
+    """The record's constructor, compiled with the on-disk cache (numba's own proxy constructor is not cached)."""
+    return StepArguments(*args)
 
 
 GRID_PLANNED_SHIFT, GRID_ROW_SHIFT = 20, 24
@@ -169,15 +179,24 @@ class _GridArgumentsType(types.StructRef):
 class GridArguments(structref.StructRefProxy):
     """:data:`GRID_FIELDS` in one compiled record (one per plan and simulator data)."""
 
+    def __new__(cls, *args):
+        return _new_grid_arguments(*args)
+
 
 structref.define_proxy(GridArguments, _GridArgumentsType, list(GRID_FIELDS))
+
+
+@njit()
+def _new_grid_arguments(*args):  # pragma: no cover - compiled
+    """The record's constructor, compiled with the on-disk cache (numba's own proxy constructor is not cached)."""
+    return GridArguments(*args)
 
 
 OFF_PLAN = -2
 """:func:`grid_control_step`'s result when the base is off its plan (the caller's readable path replans)."""
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def grid_control_step(  # pragma: no cover - compiled
     t, position_tol2, velocity_tol2, stance_mode, contact_geom, measured, a, g, limit, out
 ):

@@ -26,6 +26,7 @@ import math
 import numba as nb
 import numpy as np
 
+from quad_uneven_env.jit import njit
 from quad_uneven_env.spatial_kernels import inv3_into
 
 N_LEGS = 4
@@ -39,8 +40,8 @@ DONE, DAMPED, EXACT = 1, 2, 4
 """status bits of :func:`id_pinv` (0: not handled, use the numpy path)."""
 
 
-@nb.njit(nb.int64(_f2, _f1, _f3, _f2, nb.int64, _f1, nb.float64, nb.float64, _f1, _f2, _f1, _f1, _f3, _f3),
-         cache=False, nogil=True)  # fmt: skip
+@njit(nb.int64(_f2, _f1, _f3, _f2, nb.int64, _f1, nb.float64, nb.float64, _f1, _f2, _f1, _f1, _f3, _f3),
+         nogil=True)  # fmt: skip
 def id_pinv(M, h, J, Jdd, mask, bdd, inv_sigma, damping, tau, F, qacc, r, Jinv, S):  # pragma: no cover - compiled
     """Pinv inverse dynamics (module doc) for the stance bitmask ``mask`` (bit i: leg i in stance).
 
@@ -205,7 +206,7 @@ def id_pinv(M, h, J, Jdd, mask, bdd, inv_sigma, damping, tau, F, qacc, r, Jinv, 
     return DONE | EXACT | (DAMPED if damped else 0)
 
 
-@nb.njit(nb.int64(_f1, _f1, _f1, _f1, _f1, _f1, _f1, _f1, _f1, _f1, _f1, _f1, nb.int64, _f1), cache=False, nogil=True)
+@njit(nb.int64(_f1, _f1, _f1, _f1, _f1, _f1, _f1, _f1, _f1, _f1, _f1, _f1, nb.int64, _f1), nogil=True)
 def beta_command(qpos, qvel, p, quat, v, w, a, dw, qj, qdj, qddj, gains, mask, out):  # pragma: no cover - compiled
     """PD command beta_ddot (see ``ComputedTorqueController.beta_ddot_command``) into ``out[:n_beta]``.
 
@@ -284,7 +285,7 @@ def beta_command(qpos, qvel, p, quat, v, w, a, dw, qj, qdj, qddj, gains, mask, o
     return n
 
 
-@nb.njit(nb.int64(nb.int32[:, :], nb.int64[:], nb.int64), cache=False, nogil=True)
+@njit(nb.int64(nb.int32[:, :], nb.int64[:], nb.int64), nogil=True)
 def foot_contact_mask(geom, foot_of_geom, terrain_geom):  # pragma: no cover - compiled
     """Bitmask (bit i: foot i) of the contacts ``geom`` (ncon, 2) between a foot geom and the terrain geom."""
     out = 0
@@ -302,7 +303,7 @@ def foot_contact_mask(geom, foot_of_geom, terrain_geom):  # pragma: no cover - c
     return out
 
 
-@nb.njit(nb.void(_f1, _f1, _f1), cache=False, nogil=True)
+@njit(nb.void(_f1, _f1, _f1), nogil=True)
 def clip_into(x, limit, out):  # pragma: no cover - compiled
     """out = clip(x, -limit, limit) elementwise."""
     for i in range(x.shape[0]):
@@ -310,7 +311,7 @@ def clip_into(x, limit, out):  # pragma: no cover - compiled
         out[i] = v if v != v else min(max(v, -limit[i]), limit[i])  # NaN passes through, as np.clip
 
 
-@nb.njit(nb.boolean(_f1, _f1), cache=False, nogil=True)
+@njit(nb.boolean(_f1, _f1), nogil=True)
 def copy_if_finite(x, out):  # pragma: no cover - compiled
     """out[:] = x if every x is finite (returns True); else False and out untouched."""
     for i in range(x.shape[0]):
@@ -321,7 +322,7 @@ def copy_if_finite(x, out):  # pragma: no cover - compiled
     return True
 
 
-@nb.njit(nb.boolean(_f3, nb.int64, _f1, _f2, _f3, _f1, _f2, _f1, _f2, _f1, _f2, _f1), cache=False, nogil=True)
+@njit(nb.boolean(_f3, nb.int64, _f1, _f2, _f3, _f1, _f2, _f1, _f2, _f1, _f2, _f1), nogil=True)
 def qp_fill(J, mask, r, F0, cones, lower, H, g, A, b, C, l):  # pragma: no cover - compiled
     """The "qp" problem in the stance forces x = [F_i]_i (see ``inverse_dynamics``), into preallocated arrays.
 
@@ -370,7 +371,7 @@ def qp_fill(J, mask, r, F0, cones, lower, H, g, A, b, C, l):  # pragma: no cover
     return inside
 
 
-@nb.njit(nb.void(_f1, _f3, nb.int64, _f1, _f1, _f2), cache=False, nogil=True)
+@njit(nb.void(_f1, _f3, nb.int64, _f1, _f1, _f2), nogil=True)
 def stance_forces_and_torques_into(x, J, mask, r, tau, F):  # pragma: no cover - compiled
     """The stance forces x (3p,) into F (4, 3) (zeros for swing legs) and each stance leg's torques
     r_i - J_L,i^T F_i into tau (12,) (swing legs' entries untouched)."""
@@ -391,7 +392,7 @@ def stance_forces_and_torques_into(x, J, mask, r, tau, F):  # pragma: no cover -
         k += 1
 
 
-@nb.njit(nb.boolean(_f1, _f2, _f1, _f2, _f1, _f3, nb.int64, _f1, _f1, _f2), cache=False, nogil=True)
+@njit(nb.boolean(_f1, _f2, _f1, _f2, _f1, _f3, nb.int64, _f1, _f1, _f2), nogil=True)
 def qp_apply(x, C, l, A, b, J, mask, r, tau, F):  # pragma: no cover - compiled
     """Accept the QP solution x if finite, inside the cones (1e-6) and on the base equation (1e-6 relative);
     then write the stance forces into F (4, 3) and the stance torques r_i - J_L,i^T F_i into tau."""
@@ -417,7 +418,7 @@ def qp_apply(x, C, l, A, b, J, mask, r, tau, F):  # pragma: no cover - compiled
     return True
 
 
-@nb.njit(nb.void(_f2, nb.float64, _f3), cache=False, nogil=True)
+@njit(nb.void(_f2, nb.float64, _f3), nogil=True)
 def friction_pyramid_into(normals, mu, out):  # pragma: no cover - compiled
     """out (p, 5, 3): ``mu' n - t1, mu' n + t1, mu' n - t2, mu' n + t2, n`` per normal (``inverse_dynamics``)."""
     mus = mu / math.sqrt(2.0)
@@ -437,7 +438,7 @@ def friction_pyramid_into(normals, mu, out):  # pragma: no cover - compiled
         out[i, 4, 0], out[i, 4, 1], out[i, 4, 2] = n0, n1, n2
 
 
-@nb.njit(nb.void(_f2, nb.int64, nb.float64, _f3), cache=False, nogil=True)
+@njit(nb.void(_f2, nb.int64, nb.float64, _f3), nogil=True)
 def stance_pyramids_into(normals, mask, mu, out):  # pragma: no cover - compiled
     """out[:p] = friction pyramids (p, 5, 3) of ``normals[leg]`` for the p stance legs of ``mask``, in order."""
     p = 0
@@ -453,9 +454,8 @@ def stance_pyramids_into(normals, mask, mu, out):  # pragma: no cover - compiled
     friction_pyramid_into(stance, mu, out)
 
 
-@nb.njit(
+@njit(
     nb.boolean(_f2, nb.float64, _f3, nb.int64, _f1, _f2, _f3, _f1, _f2, _f1, _f2, _f1, _f2, _f1),
-    cache=False,
     nogil=True,
 )
 def qp_fill_with_cones(normals, mu, J, mask, r, F0, cones, lower, H, g, A, b, C, l):  # pragma: no cover - compiled

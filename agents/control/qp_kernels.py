@@ -24,6 +24,7 @@ import numba as nb
 import numpy as np
 
 from agents.control import inverse_dynamics_kernels as K
+from quad_uneven_env.jit import njit
 
 QP_SOLVED, QP_INFEASIBLE, QP_FAILED = 1, 0, -1
 """results of :func:`solve_qp`."""
@@ -47,7 +48,7 @@ _f2 = nb.float64[:, :]
 _f3 = nb.float64[:, :, :]
 
 
-@nb.njit(cache=False, nogil=True, fastmath=_FAST)
+@njit(nogil=True, fastmath=_FAST)
 def _direction(JT, R, nrm, q, d, z, r):  # pragma: no cover - compiled
     """d = J^T nrm, z = J[:, q:] d[q:] (primal step), r = R[:q, :q]^-1 d[:q] (dual step); returns
     ``(|d[q:]|^2, |d|^2)``. ``JT`` is J transposed (its rows are J's columns: contiguous)."""
@@ -76,7 +77,7 @@ def _direction(JT, R, nrm, q, d, z, r):  # pragma: no cover - compiled
     return zn, dd
 
 
-@nb.njit(cache=False, nogil=True, fastmath=_FAST)
+@njit(nogil=True, fastmath=_FAST)
 def _rotate(X, j, k, c, s, start):  # pragma: no cover - compiled
     """Rows j, k of X (columns ``start:``) <- (c X_j + s X_k, c X_k - s X_j)."""
     for i in range(start, X.shape[1]):
@@ -85,7 +86,7 @@ def _rotate(X, j, k, c, s, start):  # pragma: no cover - compiled
         X[k, i] = c * v - s * u
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def _add(JT, R, d, q):  # pragma: no cover - compiled
     """Make row ``d = J^T n`` the q-th active one: rotate d[q+1:] into d[q] (rows of JT), R[:q+1, q] = d."""
     n = JT.shape[0]
@@ -100,7 +101,7 @@ def _add(JT, R, d, q):  # pragma: no cover - compiled
         R[i, q] = d[i]
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def _drop(JT, R, active, u, q, pos):  # pragma: no cover - compiled
     """Remove the active row at position ``pos`` (of q): shift R's columns, ``active`` and u; restore R
     upper triangular by Givens rotations of its rows (and the same on JT's rows)."""
@@ -122,7 +123,7 @@ def _drop(JT, R, active, u, q, pos):  # pragma: no cover - compiled
         _rotate(JT, j, j + 1, a / h, b / h, 0)
 
 
-@nb.njit(nb.int64(_f2, _f1, _f2, _f1, _f2, _f1, _f1), cache=False, nogil=True, fastmath=_FAST)
+@njit(nb.int64(_f2, _f1, _f2, _f1, _f2, _f1, _f1), nogil=True, fastmath=_FAST)
 def solve_qp(H, g, A, b, C, l, x):  # pragma: no cover - compiled
     """x = argmin 1/2 x^T H x + g^T x subject to A x = b, C x >= l (module doc); H positive definite.
 
@@ -250,7 +251,7 @@ RELAX_WEIGHT = 1e-3
 """weight of the distance to the pinv forces in the relaxed problem (``InverseDynamics._relax``)."""
 
 
-@nb.njit(nb.void(_f2, _f1, _f2, _f1, _f2, _f1), cache=False, nogil=True)
+@njit(nb.void(_f2, _f1, _f2, _f1, _f2, _f1), nogil=True)
 def relaxed_problem_into(H, g, A, b, H_out, g_out):  # pragma: no cover - compiled
     """``H_out = A^T A + RELAX_WEIGHT H``, ``g_out = -A^T b + RELAX_WEIGHT g`` (``InverseDynamics._relax``)."""
     n = H.shape[0]
@@ -266,7 +267,7 @@ def relaxed_problem_into(H, g, A, b, H_out, g_out):  # pragma: no cover - compil
             H_out[i, j] = s + RELAX_WEIGHT * H[i, j]
 
 
-@nb.njit(nb.int64(_f2, nb.float64, _f3, nb.int64, _f1, _f1, _f1, _f2, _f3), cache=False, nogil=True)
+@njit(nb.int64(_f2, nb.float64, _f3, nb.int64, _f1, _f1, _f1, _f2, _f3), nogil=True)
 def distribute_qp(normals, mu, J, mask, r, lower, tau, F, cones):  # pragma: no cover - compiled
     """The "qp" distribution (``InverseDynamics.distribute_qp``) with :func:`solve_qp`, in place.
 

@@ -13,6 +13,9 @@ from quad_uneven_env.terrain import parse_terrain_spec
 MIN_SEEDS = 10
 """A target is judged on at least this many seeds of its terrain."""
 
+MIN_GOAL_DISTANCE = 5.0
+"""m: a target is judged on walks to a goal at least this far."""
+
 
 @dataclasses.dataclass(frozen=True)
 class Target:
@@ -56,19 +59,21 @@ def check_targets(
 ) -> list[dict[str, Any]]:
     """One row per (target, matching entry) with the measured values and ``passed``.
 
-    ``passed`` needs: goal_distance >= 5 m, >= ``MIN_SEEDS`` episodes, the success rate, the speed
+    A target is judged only where the suite is made to judge it: a goal of at least ``MIN_GOAL_DISTANCE`` and an
+    entry with at least ``MIN_SEEDS`` seeds (a short check such as the ``smoke`` suite gives no rows).
+    ``passed`` needs: >= ``MIN_SEEDS`` episodes run (fewer with ``--episodes``), the success rate, the speed
     (mean over successes) and every success with the index >= 0 for >= 99% of its time.
     """
-    rows = []
+    rows: list[dict[str, Any]] = []
+    if goal_distance < MIN_GOAL_DISTANCE:
+        return rows
     groups = {g["entry"]: g for g in by_entry}
     for target in TARGETS:
         for i, entry in enumerate(entries):
-            if i not in groups or not _matches(target, entry):
+            if i not in groups or len(entry.seeds) < MIN_SEEDS or not _matches(target, entry):
                 continue
             g = groups[i]
             why = []
-            if goal_distance < 5.0:
-                why.append(f"goal {goal_distance} m < 5 m")
             if g["episodes"] < MIN_SEEDS:
                 why.append(f"{g['episodes']} < {MIN_SEEDS} episodes")
             rate = g["success_rate"] or 0.0

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from agents.control.adaptation import ADAPTATIONS
 from agents.control.controller import Gains
 from agents.control.inverse_dynamics import DISTRIBUTIONS
 from planners.gait import validate_durations
@@ -101,6 +102,11 @@ class ExpertConfig:
     """with "nominal": when the simulated robot's parameters equal the nominal ones exactly (checked at
     every reset), read the dynamics terms from the simulator's data instead of copying the measured
     state into the nominal model: the same numbers bit for bit (tested), about 10 µs a step cheaper."""
+    adaptation: str = param("none", kind="choice", choices=ADAPTATIONS)
+    """adaptive gains on the controller's joint torques (:mod:`agents.control.adaptation`), updated once per control
+    step of the env from the plan's tracking error and the torques: "none", "knee" (the four knees' gains follow
+    the correlation of their tracking error with their load) or "learned" (all twelve, driven by the learned
+    strength estimator). They undo weak or strong motors and a heavier body than the model's."""
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -18,7 +18,6 @@ from typing import Any
 
 import mujoco
 import numpy as np
-from threadpoolctl import ThreadpoolController
 
 from agents.expert.command import cycle_durations, cycle_stride, cycle_turn, fallback_stride
 from agents.expert.config import ExpertConfig
@@ -55,15 +54,6 @@ def disc_offsets(radius: float, step: float) -> np.ndarray:
 
 AIRBORNE_DISC = disc_offsets(AIRBORNE_FOOTHOLD_RADIUS, 0.01)
 """(n, 2) m: horizontal offsets on a 1 cm grid within ``AIRBORNE_FOOTHOLD_RADIUS`` (the origin included)."""
-
-_BLAS: list[ThreadpoolController] = []
-
-
-def blas_controller() -> ThreadpoolController:
-    """One ThreadpoolController per process: building it scans the loaded libraries."""
-    if not _BLAS:
-        _BLAS.append(ThreadpoolController())
-    return _BLAS[0]
 
 
 class HoldReference:
@@ -308,10 +298,7 @@ class CyclePlanner:
         (:meth:`planners.reference.Reference.defect`), is logged with the stride (m) and ``note``."""
         tic = time.perf_counter()
         try:
-            # Small dense problems: multi-threaded BLAS only adds contention (much slower on
-            # a loaded 2-core machine), so the planner runs single-threaded.
-            with blas_controller().limit(limits=1, user_api="blas"):
-                plan = plan_gait_cycle(scenario)
+            plan = plan_gait_cycle(scenario)  # (single-threaded BLAS: planners.blas)
         except PlanningError as err:
             self.log.add(f"t={t0:.2f} s, stride {_fmt(stride)} m{note}: {err}")
             return None, isinstance(err, FootholdError) and err.slope_blocked > 0

@@ -4,8 +4,9 @@ At every physics step :class:`PhysicsHook` reads the measured state (into the ex
 the simulator's data), lets the disturbance recovery and the friction adaptation look at it on their check steps,
 plans the next cycle when the current one is over, and computes the joint torques: by the controller's compiled
 step on the plan's grid (:meth:`ComputedTorqueController.grid_step_into`) where it applies, else by the readable
-controller call (:meth:`ComputedTorqueController.__call__`, the reference both are tested equal to). The env's
-fast lane (:meth:`PhysicsHook.torques_into`) takes a plain grid step without the call's Python.
+controller call (:meth:`ComputedTorqueController.__call__`, the reference both are tested equal to), times the
+adaptive gains of ``ExpertConfig.adaptation`` (:mod:`agents.control.adaptation`) if any. The env's fast lane
+(:meth:`PhysicsHook.torques_into`) takes a plain grid step without the call's Python.
 
 It never raises out of a rollout once reset: a failure of the controller at a physics step (logged with its
 reason) keeps the last good torques for that step.
@@ -19,6 +20,7 @@ import mujoco
 import numpy as np
 
 from agents.control import inverse_dynamics_kernels as IK
+from agents.control.adaptation import AdaptiveGains
 from agents.control.controller import ComputedTorqueController
 from agents.control.nominal import NominalModel
 from agents.expert.config import ExpertConfig
@@ -26,7 +28,9 @@ from agents.expert.cycle import CyclePlanner
 from agents.expert.friction import SLIP_CHECK_EVERY, FrictionAdaptation
 from agents.expert.log import FailureLog
 from agents.expert.recovery import DISTURBANCE_CHECK_EVERY, NO_OFF_PLAN_CHECK, DisturbanceRecovery
+from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
+from quad_uneven_env.measurement_kernels import clip_finite_into
 
 NOT_ATTACHED = (
     "the ExpertPolicy acts through the env's physics-rate hook, and this env's hook is not reset by it: build it with "
@@ -45,6 +49,7 @@ class PhysicsHook:
     :param planner: the gait-cycle planner.
     :param recovery: the disturbance check.
     :param friction: the friction assumption and the slip check.
+    :param adaptation: the adaptive gains on the torques, or None.
     :param log: where failures go.
     """
 
@@ -56,6 +61,7 @@ class PhysicsHook:
         planner: CyclePlanner,
         recovery: DisturbanceRecovery,
         friction: FrictionAdaptation,
+        adaptation: AdaptiveGains | None,
         log: FailureLog,
     ) -> None:
         self.config = config
@@ -64,6 +70,7 @@ class PhysicsHook:
         self.planner = planner
         self.recovery = recovery
         self.friction = friction
+        self.adaptation = adaptation
         self.log = log
         self.compiled = True
         """take the controller's compiled step where it applies (False: the readable controller call at every
@@ -109,9 +116,16 @@ class PhysicsHook:
         self.controller.reset(self._model, self._data, terrain)
         self.friction.start(self._model)
         self.planner.reset(self._data, data, terrain)
+        if self.adaptation is not None:
+            self.adaptation.reset(float(data.time))
+
+    def planned_now(self, sim_time: float) -> tuple[ReferenceSample, float]:
+        """The current plan at simulator time ``sim_time`` (s) (:meth:`CyclePlanner.planned_now`)."""
+        return self.planner.planned_now(sim_time - self.controller.t0)
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
-        """Joint torques (N m) of the computed-torque controller at the measured state.
+        """Joint torques (N m) of the computed-torque controller at the measured state, times the adaptive gains
+        (``ExpertConfig.adaptation``).
 
         Never raises once reset: a failing step (logged in the failure log) returns the last good torques.
 
@@ -119,6 +133,13 @@ class PhysicsHook:
         """
         if self._sim is None:
             raise RuntimeError(NOT_ATTACHED)
+        tau = self._controller_torques(model, data, action)
+        if self.adaptation is None:
+            return tau
+        return self.adaptation.apply(tau, float(data.time), data.qpos[7:], self.planned_now)
+
+    def _controller_torques(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
+        """Joint torques (N m) of the computed-torque controller (the call's, before the adaptive gains)."""
         try:
             own = data if self.shares_simulator_data else self.nominal.measure(data.qpos, data.qvel, data.time)  # type: ignore[union-attr]
             self._steps += 1
@@ -166,12 +187,25 @@ class PhysicsHook:
         data, action)`` returns, clipped to ``±limit`` (N m), written into ``out`` in one compiled call when the
         step is a plain grid step; False where the full call must run instead (nothing it would not redo the
         same way changed: the own model's copy of the measured state, the inverse-dynamics buffers). The action
-        is ignored, as by the call.
+        is ignored, as by the call. With an adaptation the lane writes the controller's torques unclipped, and
+        the gains and the clip follow here, as in the call.
 
         Never taken on a slip-check step, and on a disturbance-check step only while the base is on its plan (the
         check is compiled into the call). Outside the nominal world the measured state is first copied into the
         expert's own model, as the call does.
         """
+        adaptation = self.adaptation
+        if adaptation is not None:
+            if not self._lane_torques_into(model, data, adaptation.raw, adaptation.no_limit):
+                return False
+            tau = adaptation.apply(adaptation.raw, float(data.time), data.qpos[7:], self.planned_now)
+            return bool(clip_finite_into(tau, limit, out))
+        return self._lane_torques_into(model, data, out, limit)
+
+    def _lane_torques_into(
+        self, model: mujoco.MjModel, data: mujoco.MjData, out: np.ndarray, limit: np.ndarray
+    ) -> bool:
+        """:meth:`torques_into` before the adaptive gains."""
         planner = self.planner
         grid = planner.grid
         if grid is None or data is not self._sim or not self.compiled:

@@ -8,6 +8,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
+from agents.control.adaptation import AdaptiveGains, make_adaptation
 from agents.control.controller import ComputedTorqueController
 from agents.control.nominal import NominalModel
 from agents.expert.config import ExpertConfig
@@ -32,7 +33,8 @@ class ExpertPolicy:
     and its fallbacks), :class:`~agents.expert.friction.FrictionAdaptation` (:attr:`friction`: the friction its
     cones and footholds assume), :class:`~agents.expert.recovery.DisturbanceRecovery` (:attr:`recovery`: replans
     when pushed) and :class:`~agents.expert.hook.PhysicsHook` (:attr:`hook`: the physics-rate control), around
-    one :class:`~agents.control.controller.ComputedTorqueController` (:attr:`controller`).
+    one :class:`~agents.control.controller.ComputedTorqueController` (:attr:`controller`), with the adaptive gains
+    of ``ExpertConfig.adaptation`` on its torques (:attr:`adaptation`).
 
     :param env: the environment (wrapped or not).
     :param config: gait and control settings.
@@ -59,8 +61,9 @@ class ExpertPolicy:
             gains=cfgx.gains,
             mu=cfgx.friction if self.nominal is not None else None,
         )
+        adaptation = make_adaptation(cfgx.adaptation, u.dt, u.idx.torque_limit)
         self.hook = PhysicsHook(
-            cfgx, self.controller, self.nominal, self.planner, self.recovery, self.friction, self.log
+            cfgx, self.controller, self.nominal, self.planner, self.recovery, self.friction, adaptation, self.log
         )
         self._zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
 
@@ -105,6 +108,16 @@ class ExpertPolicy:
     ) -> bool:
         """The hook's fast lane (:meth:`PhysicsHook.torques_into`)."""
         return self.hook.torques_into(model, data, action, out, limit)
+
+    @property
+    def adaptation(self) -> AdaptiveGains | None:
+        """the adaptive gains on the torques (:class:`agents.control.adaptation.AdaptiveGains`; None: "none");
+        another one may be set before the env's reset."""
+        return self.hook.adaptation
+
+    @adaptation.setter
+    def adaptation(self, adaptation: AdaptiveGains | None) -> None:
+        self.hook.adaptation = adaptation
 
     # -------------------------------------------------------------- diagnostics
     @property
@@ -156,7 +169,7 @@ class ExpertPolicy:
         """
         if self.planner.current_ref is None:
             raise RuntimeError(f"ExpertPolicy has no plan yet: {NOT_ATTACHED}")
-        return self.planner.planned_now(sim_time - self.controller.t0)
+        return self.hook.planned_now(sim_time)
 
 
 def attach_expert(env: gym.Env, config: ExpertConfig | None = None) -> ExpertPolicy:

@@ -7,10 +7,17 @@ from a bare interpreter). Stable-Baselines3 and torch are imported only by :func
 from typing import Any
 
 from agents.rl.config import TrainConfig, TrainConfigError, load_train_config
-from agents.rl.residual_env import RESIDUAL_ENV_ID, ResidualController, ResidualExpertEnv, make_residual_env
+from agents.rl.residual_env import (
+    RESIDUAL_ENV_ID,
+    ResidualConfig,
+    ResidualController,
+    ResidualExpertEnv,
+    make_residual_env,
+)
 
 __all__ = [
     "RESIDUAL_ENV_ID",
+    "ResidualConfig",
     "ResidualController",
     "ResidualExpertEnv",
     "TrainConfig",

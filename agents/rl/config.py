@@ -29,11 +29,6 @@ RESIDUAL_BASES = ("torque_limit", "expert_torque")
 """What one unit of residual action is: a fraction of the motor's torque limit (additive), or of the expert's
 own torque at that physics step (a gain on the expert: ``tau = tau_expert x (1 + residual_scale x action)``)."""
 
-GAIN_ADAPTATIONS = ("none", "knee", "learned")
-"""What the residual acts on: the expert's torques, those with adaptive knee gains
-(:mod:`agents.rl.gain_adaptation`), or those with adaptive gains on every joint driven by the learned strength
-estimator (:mod:`agents.rl.strength_estimator`)."""
-
 ALGOS = ("ppo", "sac")
 """Stable-Baselines3 algorithms ``quad-uneven train`` supports."""
 
@@ -88,19 +83,10 @@ class TrainConfig:
     residual_basis: str = param("torque_limit", kind="choice", choices=RESIDUAL_BASES)
     """``torque_limit``: residual torque = residual_scale x action x the motor limit; ``expert_torque``:
     residual_scale x action x the expert's own torque (per joint and physics step: a gain on the expert)."""
-    gain_adaptation: str = param("none", kind="choice", choices=GAIN_ADAPTATIONS)
-    """``none``: the residual acts on the expert's torques; ``knee``: on the expert's torques with adaptive knee
-    gains (:mod:`agents.rl.gain_adaptation`: each knee's gain follows the correlation of its tracking error
-    with its load); ``learned``: on the expert's torques with adaptive gains on all twelve joints, driven by the
-    learned strength estimator (:mod:`agents.rl.strength_estimator`)."""
-    adaptation_features: bool = param(False, kind="bool")
-    """append the adapted knee gains to the observation, after the expert features (needs ``gain_adaptation:
-    knee`` and ``expert_features``): what the adaptation has learned of the motors, which the policy cannot
-    reconstruct from one observation."""
-    initial_action: float = param(0.0, "action units", lo=-1.0, hi=1.0)
-    """the untrained policy's mean action, every joint (0: the expert exactly). With ``expert_torque`` and
-    ``stance`` legs, ``initial_action x residual_scale`` is a hand-made prior: e.g. 0.6 x 0.5 = +30 % torque
-    on stance legs (benchmarks/stance_torque_boost.py); PPO refines from there."""
+    expert: dict[str, Any] = dataclasses.field(default_factory=dict)
+    """fields of :class:`agents.expert.ExpertConfig` for the expert under the residual, e.g. ``{adaptation: knee}``
+    (adaptive gains on its knee torques, :mod:`agents.control.adaptation`: the residual then acts on the adapted
+    torques); ``{}``: its defaults."""
     max_episode_steps: int = param(1000, "steps", kind="int", lo=1)
     """control steps per training episode (1000 = 20 s)."""
     env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
@@ -119,26 +105,25 @@ class TrainConfig:
     """keyword arguments of the SB3 algorithm class (``learning_rate``, ``n_steps``, ...)."""
     policy_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
     """SB3 ``policy_kwargs`` (``net_arch``, ``log_std_init``, ...)."""
-    actor_warmup_steps: int = param(0, "steps", kind="int", lo=0)
-    """SAC only: for this many env steps (all envs) only the critics learn; the actor and the entropy temperature
-    keep their starting values, the untrained agent's or a warm start's
-    (:class:`agents.rl.training.ActorWarmupCallback`). 0: the actor learns from the first update, on critics that
-    know nothing yet."""
-    initial_std: float | None = param(None, "action units", lo=0.0, hi=7.0, lo_open=True, none_ok=True)
-    """SAC only: the untrained actor's exploration std per action (before the tanh), the same in every state: its
-    log-std layer starts with zero weights and the bias log(initial_std), as the mean layer starts at
-    ``initial_action`` (at most 7: SB3 clamps the log std to 2). None: SB3's random layer, a std of about 1 in
-    every state (SB3 ignores ``policy_kwargs.log_std_init`` for SAC unless ``use_sde``; PPO takes that field and
-    refuses this one)."""
     init_from: str | None = None
     """a warm start: a saved model (a training run's folder or its ``.zip``) whose weights, optimizer states and
     observation statistics this run starts from (:mod:`agents.rl.warm_start`); it must have been trained for the
-    same env (``algo``, ``residual_*``, ``gain_adaptation``, ``expert_features``, ``normalize_obs``,
-    ``env_kwargs``). None: a new model."""
+    same env (``algo``, ``residual_*``, ``expert``, ``expert_features``, ``normalize_obs``, ``env_kwargs``). None: a
+    new model."""
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-serialisable copy."""
         return dataclasses.asdict(self)
+
+    def residual_config(self) -> Any:
+        """The residual env's :class:`~agents.rl.residual_env.ResidualConfig` of this run (``residual: true``).
+
+        :raises ValueError: naming ``expert.field`` on a bad expert setting (:func:`validate` checks it first).
+        """
+        from agents.rl.residual_env import ResidualConfig  # deferred: the expert's kernels
+
+        fields = ("residual_scale", "residual_legs", "residual_basis", "expert_features", "residual_penalty", "expert")
+        return ResidualConfig.from_dict({name: getattr(self, name) for name in fields}, where="")
 
 
 def _mapping(name: str, value: Any) -> dict[str, Any]:
@@ -180,47 +165,31 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         or cfg.residual_penalty
         or cfg.residual_legs != "all"
         or cfg.residual_basis != "torque_limit"
-        or cfg.gain_adaptation != "none"
-        or cfg.initial_action
+        or cfg.expert
     ):
         raise TrainConfigError(
             "residual: false trains from scratch without the expert, so expert_features must be false, "
-            "residual_penalty 0, residual_legs 'all', residual_basis 'torque_limit', gain_adaptation 'none' and "
-            "initial_action 0, got "
+            "residual_penalty 0, residual_legs 'all', residual_basis 'torque_limit' and expert {}, got "
             f"expert_features={cfg.expert_features}, residual_penalty={cfg.residual_penalty}, "
-            f"residual_legs={cfg.residual_legs!r}, residual_basis={cfg.residual_basis!r}, "
-            f"gain_adaptation={cfg.gain_adaptation!r}, "
-            f"initial_action={cfg.initial_action}"
+            f"residual_legs={cfg.residual_legs!r}, residual_basis={cfg.residual_basis!r}, expert={cfg.expert!r}"
         )
     if cfg.init_from is not None and (not isinstance(cfg.init_from, str) or not cfg.init_from):
         raise TrainConfigError(
             f"init_from must be a path to a saved model (folder or .zip) or null, got {cfg.init_from!r}"
         )
-    if cfg.adaptation_features and not (cfg.residual and cfg.expert_features and cfg.gain_adaptation == "knee"):
-        raise TrainConfigError(
-            "adaptation_features: true needs residual: true, expert_features: true and gain_adaptation: knee, got "
-            f"residual={cfg.residual}, expert_features={cfg.expert_features}, gain_adaptation={cfg.gain_adaptation!r}"
-        )
-    if cfg.actor_warmup_steps and cfg.algo != "sac":
-        raise TrainConfigError(
-            f"actor_warmup_steps needs algo: sac (PPO's actor and critic share one optimizer), got algo "
-            f"{cfg.algo!r} with actor_warmup_steps={cfg.actor_warmup_steps}"
-        )
-    if cfg.initial_std is not None and cfg.hyperparams.get("use_sde"):
-        raise TrainConfigError(
-            "initial_std is for SAC without use_sde; with use_sde set policy_kwargs.log_std_init, got "
-            f"initial_std={cfg.initial_std} and hyperparams.use_sde=true"
-        )
+    expert = _mapping("expert", cfg.expert)
+    if expert:
+        from agents.rl.residual_env import expert_config  # deferred: the expert's kernels
+
+        try:
+            expert_config(expert, "expert")
+        except ValueError as err:
+            raise TrainConfigError(str(err)) from None
     if cfg.algo == "sac" and "log_std_init" in cfg.policy_kwargs and not cfg.hyperparams.get("use_sde"):
         warnings.warn(
             "policy_kwargs.log_std_init has no effect on SAC without use_sde (SB3): the untrained actor explores "
-            "with a std of about 1 unless initial_std is set",
+            "with a std of about 1",
             stacklevel=2,
-        )
-    if cfg.initial_std is not None and cfg.algo != "sac":
-        raise TrainConfigError(
-            f"initial_std needs algo: sac (PPO's exploration std is policy_kwargs.log_std_init), got algo "
-            f"{cfg.algo!r} with initial_std={cfg.initial_std}"
         )
     _mapping("hyperparams", cfg.hyperparams)
     _mapping("policy_kwargs", cfg.policy_kwargs)

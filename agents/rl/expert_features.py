@@ -17,7 +17,6 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from agents.rl.gain_adaptation import GAIN_BOUNDS, KNEE_JOINTS
 from quad_uneven_env import physics
 from quad_uneven_env.observations import ObsField, observation_structure
 
@@ -36,36 +35,18 @@ EXPERT_FEATURE_FIELDS: tuple[ObsField, ...] = (
 )
 """The expert features, in order (appended to the env's observation by the residual env)."""
 
-ADAPTATION_FEATURE_FIELDS: tuple[ObsField, ...] = (
-    ObsField("adapted_knee_gain", 4, *GAIN_BOUNDS, "-", "the adaptive gains on the expert's knee torques, leg order"),
-)
-"""With ``adaptation_features``: what the knee adaptation has learned of its motors, after the expert features."""
-
-ADAPTATION_FEATURE_SIZE = sum(f.size for f in ADAPTATION_FEATURE_FIELDS)
-"""Length of the adaptation feature vector."""
-
 EXPERT_FEATURE_SIZE = sum(f.size for f in EXPERT_FEATURE_FIELDS)
 """Length of the expert feature vector."""
 
 _LOW = np.concatenate([np.full(f.size, f.low) for f in EXPERT_FEATURE_FIELDS])
 _HIGH = np.concatenate([np.full(f.size, f.high) for f in EXPERT_FEATURE_FIELDS])
 _SLICES = observation_structure(EXPERT_FEATURE_FIELDS)
-_ADAPT_LOW = np.concatenate([np.full(f.size, f.low) for f in ADAPTATION_FEATURE_FIELDS])
-_ADAPT_HIGH = np.concatenate([np.full(f.size, f.high) for f in ADAPTATION_FEATURE_FIELDS])
 
 
-def feature_fields(adaptation: bool = False) -> tuple[ObsField, ...]:
-    """The fields appended to the env's observation: the expert's, then (``adaptation``) the adaptation's."""
-    return EXPERT_FEATURE_FIELDS + (ADAPTATION_FEATURE_FIELDS if adaptation else ())
-
-
-def augmented_space(env_space: spaces.Box, adaptation: bool = False) -> spaces.Box:
-    """``env_space`` with the expert features (and, with ``adaptation``, the adapted knee gains) appended."""
-    low, high = [env_space.low, _LOW], [env_space.high, _HIGH]
-    if adaptation:
-        low.append(_ADAPT_LOW)
-        high.append(_ADAPT_HIGH)
-    return spaces.Box(np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32))
+def augmented_space(env_space: spaces.Box) -> spaces.Box:
+    """``env_space`` with the expert features appended."""
+    low, high = np.concatenate([env_space.low, _LOW]), np.concatenate([env_space.high, _HIGH])
+    return spaces.Box(low.astype(np.float32), high.astype(np.float32))
 
 
 def _yaw_rotation(quat_wxyz: np.ndarray) -> np.ndarray:
@@ -109,22 +90,9 @@ def expert_features(expert, data: mujoco.MjData) -> np.ndarray:
     return out.astype(np.float32)
 
 
-def adaptation_features(gain: np.ndarray) -> np.ndarray:
-    """The adaptation features (:data:`ADAPTATION_FEATURE_FIELDS`) of the 12 joint gains ``gain``.
-
-    :param gain: (12,) -, :attr:`agents.rl.gain_adaptation.KneeGainAdaptation.gain` (joint order).
-    :return: (ADAPTATION_FEATURE_SIZE,) float32: the four knees' gains, clipped to their bounds.
-    """
-    return np.clip(np.asarray(gain, dtype=float)[KNEE_JOINTS], _ADAPT_LOW, _ADAPT_HIGH).astype(np.float32)
-
-
 __all__ = [
-    "ADAPTATION_FEATURE_FIELDS",
-    "ADAPTATION_FEATURE_SIZE",
     "EXPERT_FEATURE_FIELDS",
     "EXPERT_FEATURE_SIZE",
-    "adaptation_features",
     "augmented_space",
     "expert_features",
-    "feature_fields",
 ]

@@ -8,15 +8,19 @@ metadata travels in the ONNX ``metadata_props``: ``observation_layout`` (JSON na
 ``action_low``/``action_high``, ``residual``, ``residual_scale``, ``residual_legs`` and ``residual_basis`` (a
 residual action is added to the expert's torques as ``residual_scale x action x torque_limit``, or with
 ``residual_basis`` "expert_torque" as ``residual_scale x action x`` the expert's torque; with ``residual_legs``
-"stance" only on the legs whose foot touches the ground), ``gain_adaptation`` ("knee": the expert's knee
-torques are first multiplied by the adaptive gains of :mod:`agents.rl.gain_adaptation`, which a deployment must
-run too), ``torque_limit`` (N m), ``algo``,
-``env_id``, ``env_kwargs``, ``observation_normalization`` ("folded" or "none").
+"stance" only on the legs whose foot touches the ground), ``expert`` (the expert's config: its fields that
+differ from :class:`agents.expert.ExpertConfig`'s defaults; with ``adaptation`` "knee" or "learned" its torques are
+first multiplied by the adaptive gains of :mod:`agents.control.adaptation`, which a deployment must run too),
+``torque_limit`` (N m), ``algo``, ``env_id``, ``env_kwargs``, ``observation_normalization`` ("folded" or "none").
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
+import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -72,6 +76,22 @@ def _policy_module(model: Any, norm: Any, low: np.ndarray, high: np.ndarray) -> 
     return DeterministicPolicy().eval()
 
 
+@contextlib.contextmanager
+def _quiet_exporter() -> Iterator[None]:
+    """torch's ONNX exporter without its notes on optional torchvision operators (never in a policy network) and
+    the deprecation warnings of its own internals: nothing a user of ``export`` can act on."""
+    registration = logging.getLogger("torch.onnx._internal.exporter._registration")
+    level = registration.level
+    registration.setLevel(logging.ERROR)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FutureWarning)
+            warnings.simplefilter("ignore", DeprecationWarning)
+            yield
+    finally:
+        registration.setLevel(level)
+
+
 def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None, allow_pickle: bool = False) -> Path:
     """Write the ONNX file of the SB3 model ``model_path`` (with its ``rl_meta.json`` and statistics) to ``out``.
 
@@ -106,10 +126,11 @@ def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None
     out.parent.mkdir(parents=True, exist_ok=True)
     dummy = torch.zeros(1, n_obs, dtype=torch.float32)
     batch = torch.export.Dim("batch", min=1)
-    torch.onnx.export(
-        module, (dummy,), str(out), input_names=["obs"], output_names=["action"],
-        dynamic_shapes=({0: batch},), dynamo=True, verbose=False,
-    )  # fmt: skip
+    with _quiet_exporter():
+        torch.onnx.export(
+            module, (dummy,), str(out), input_names=["obs"], output_names=["action"],
+            dynamic_shapes=({0: batch},), dynamo=True, verbose=False,
+        )  # fmt: skip
     graph = onnx.load(str(out))
     props = {
         "observation_layout": json.dumps(layout),
@@ -120,7 +141,7 @@ def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None
         "residual_scale": json.dumps(meta.get("residual_scale")),
         **{  # the residual's settings (defaults for older models' metadata); None for a model from scratch
             name: json.dumps(meta.get(name, META_DEFAULTS[name]) if meta.get("residual") else None)
-            for name in ("residual_legs", "residual_basis", "gain_adaptation", "adaptation_features")
+            for name in ("residual_legs", "residual_basis", "expert")
         },
         "torque_limit": json.dumps(torque_limit),
         "algo": algo,

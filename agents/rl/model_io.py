@@ -3,9 +3,13 @@
 A training run writes ``DIR/rl_meta.json`` (and a copy in ``DIR/checkpoints/`` and ``DIR/best/``)::
 
     {"format": "quad-uneven-rl/1", "algo": "ppo", "residual": true, "residual_scale": 0.1,
-     "env_id": "QuadUnevenResidual-v0", "env_kwargs": {...}, "normalize_obs": true, ...}
+     "expert": {"adaptation": "knee"}, "env_id": "QuadUnevenResidual-v0", "env_kwargs": {...},
+     "normalize_obs": true, ...}
 
-:func:`load_sb3_policy` reads it for a model ``.zip`` in the same folder: a residual model gets the
+A residual model's ``residual_*``, ``expert_features`` and ``expert`` fields are its
+:class:`~agents.rl.residual_env.ResidualConfig` (``expert``: the :class:`~agents.expert.ExpertConfig` fields that
+differ from the defaults; with ``adaptation: learned`` also ``strength_estimator_sha256``, the estimator it was
+made with). :func:`load_sb3_policy` reads it for a model ``.zip`` in the same folder: a residual model gets that
 expert plus residual installed as the env's physics-rate controller (so ``quad-uneven evaluate`` runs
 the expert in the loop), and observations are normalised with the saved statistics
 (:mod:`agents.rl.normalization`). Nothing from the folder is unpickled unless the user opts in.
@@ -35,11 +39,18 @@ META_FORMAT = "quad-uneven-rl/1"
 META_DEFAULTS: dict[str, Any] = {
     "residual_legs": "all",
     "residual_basis": "torque_limit",
-    "gain_adaptation": "none",
-    "adaptation_features": False,
+    "expert_features": False,
+    "expert": {},
     "env_kwargs": {},
 }
-"""Values of the fields absent from the metadata of models trained before the option existed."""
+"""Values of the fields a model's metadata may leave out."""
+
+RESIDUAL_META_FIELDS = ("residual_scale", "residual_legs", "residual_basis", "expert_features", "expert")
+"""The metadata fields of a residual model that make its :class:`~agents.rl.residual_env.ResidualConfig`."""
+
+NOT_READ = {"gain_adaptation": "none", "adaptation_features": False}
+"""Metadata fields this reader refuses unless they hold these values (which it can ignore): the adaptation is
+the expert's (``expert: {adaptation: ...}``), and the adapted gains are no observation."""
 
 
 class ModelError(ValueError):
@@ -64,30 +75,25 @@ def read_metadata(model_path: str | Path) -> dict[str, Any] | None:
 
 
 def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
-    """``meta`` with the fields the evaluation uses checked (``algo``, ``residual``, ``residual_scale``, ...)."""
-    from agents.rl.config import ALGOS, GAIN_ADAPTATIONS, RESIDUAL_BASES, RESIDUAL_LEGS
+    """``meta`` with the fields the evaluation uses checked (``algo``, ``residual``, the residual's config, ...)."""
+    from agents.rl.config import ALGOS
 
     if meta.get("algo") not in (None, *ALGOS):
         raise ModelError(f"{path}: algo must be one of {list(ALGOS)}, got {meta.get('algo')!r}")
     if not isinstance(meta.get("residual", False), bool):
         raise ModelError(f"{path}: residual must be true or false, got {meta.get('residual')!r}")
     if meta.get("residual"):
-        scale = meta.get("residual_scale")
         if "residual_scale" not in meta:
             raise ModelError(f"{path}: residual_scale is missing (a residual model needs a number in (0, 1])")
-        if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0.0 < scale <= 1.0:
-            raise ModelError(f"{path}: residual_scale must be a number in (0, 1] (of the torque limit), got {scale!r}")
-        legs = meta.get("residual_legs", META_DEFAULTS["residual_legs"])
-        if legs not in RESIDUAL_LEGS:
-            raise ModelError(f"{path}: residual_legs must be one of {list(RESIDUAL_LEGS)}, got {legs!r}")
-        basis = meta.get("residual_basis", META_DEFAULTS["residual_basis"])
-        if basis not in RESIDUAL_BASES:
-            raise ModelError(f"{path}: residual_basis must be one of {list(RESIDUAL_BASES)}, got {basis!r}")
-        adaptation = meta.get("gain_adaptation", META_DEFAULTS["gain_adaptation"])
-        if adaptation not in GAIN_ADAPTATIONS:
-            raise ModelError(f"{path}: gain_adaptation must be one of {list(GAIN_ADAPTATIONS)}, got {adaptation!r}")
-        if adaptation == "learned":
-            from agents.rl.strength_estimator import DEFAULT_ESTIMATOR, estimator_digest
+        for name, value in NOT_READ.items():
+            if name in meta and meta[name] != value:
+                raise ModelError(
+                    f"{path}: {name} must be absent or {value!r}, got {meta[name]!r} (the expert's adaptation is "
+                    "expert: {adaptation: ...})"
+                )
+        config = residual_config_of(meta, path)
+        if config.expert.adaptation == "learned":
+            from agents.control.adaptation.learned import DEFAULT_ESTIMATOR, estimator_digest
 
             digest = meta.get("strength_estimator_sha256")
             if digest != estimator_digest():
@@ -96,19 +102,27 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
                     f"made with ({estimator_digest()[:12]}... is installed), got {str(digest)[:12]!r}: the model's "
                     "gains would come from another estimator"
                 )
-        gains_seen = meta.get("adaptation_features", META_DEFAULTS["adaptation_features"])
-        needs = adaptation == "knee" and meta.get("expert_features")
-        if not isinstance(gains_seen, bool) or (gains_seen and not needs):
-            raise ModelError(
-                f"{path}: adaptation_features must be false, or true with gain_adaptation 'knee' and expert_features, "
-                f"got {gains_seen!r}"
-            )
     env_kwargs = meta.get("env_kwargs")
     if env_kwargs is not None and not isinstance(env_kwargs, dict):
         raise ModelError(f"{path}: env_kwargs must be a mapping of QuadUneven-v0 arguments, got {env_kwargs!r}")
     if not isinstance(meta.get("normalize_obs", False), bool):
         raise ModelError(f"{path}: normalize_obs must be true or false, got {meta.get('normalize_obs')!r}")
     return meta
+
+
+def residual_config_of(meta: dict[str, Any], path: str | Path = META_FILE) -> Any:
+    """The :class:`~agents.rl.residual_env.ResidualConfig` a residual model's metadata records
+    (:data:`RESIDUAL_META_FIELDS`, the absent ones from :data:`META_DEFAULTS`).
+
+    :raises ModelError: naming ``path`` and the bad field (e.g. ``expert.adaptation``) with its allowed values.
+    """
+    from agents.rl.residual_env import ResidualConfig
+
+    raw = {name: meta.get(name, META_DEFAULTS.get(name)) for name in RESIDUAL_META_FIELDS}
+    try:
+        return ResidualConfig.from_dict(raw, where="")
+    except ValueError as err:
+        raise ModelError(f"{path}: {err}") from None
 
 
 def write_metadata(folder: Path, meta: dict[str, Any]) -> Path:
@@ -141,23 +155,13 @@ class SB3Policy:
     :param expert: the :class:`agents.expert.ExpertPolicy` in the loop of a residual model, or None.
     :param features_of: the env (unwrapped) whose simulator state the expert features are read from, for a
         model trained with them (:mod:`agents.rl.expert_features`); None: the observation is used as given.
-    :param adaptation: the :class:`agents.rl.gain_adaptation.KneeGainAdaptation` whose gains follow the expert
-        features, for a model trained with ``adaptation_features``; None: none.
     """
 
-    def __init__(
-        self,
-        model: Any,
-        obs_normalizer: Any = None,
-        expert: Any = None,
-        features_of: Any = None,
-        adaptation: Any = None,
-    ) -> None:
+    def __init__(self, model: Any, obs_normalizer: Any = None, expert: Any = None, features_of: Any = None) -> None:
         self.model = model
         self.obs_normalizer = obs_normalizer
         self.expert = expert
         self.features_of = features_of
-        self.adaptation = adaptation
 
     @property
     def planner_times_ms(self) -> list[float] | None:
@@ -178,16 +182,12 @@ class SB3Policy:
     ) -> tuple[np.ndarray, Any]:
         """SB3's predict on the (normalised) observation; :return: action in [-1, 1]^12 and the state.
 
-        For a model trained with the expert features, they are appended to ``observation`` (one env's) first
-        (and the adapted knee gains after them, for a model trained with those).
+        For a model trained with the expert features, they are appended to ``observation`` (one env's) first.
         """
         if self.features_of is not None:
-            from agents.rl.expert_features import adaptation_features, expert_features
+            from agents.rl.expert_features import expert_features
 
-            parts = [observation, expert_features(self.expert, self.features_of.data)]
-            if self.adaptation is not None:
-                parts.append(adaptation_features(self.adaptation.gain))
-            observation = np.concatenate(parts)
+            observation = np.concatenate([observation, expert_features(self.expert, self.features_of.data)])
         obs = observation if self.obs_normalizer is None else self.obs_normalizer.normalize(observation)
         return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
 
@@ -347,24 +347,20 @@ class ModelSpaces:
     """The observation and action spaces of a model trained on ``env`` (with ``meta``), and its layout.
 
     ``observation_space`` is ``env``'s, with the expert features appended when ``meta`` says
-    ``residual`` and ``expert_features`` (and the adapted knee gains after them with ``adaptation_features``);
-    ``observation_structure`` names the slices of every part.
+    ``residual`` and ``expert_features``; ``observation_structure`` names the slices of every part.
     """
 
     def __init__(self, env: gym.Env, meta: dict[str, Any] | None) -> None:
         self.expert_features = bool(meta and meta.get("residual") and meta.get("expert_features", False))
-        self.adaptation_features = bool(
-            self.expert_features and meta and meta.get("adaptation_features", META_DEFAULTS["adaptation_features"])
-        )
         self.action_space = env.action_space
         self.observation_space = env.observation_space
         self.observation_structure: dict[str, slice] = dict(env.unwrapped.observation_structure)
         if self.expert_features:
-            from agents.rl.expert_features import augmented_space, feature_fields
+            from agents.rl.expert_features import EXPERT_FEATURE_FIELDS, augmented_space
 
             offset = int(env.observation_space.shape[0])
-            self.observation_space = augmented_space(env.observation_space, self.adaptation_features)
-            for f in feature_fields(self.adaptation_features):
+            self.observation_space = augmented_space(env.observation_space)
+            for f in EXPERT_FEATURE_FIELDS:
                 self.observation_structure[f.name] = slice(offset, offset + f.size)
                 offset += f.size
 
@@ -372,7 +368,7 @@ class ModelSpaces:
 def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: bool = False) -> SB3Policy:
     """Load the SB3 model ``path`` as a policy for ``env`` (a ``QuadUneven-v0`` env, before ``reset``).
 
-    With ``rl_meta.json`` saying ``residual``, installs the expert plus the residual
+    With ``rl_meta.json`` saying ``residual``, installs the expert of its recorded config plus the residual
     (:func:`agents.rl.residual_env.install_residual_controller`) on ``env.unwrapped``, and with
     ``expert_features`` the policy appends the expert features to every observation, as the training env
     did. Nothing in the model folder is unpickled unless ``allow_pickle`` (see :func:`load_sb3_model`).
@@ -389,25 +385,19 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
     normalizer = load_obs_normalization(path, meta, allow_pickle)
     model = load_sb3_model(path, algo, spaces_of, allow_pickle)  # type: ignore[arg-type]
     check_spaces(model, spaces_of, path)  # type: ignore[arg-type]
-    expert = controller = None
+    expert = None
     if meta is not None and meta.get("residual"):
         from agents.rl.residual_env import install_residual_controller
 
-        expert, controller = install_residual_controller(
-            env,
-            float(meta["residual_scale"]),
-            residual_legs=meta.get("residual_legs", META_DEFAULTS["residual_legs"]),
-            residual_basis=meta.get("residual_basis", META_DEFAULTS["residual_basis"]),
-            gain_adaptation=meta.get("gain_adaptation", META_DEFAULTS["gain_adaptation"]),
-        )
-    adaptation = controller.adaptation if controller is not None and spaces_of.adaptation_features else None
-    return SB3Policy(model, normalizer, expert, env.unwrapped if spaces_of.expert_features else None, adaptation)
+        expert, _ = install_residual_controller(env, residual_config_of(meta, path))
+    return SB3Policy(model, normalizer, expert, env.unwrapped if spaces_of.expert_features else None)
 
 
 __all__ = [
     "META_DEFAULTS",
     "META_FILE",
     "META_FORMAT",
+    "RESIDUAL_META_FIELDS",
     "ModelError",
     "ModelSpaces",
     "SB3Policy",
@@ -417,6 +407,7 @@ __all__ = [
     "load_sb3_policy",
     "metadata_env_kwargs",
     "read_metadata",
+    "residual_config_of",
     "write_metadata",
     "zip_data",
 ]

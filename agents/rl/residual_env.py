@@ -8,9 +8,11 @@ physics rate through the env's controller hook; the RL action is added on top of
 at every 2 ms physics step, with ``action`` in [-1, 1]^12 (joint order LF RF LH RH x HAA HFE KFE) held over
 the control step (``residual_basis="expert_torque"`` makes the residual a gain on the expert instead:
 ``tau = clip(tau_expert * (1 + residual_scale * action), ...)``, per joint). With ``action = 0`` the env
-reproduces the expert exactly. Reward, termination and info are those of ``QuadUneven-v0``; the observation
-is ``QuadUneven-v0``'s followed by the expert features (:mod:`agents.rl.expert_features`: the expert's plan
-now, the tracking error and its torques), or the env's alone with ``expert_features=False``.
+reproduces the expert exactly (the expert of ``ResidualConfig.expert``, with its adaptive gains if its
+``adaptation`` says so: then ``tau_expert`` is the adapted torque). Reward, termination and info are those of
+``QuadUneven-v0``; the observation is ``QuadUneven-v0``'s followed by the expert features
+(:mod:`agents.rl.expert_features`: the expert's plan now, the tracking error and its torques), or the env's alone
+with ``expert_features=False``. The settings travel as one frozen :class:`ResidualConfig`.
 
 ``residual_scale`` (default 0.1: up to 12 N m on top of the expert, with 120 N m motors) bounds how
 far the learned agent can move away from the expert. ``residual_legs="stance"`` applies the residual only
@@ -26,13 +28,18 @@ Usage::
 
     import gymnasium as gym
     import agents.rl  # registers QuadUnevenResidual-v0
+    from agents.expert import ExpertConfig
+    from agents.rl import ResidualConfig
 
-    env = gym.make("QuadUnevenResidual-v0", residual_scale=0.1, terrain="rough")
+    config = ResidualConfig(residual_scale=0.1, expert=ExpertConfig(adaptation="knee"))
+    env = gym.make("QuadUnevenResidual-v0", config=config, terrain="rough")
     # or, from a bare interpreter: gym.make("agents.rl:QuadUnevenResidual-v0")
 """
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -40,14 +47,13 @@ import mujoco
 import numpy as np
 from gymnasium.envs.registration import register, registry
 
+from agents.control.controller import Gains
 from agents.expert import ExpertConfig, ExpertPolicy
 from agents.rl import residual_kernels as RK
 from agents.rl.config import RESIDUAL_BASES, RESIDUAL_LEGS
-from agents.rl.expert_features import adaptation_features as adaptation_feature_vector
 from agents.rl.expert_features import augmented_space, expert_features
-from agents.rl.gain_adaptation import KneeGainAdaptation, check_gain_adaptation
-from agents.rl.strength_estimator import LearnedGainAdaptation
 from quad_uneven_env.env import QuadUnevenEnv
+from quad_uneven_env.fields import check_fields, from_mapping, param
 from quad_uneven_env.measurement_kernels import clip_finite_into
 
 RESIDUAL_ENV_ID = "QuadUnevenResidual-v0"
@@ -94,15 +100,85 @@ def check_residual_scale(residual_scale: Any) -> float:
     return value
 
 
-def make_gain_adaptation(name: str, period: float) -> KneeGainAdaptation | LearnedGainAdaptation | None:
-    """The adaptation ``name`` (one of :data:`~agents.rl.config.GAIN_ADAPTATIONS`) updated every ``period`` s,
-    or None for ``"none"``."""
-    name = check_gain_adaptation(name)
-    if name == "knee":
-        return KneeGainAdaptation(period)
-    if name == "learned":
-        return LearnedGainAdaptation(period)
-    return None
+def expert_config(raw: Mapping[str, Any] | ExpertConfig | None, where: str = "expert") -> ExpertConfig:
+    """An :class:`ExpertConfig` from a mapping of its fields (``gains`` a mapping of :class:`Gains` fields,
+    ``durations`` a list), as a training config or ``rl_meta.json`` says it; an ExpertConfig is returned as is.
+
+    :raises ValueError: naming ``where.field`` and its allowed values.
+    """
+    if raw is None or isinstance(raw, ExpertConfig):
+        return ExpertConfig() if raw is None else raw
+    values = dict(raw) if isinstance(raw, Mapping) else raw
+    if isinstance(values, dict):
+        if isinstance(values.get("gains"), Mapping):
+            values["gains"] = from_mapping(Gains, values["gains"], f"{where}.gains")
+        if isinstance(values.get("durations"), list):
+            values["durations"] = tuple(values["durations"])
+    return from_mapping(ExpertConfig, values, where)
+
+
+def expert_overrides(config: ExpertConfig) -> dict[str, Any]:
+    """The fields of ``config`` that differ from :class:`ExpertConfig`'s defaults, as JSON values (a mapping for
+    ``gains``, a list for ``durations``): what ``rl_meta.json`` records, and :func:`expert_config` reads back."""
+    default = ExpertConfig()
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(ExpertConfig):
+        value = getattr(config, f.name)
+        if value == getattr(default, f.name):
+            continue
+        if isinstance(value, Gains):
+            value = {g.name: getattr(value, g.name) for g in dataclasses.fields(Gains)}
+        elif isinstance(value, tuple):
+            value = list(value)
+        out[f.name] = value
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class ResidualConfig:
+    """The residual env's settings (SI units): what one unit of action does, where, on top of which expert, and
+    what the agent sees. Frozen; bad values raise ``ValueError`` naming ``ResidualConfig.field``."""
+
+    residual_scale: float = param(DEFAULT_RESIDUAL_SCALE, "of the torque limit", lo=0.0, hi=1.0, lo_open=True)
+    """residual per unit action as a fraction of the torque limit (``torque_limit`` basis) or of the expert's
+    torque (``expert_torque`` basis), in (0, 1]."""
+    residual_legs: str = param("all", kind="choice", choices=RESIDUAL_LEGS)
+    """``all``: every leg takes the residual; ``stance``: only a leg whose foot touches the ground, at each
+    physics step (the residual then cannot move a swinging foot)."""
+    residual_basis: str = param("torque_limit", kind="choice", choices=RESIDUAL_BASES)
+    """``torque_limit``: residual = scale x action x the motor limit; ``expert_torque``: scale x action x the
+    expert's own torque (per joint and physics step: a gain on the expert)."""
+    expert_features: bool = param(True, kind="bool")
+    """append the expert features (:mod:`agents.rl.expert_features`) to the observation."""
+    residual_penalty: float = param(0.0, "per mean(action^2)", lo=0.0)
+    """>= 0: subtracted from the reward per unit of mean(action^2) over the 12 joints; 0 keeps the env's."""
+    expert: ExpertConfig = dataclasses.field(default_factory=ExpertConfig)
+    """the expert under the residual (its ``adaptation``: adaptive gains on its torques)."""
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if not isinstance(self.expert, ExpertConfig):
+            raise ValueError(f"ResidualConfig.expert must be an ExpertConfig, got {self.expert!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON values of every field; ``expert`` as its fields that differ from the defaults
+        (:func:`expert_overrides`)."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "expert"}
+        return {**out, "expert": expert_overrides(self.expert)}
+
+    @classmethod
+    def from_dict(cls, raw: Mapping[str, Any], where: str = "ResidualConfig") -> ResidualConfig:
+        """A config from a mapping of its fields (``expert`` a mapping of :class:`ExpertConfig` fields; missing
+        fields take their defaults), the inverse of :meth:`to_dict`.
+
+        :raises ValueError: naming ``where.field`` (or ``where.expert.field``) and its allowed values.
+        """
+        if not isinstance(raw, Mapping):
+            raise ValueError(f"{where} must be a mapping of ResidualConfig fields, got {raw!r}")
+        values = dict(raw)
+        if "expert" in values:
+            values["expert"] = expert_config(values["expert"], f"{where}.expert" if where else "expert")
+        return from_mapping(cls, values, where)
 
 
 class ResidualController:
@@ -119,16 +195,9 @@ class ResidualController:
         for ``"stance"``).
     :param residual_basis: ``"torque_limit"`` (residual = scale x action x ``torque_limit``) or
         ``"expert_torque"`` (residual = scale x action x the expert's torque, joint by joint).
-    :param gain_adaptation: ``"none"``, ``"knee"`` or ``"learned"``: the expert's knee torques (``"knee"``) or
-        all its joint torques (``"learned"``) are first multiplied by the adaptive gains of
-        :class:`~agents.rl.gain_adaptation.KneeGainAdaptation` or
-        :class:`~agents.rl.strength_estimator.LearnedGainAdaptation`, updated every ``update_period`` from the
-        expert's plan (``expert.planned_now``) and torques; the residual then acts on the adapted torques. With
-        an adaptation, action 0 is no longer the expert alone.
-    :param update_period: s between two updates of the adaptation (the env's control step).
-    :param adaptation: an adaptation object to use instead of the one ``gain_adaptation`` names (its ``gain``
-        (12,) array multiplies the expert's torques, its ``reset()`` and ``update(error, load, t)`` are called as
-        :class:`~agents.rl.gain_adaptation.KneeGainAdaptation`'s; the strength estimator's data collection).
+
+    An expert with adaptive gains (``ExpertConfig.adaptation``) returns its adapted torques: the residual acts on
+    those.
     """
 
     def __init__(
@@ -139,20 +208,8 @@ class ResidualController:
         residual_legs: str = "all",
         foot_sensor_adr: Any = None,
         residual_basis: str = "torque_limit",
-        gain_adaptation: str = "none",
-        update_period: float = 0.02,
-        adaptation: Any = None,
     ) -> None:
         self.expert = expert
-        self.gain_adaptation = check_gain_adaptation(gain_adaptation)
-        if adaptation is None:
-            adaptation = make_gain_adaptation(self.gain_adaptation, update_period)
-        self.adaptation = adaptation
-        if self.adaptation is not None and not hasattr(expert, "planned_now"):
-            raise ValueError(
-                f"gain_adaptation={self.gain_adaptation!r} needs an expert with a plan (planned_now), like ExpertPolicy"
-            )
-        self._next_update = self._t_reset = 0.0
         self.residual_scale = check_residual_scale(residual_scale)
         self.residual_legs = check_residual_legs(residual_legs)
         self.residual_basis = check_residual_basis(residual_basis)
@@ -169,11 +226,9 @@ class ResidualController:
         self._touch = np.zeros(1)  # stands in for the contact switches when no leg is gated
         self._tau_expert = np.zeros_like(self.torque_limit)  # the expert's lane writes here
         self._no_limit = np.full_like(self.torque_limit, np.inf)  # its torques, unclipped as its call returns them
-        self._expert_gain = np.ones_like(self.torque_limit) if self.adaptation is None else self.adaptation.gain
+        self._expert_gain = np.ones_like(self.torque_limit)  # the kernel's gain on the expert: none here
         # Per physics step only where the applied residual varies within a control step (gated, or a gain).
-        self._track_applied = (
-            self._foot_adr is not None or self.residual_basis == "expert_torque" or self.adaptation is not None
-        )
+        self._track_applied = self._foot_adr is not None or self.residual_basis == "expert_torque"
         self._applied_sum = 0.0  # mean |applied residual| (N m) summed over physics steps since the last query
         self._applied_n = 0
 
@@ -182,17 +237,13 @@ class ResidualController:
         self._applied_sum, self._applied_n = 0.0, 0
         if hasattr(self.expert, "reset"):
             self.expert.reset(model, data, terrain)
-        if self.adaptation is not None:
-            self.adaptation.reset()
-            self._t_reset = float(data.time)
-            self._next_update = self._t_reset + self.adaptation.period
 
     def residual_torque(self, action: np.ndarray) -> float:
-        """N m: mean over the 12 joints of |residual torque| before the motor limit (with ``gain_adaptation``,
-        everything added to the expert's torque: the adapted gains' share included). With ``"all"`` legs in the
-        ``torque_limit`` basis and no adaptation it is what ``action`` (clipped to [-1, 1]) commands; otherwise
-        the mean of what was applied over the physics steps since the previous call (what ``action`` would
-        command in the ``torque_limit`` basis if there were none)."""
+        """N m: mean over the 12 joints of |residual torque| before the motor limit (what is added to the
+        expert's torque, adapted if its config says so). With ``"all"`` legs in the ``torque_limit`` basis it is
+        what ``action`` (clipped to [-1, 1]) commands; otherwise the mean of what was applied over the physics
+        steps since the previous call (what ``action`` would command in the ``torque_limit`` basis if there were
+        none)."""
         if self._applied_n:
             value = self._applied_sum / self._applied_n
             self._applied_sum, self._applied_n = 0.0, 0
@@ -221,11 +272,8 @@ class ResidualController:
         return bool(clip_finite_into(tau, limit, out))  # finite: the expert's torques and the action are
 
     def _add_residual(self, data: mujoco.MjData, action: np.ndarray, tau_expert: np.ndarray) -> np.ndarray:
-        """Expert + residual in ``self._tau`` (N m, clipped to the motor limits), the adaptive gains updated first
-        and the applied residual counted."""
+        """Expert + residual in ``self._tau`` (N m, clipped to the motor limits), the applied residual counted."""
         action = np.asarray(action, dtype=np.float64)
-        if self.adaptation is not None:
-            self._update_adaptation(data, tau_expert)
         applied = RK.residual_torques_into(
             action, tau_expert, self._expert_gain, self.gain, self.residual_scale,
             self.residual_basis == "expert_torque",
@@ -236,17 +284,6 @@ class ResidualController:
             self._applied_sum += applied
             self._applied_n += 1
         return self._tau
-
-    def _update_adaptation(self, data: mujoco.MjData, tau_expert: np.ndarray) -> None:
-        """Update the adaptive gains if a control step has begun (they multiply the expert's torques)."""
-        adaptation = self.adaptation
-        t = float(data.time)
-        if t >= self._next_update - 1e-9:
-            ref, _ = self.expert.planned_now(t)
-            adaptation.update(ref.q_joints - data.qpos[7:], tau_expert / self.torque_limit, t - self._t_reset)
-            self._next_update += adaptation.period
-            if self._next_update <= t:  # a jump of the clock (never in a rollout): back on the control grid
-                self._next_update = t + adaptation.period
 
 
 def residual_torques(
@@ -262,7 +299,7 @@ def residual_torques(
     """The residual composition in numpy (the twin of the compiled
     :func:`~agents.rl.residual_kernels.residual_torques_into`).
 
-    :param expert_gain: (12,) gains on the expert's torques (the adaptive knee gains, else ones).
+    :param expert_gain: (12,) gains on the expert's torques (ones in :class:`ResidualController`).
     :param per_unit: (12,) N m of residual per unit action in the ``torque_limit`` basis.
     :param stance_legs: (4,) bool, the legs whose foot touches (None: every leg takes its residual).
     :return: the torques (12, N m, clipped to ``±limit``) and mean |torque - tau_expert| before the clip.
@@ -277,23 +314,19 @@ def residual_torques(
 
 
 def install_residual_controller(
-    env: gym.Env,
-    residual_scale: float = DEFAULT_RESIDUAL_SCALE,
-    expert_config: ExpertConfig | None = None,
-    residual_legs: str = "all",
-    residual_basis: str = "torque_limit",
-    gain_adaptation: str = "none",
+    env: gym.Env, config: ResidualConfig | None = None
 ) -> tuple[ExpertPolicy, ResidualController]:
     """Put the expert plus a residual on ``env.unwrapped``'s physics-rate hook (call before ``reset``).
 
     :param env: a ``QuadUneven-v0`` env (wrapped or not) in ``action_mode="torque"``.
-    :param residual_scale: see :class:`ResidualController`.
-    :param residual_legs: see :class:`ResidualController`.
-    :param residual_basis: see :class:`ResidualController`.
-    :param gain_adaptation: see :class:`ResidualController` (updated once per control step of ``env``).
+    :param config: the residual's settings and the expert's (default :class:`ResidualConfig`); the expert's
+        adaptive gains, if any, are updated once per control step of ``env``.
     :return: the expert (planner times, failure log) and the installed controller.
-    :raises ValueError: on another action mode or a bad ``residual_scale``.
+    :raises ValueError: on another action mode or a config that is not a :class:`ResidualConfig`.
     """
+    config = ResidualConfig() if config is None else config
+    if not isinstance(config, ResidualConfig):
+        raise ValueError(f"config must be a ResidualConfig, got {config!r}")
     base = env.unwrapped
     if not isinstance(base, QuadUnevenEnv):
         raise ValueError(f"the residual controller needs a QuadUneven-v0 env, got {type(base).__name__}")
@@ -301,12 +334,14 @@ def install_residual_controller(
         raise ValueError(
             f"action_mode must be 'torque' for the residual env (expert torques), got {base.action_mode!r}"
         )
-    scale = check_residual_scale(residual_scale)
-    legs = check_residual_legs(residual_legs)
-    basis = check_residual_basis(residual_basis)
-    expert = ExpertPolicy(env, expert_config)
+    expert = ExpertPolicy(env, config.expert)
     controller = ResidualController(
-        expert, base.idx.torque_limit, scale, legs, base.idx.foot_sensor_adr, basis, gain_adaptation, base.dt
+        expert,
+        base.idx.torque_limit,
+        config.residual_scale,
+        config.residual_legs,
+        base.idx.foot_sensor_adr,
+        config.residual_basis,
     )
     base.set_controller(controller)
     return expert, controller
@@ -318,66 +353,28 @@ class ResidualExpertEnv(gym.Wrapper):
     Action space, reward, termination and info are the wrapped env's, plus ``info["residual_scale"]`` and
     ``info["residual_torque"]`` (N m: mean over the 12 joints of |residual torque| commanded this step,
     before the motor limit). The observation is the wrapped env's followed by the expert features
-    (:data:`agents.rl.expert_features.EXPERT_FEATURE_FIELDS`) unless ``expert_features`` is False.
+    (:data:`agents.rl.expert_features.EXPERT_FEATURE_FIELDS`) unless ``config.expert_features`` is False.
+    With ``config.residual_penalty`` > 0, that times mean(action^2) over the 12 joints is subtracted from the
+    reward (``info["reward_terms"]["residual"]``).
 
     :param env: a ``QuadUneven-v0`` env in torque mode, without a controller of its own.
-    :param residual_scale: residual torque per unit action as a fraction of the torque limit, in (0, 1].
-    :param expert_config: the expert's settings (default :class:`ExpertConfig`).
-    :param expert_features: append the expert features to the observation.
-    :param residual_penalty: >= 0: subtracted from the reward per unit of mean(action^2) over the 12 joints
-        (``info["reward_terms"]["residual"]``); 0 keeps the env's reward.
-    :param residual_legs: ``"all"`` or ``"stance"`` (see :class:`ResidualController`).
-    :param residual_basis: ``"torque_limit"`` or ``"expert_torque"`` (see :class:`ResidualController`).
-    :param gain_adaptation: ``"none"``, ``"knee"`` or ``"learned"`` (see :class:`ResidualController`).
-    :param adaptation_features: append the adapted knee gains after the expert features
-        (:data:`agents.rl.expert_features.ADAPTATION_FEATURE_FIELDS`); needs ``gain_adaptation="knee"`` and
-        ``expert_features``.
+    :param config: the residual's settings and the expert's (default :class:`ResidualConfig`).
     """
 
-    def __init__(
-        self,
-        env: gym.Env,
-        residual_scale: float = DEFAULT_RESIDUAL_SCALE,
-        expert_config: ExpertConfig | None = None,
-        expert_features: bool = True,
-        residual_penalty: float = 0.0,
-        residual_legs: str = "all",
-        residual_basis: str = "torque_limit",
-        gain_adaptation: str = "none",
-        adaptation_features: bool = False,
-    ) -> None:
+    def __init__(self, env: gym.Env, config: ResidualConfig | None = None) -> None:
         super().__init__(env)
-        for name, flag in (("expert_features", expert_features), ("adaptation_features", adaptation_features)):
-            if not isinstance(flag, bool):
-                raise ValueError(f"{name} must be true or false, got {flag!r}")
-        if adaptation_features and not (expert_features and gain_adaptation == "knee"):
-            raise ValueError(
-                "adaptation_features needs gain_adaptation='knee' and expert_features=True, got "
-                f"gain_adaptation={gain_adaptation!r}, expert_features={expert_features}"
-            )
-        try:
-            penalty = float("nan") if isinstance(residual_penalty, bool) else float(residual_penalty)
-        except (TypeError, ValueError):
-            penalty = float("nan")
-        if not (0.0 <= penalty < float("inf")):
-            raise ValueError(f"residual_penalty must be a finite number >= 0, got {residual_penalty!r}")
-        self.residual_penalty = penalty
-        self.expert, self.controller = install_residual_controller(
-            env, residual_scale, expert_config, residual_legs, residual_basis, gain_adaptation
-        )
+        self.config = ResidualConfig() if config is None else config
+        self.expert, self.controller = install_residual_controller(env, self.config)
         self.residual_scale = self.controller.residual_scale
-        self.expert_features = expert_features
-        self.adaptation_features = adaptation_features
-        if expert_features:
-            self.observation_space = augmented_space(env.observation_space, adaptation_features)
+        self.residual_penalty = self.config.residual_penalty
+        self.expert_features = self.config.expert_features
+        if self.expert_features:
+            self.observation_space = augmented_space(env.observation_space)
 
     def _observation(self, obs: np.ndarray) -> np.ndarray:
         if not self.expert_features:
             return obs
-        parts = [obs, expert_features(self.expert, self.env.unwrapped.data)]
-        if self.adaptation_features:
-            parts.append(adaptation_feature_vector(self.controller.adaptation.gain))
-        return np.concatenate(parts)
+        return np.concatenate([obs, expert_features(self.expert, self.env.unwrapped.data)])
 
     def reset(self, **kwargs: Any):
         """Reset the env (the expert plans its first cycle); the info has the step's keys (residual zero)."""
@@ -401,46 +398,28 @@ class ResidualExpertEnv(gym.Wrapper):
         return self._observation(obs), reward, terminated, truncated, info
 
 
-def make_residual_env(
-    residual_scale: float = DEFAULT_RESIDUAL_SCALE,
-    expert_config: ExpertConfig | None = None,
-    expert_features: bool = True,
-    residual_penalty: float = 0.0,
-    residual_legs: str = "all",
-    residual_basis: str = "torque_limit",
-    gain_adaptation: str = "none",
-    adaptation_features: bool = False,
-    **env_kwargs: Any,
-) -> ResidualExpertEnv:
+def make_residual_env(config: ResidualConfig | Mapping[str, Any] | None = None, **kwargs: Any) -> ResidualExpertEnv:
     """The residual env (entry point of ``QuadUnevenResidual-v0``).
 
-    :param residual_scale: residual torque per unit action as a fraction of the torque limit, in (0, 1]
-        (default 0.1 = 12 N m per joint).
-    :param expert_config: the expert's settings.
-    :param expert_features: append the expert features (:mod:`agents.rl.expert_features`) to the observation.
-    :param residual_penalty: reward penalty per unit of mean(action^2) (see :class:`ResidualExpertEnv`).
-    :param residual_legs: ``"all"`` or ``"stance"``: which legs take the residual (:class:`ResidualController`).
-    :param residual_basis: ``"torque_limit"`` or ``"expert_torque"``: what a unit of action is.
-    :param gain_adaptation: ``"none"``, ``"knee"`` or ``"learned"``: adaptive gains on the expert under the
-        residual.
-    :param adaptation_features: append the adapted knee gains to the observation (needs ``"knee"``).
-    :param env_kwargs: ``QuadUnevenEnv`` arguments (``terrain``, ``reward_weights``, ...); ``action_mode`` must be
-        ``"torque"`` and ``controller`` is not accepted.
+    :param config: a :class:`ResidualConfig`, or a mapping of its fields (``expert`` a mapping of
+        :class:`ExpertConfig` fields); None: the defaults, or the :class:`ResidualConfig` fields among ``kwargs``
+        (``gym.make(RESIDUAL_ENV_ID, residual_scale=0.2, expert=ExpertConfig(adaptation="knee"))``).
+    :param kwargs: :class:`ResidualConfig` fields (without ``config``), then ``QuadUnevenEnv`` arguments
+        (``terrain``, ``reward_weights``, ...); ``action_mode`` must be ``"torque"`` and ``controller`` is not
+        accepted.
     :raises ValueError: on a bad argument (named).
     """
-    if "controller" in env_kwargs:
+    if "controller" in kwargs:
         raise ValueError("controller is not accepted by the residual env: expert plus residual is its controller")
-    return ResidualExpertEnv(
-        QuadUnevenEnv(**env_kwargs),
-        residual_scale,
-        expert_config,
-        expert_features,
-        residual_penalty,
-        residual_legs,
-        residual_basis,
-        gain_adaptation,
-        adaptation_features,
-    )
+    names = {f.name for f in dataclasses.fields(ResidualConfig)}
+    fields = {k: kwargs.pop(k) for k in list(kwargs) if k in names}
+    if fields and config is not None:
+        raise ValueError(
+            f"give the residual's settings in config or as keywords, not both: got config and {sorted(fields)}"
+        )
+    if not isinstance(config, ResidualConfig):
+        config = ResidualConfig.from_dict(fields if config is None else config)
+    return ResidualExpertEnv(QuadUnevenEnv(**kwargs), config)
 
 
 if RESIDUAL_ENV_ID not in registry:
@@ -454,10 +433,13 @@ __all__ = [
     "DEFAULT_RESIDUAL_SCALE",
     "RESIDUAL_ENV_ID",
     "RESIDUAL_LEGS",
+    "ResidualConfig",
     "ResidualController",
     "ResidualExpertEnv",
     "check_residual_basis",
     "check_residual_legs",
+    "expert_config",
+    "expert_overrides",
     "install_residual_controller",
     "make_residual_env",
     "residual_torques",

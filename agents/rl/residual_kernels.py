@@ -5,10 +5,10 @@ Its numpy twin, which the tests compare it with bit for bit: :func:`agents.rl.re
 
 from __future__ import annotations
 
-import numba as nb
+from quad_uneven_env.jit import njit
 
 
-@nb.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def residual_torques_into(  # pragma: no cover - compiled
     action, tau_expert, expert_gain, per_unit, scale, expert_basis, touch, foot_adr, gated, limit, out
 ):
@@ -29,7 +29,7 @@ def residual_torques_into(  # pragma: no cover - compiled
     return total / n
 
 
-@nb.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def pairwise_abs_diff_sum(x, y):  # pragma: no cover - compiled
     """sum |x - y| in the order of numpy's pairwise summation for n <= 128 (eight accumulators, then the tail)."""
     n = x.shape[0]

@@ -2,7 +2,7 @@
 
 Typical use::
 
-    quad-uneven select --run runs/sac_residual_adaptive_features --suite robust_extreme --seed 200 --workers 2
+    quad-uneven select --run runs/ppo_residual_adaptive --suite robust_extreme --seed 200 --workers 2
 
 The candidates are the run's checkpoints (``DIR/checkpoints/model_<N>_steps.zip``) and its final model
 (``DIR/model.zip``). Each is evaluated on the same episodes (:func:`agents.evaluation.run.evaluate`, into

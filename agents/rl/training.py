@@ -131,42 +131,6 @@ class CheckpointWithStatsCallback(CheckpointCallback):
         return super()._on_step()
 
 
-class ActorWarmupCallback(BaseCallback):
-    """SAC: for the first ``steps`` env steps the actor's and the entropy temperature's optimizers do not step
-    (their gradients are computed and dropped), so only the critics learn and the policy stays the untrained
-    agent. A residual agent starts as a good policy (the expert); actor updates on a critic that knows nothing
-    yet move it away from that before the critic can say which way is better."""
-
-    def __init__(self, steps: int) -> None:
-        super().__init__()
-        self.steps = steps
-        self._gated: list[Any] = []
-
-    def _optimizers(self) -> list[Any]:
-        found = (self.model.actor.optimizer, getattr(self.model, "ent_coef_optimizer", None))
-        return [o for o in found if o is not None]
-
-    def _on_training_start(self) -> None:
-        if self.model.num_timesteps >= self.steps:
-            return
-        for opt in self._optimizers():
-            opt.step = lambda *args, **kwargs: None  # an instance attribute: shadows Optimizer.step
-            self._gated.append(opt)
-
-    def _release(self) -> None:
-        for opt in self._gated:
-            del opt.step  # Optimizer.step again
-        self._gated = []
-
-    def _on_step(self) -> bool:
-        if self._gated and self.model.num_timesteps > self.steps:  # the updates after the first `steps` steps
-            self._release()
-        return True
-
-    def _on_training_end(self) -> None:
-        self._release()
-
-
 class EpisodeMetricsCallback(BaseCallback):
     """Logs our per-episode figures (:data:`EPISODE_KEYS`) through SB3's logger (TensorBoard, CSV, stdout).
 
@@ -231,19 +195,18 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
             "env_kwargs": {**SCRATCH_ENV_KWARGS, **cfg.env_kwargs},
             "expert_features": False,
         }
-    if cfg.gain_adaptation == "learned":
-        from agents.rl.strength_estimator import estimator_digest
+    residual = cfg.residual_config()
+    if residual.expert.adaptation == "learned":
+        from agents.control.adaptation.learned import estimator_digest
 
         common = {**common, "strength_estimator_sha256": estimator_digest()}
     return {
         **common,
         "residual": True,
-        "residual_scale": float(cfg.residual_scale),
-        "residual_legs": cfg.residual_legs,
-        "residual_basis": cfg.residual_basis,
-        "gain_adaptation": cfg.gain_adaptation,
-        "adaptation_features": bool(cfg.adaptation_features),
-        "initial_action": float(cfg.initial_action),
+        "residual_scale": float(residual.residual_scale),
+        "residual_legs": residual.residual_legs,
+        "residual_basis": residual.residual_basis,
+        "expert": residual.to_dict()["expert"],
         "env_id": RESIDUAL_ENV_ID,
         "env_kwargs": dict(cfg.env_kwargs),
         "expert_features": bool(cfg.expert_features),
@@ -272,44 +235,28 @@ def _make_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) ->
     except TypeError as err:  # an unknown keyword of the algorithm or of its policy
         raise TrainConfigError(f"hyperparams/policy_kwargs: {err}") from None
     if cfg.residual:
-        _constant_mean_action(model, cfg.initial_action)
-    if cfg.initial_std is not None:
-        _constant_log_std(model, cfg.initial_std)
+        _zero_mean_action(model)
     return model
 
 
-def _constant_log_std(model: Any, std: float) -> None:
-    """Make SAC's log-std layer output ``log(std)`` in every state (zero weights, that bias); it still learns."""
-    import torch
+def _zero_mean_action(model: Any) -> None:
+    """Zero the layer that outputs the mean action (PPO ``action_net``, SAC ``actor.mu``): weights and bias.
 
-    with torch.no_grad():
-        model.actor.log_std.weight.zero_()
-        model.actor.log_std.bias.fill_(float(np.log(std)))
-
-
-def _constant_mean_action(model: Any, action: float = 0.0) -> None:
-    """Make the layer that outputs the mean action (PPO ``action_net``, SAC ``actor.mu``) output ``action``.
-
-    Its weights are zeroed and its bias set (through ``atanh`` for SAC's squashed Gaussian), so the untrained
-    deterministic agent commands ``action`` on every joint: with 0 it is exactly the expert. The weights
+    The untrained deterministic agent then commands 0 on every joint: it is exactly the expert. The weights
     still get gradients, since the layer's inputs are not zero.
     """
     import torch
 
     head = getattr(model.policy, "action_net", None)
-    bias = float(action)
     if head is None:
         head = model.actor.mu
-        bias = float(np.arctanh(np.clip(bias, -0.999, 0.999)))
     with torch.no_grad():
         head.weight.zero_()
-        head.bias.fill_(bias)
+        head.bias.zero_()
 
 
 def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCallback], Any]:
     callbacks: list[BaseCallback] = [ProgressCallback(progress), EpisodeMetricsCallback()]
-    if cfg.actor_warmup_steps > 0:
-        callbacks.append(ActorWarmupCallback(cfg.actor_warmup_steps))
     if cfg.time_limit_min > 0:
         callbacks.append(WallClockLimitCallback(cfg.time_limit_min))
     eval_env = None

@@ -15,7 +15,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
 from agents.rl.config import TrainConfig, terrain_label
-from agents.rl.residual_env import RESIDUAL_ENV_ID
+from agents.rl.residual_env import RESIDUAL_ENV_ID, ResidualConfig
 from agents.rl.terrain_mix import TerrainMixEnv
 
 SCRATCH_ENV_KWARGS: dict[str, Any] = {"action_mode": "joint_pd"}
@@ -72,37 +72,24 @@ class EpisodeStats(gym.Wrapper):
 
 def make_train_env(
     terrain: Any,
-    residual_scale: float,
     max_episode_steps: int,
     env_kwargs: dict[str, Any] | None = None,
     randomization: Any = None,
-    expert_features: bool = True,
-    residual_penalty: float = 0.0,
-    residual: bool = True,
-    residual_legs: str = "all",
-    residual_basis: str = "torque_limit",
-    gain_adaptation: str = "none",
-    adaptation_features: bool = False,
+    residual: ResidualConfig | None = None,
 ) -> gym.Env:
-    """One residual env (expert in the loop) with a time limit and :class:`EpisodeStats`.
+    """One training env with a time limit and :class:`EpisodeStats`: the residual env (expert in the loop), or
+    plain ``QuadUneven-v0`` in ``joint_pd`` mode (training from scratch).
 
     :param terrain: terrain kind, preset, YAML path or mapping, or a list of them (a
         :class:`~agents.rl.terrain_mix.TerrainMixEnv`: each episode on one of them).
-    :param residual_scale: residual torque per unit action as a fraction of the torque limit.
     :param max_episode_steps: control steps before truncation.
     :param env_kwargs: extra QuadUneven-v0 arguments.
     :param randomization: the training world's randomization (None: nominal).
-    :param expert_features: append the expert features to the observation.
-    :param residual_penalty: reward penalty per unit of mean(action^2).
-    :param residual_legs: ``all`` or ``stance``: which legs take the residual.
-    :param residual_basis: ``torque_limit`` or ``expert_torque``: what a unit of residual action is.
-    :param gain_adaptation: ``none``, ``knee`` or ``learned``: adaptive gains on the expert under the residual.
-    :param adaptation_features: append the adapted knee gains to the observation.
-    :param residual: false: plain ``QuadUneven-v0`` in ``joint_pd`` mode instead (training from scratch).
+    :param residual: the residual env's settings and its expert's; None: no expert (from scratch).
     """
 
     def one(spec: Any) -> gym.Env:
-        if not residual:
+        if residual is None:
             return gym.make(
                 "QuadUneven-v0",
                 terrain=spec,
@@ -113,16 +100,10 @@ def make_train_env(
             )
         return gym.make(
             RESIDUAL_ENV_ID,
+            config=residual,
             terrain=spec,
-            residual_scale=residual_scale,
             max_episode_steps=max_episode_steps,
             randomization=randomization,
-            expert_features=expert_features,
-            residual_penalty=residual_penalty,
-            residual_legs=residual_legs,
-            residual_basis=residual_basis,
-            gain_adaptation=gain_adaptation,
-            adaptation_features=adaptation_features,
             **(env_kwargs or {}),
         )
 
@@ -160,17 +141,10 @@ def build_vec_env(
     env_fn = functools.partial(
         make_train_env,
         cfg.terrain,
-        float(cfg.residual_scale),
         cfg.max_episode_steps,
         dict(cfg.env_kwargs),
         cfg.randomization,
-        cfg.expert_features,
-        float(cfg.residual_penalty),
-        cfg.residual,
-        cfg.residual_legs,
-        cfg.residual_basis,
-        cfg.gain_adaptation,
-        cfg.adaptation_features,
+        cfg.residual_config() if cfg.residual else None,
     )
     if kind == "subproc":
         env_fn = functools.partial(_ignoring_interrupts, env_fn)

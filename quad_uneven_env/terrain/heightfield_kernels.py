@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from quad_uneven_env.jit import njit
 
-@nb.njit(cache=False, nogil=True, inline="always")
+
+@njit(nogil=True, inline="always")
 def height_at(flat, nrow, ncol, ox, oy, inv_cell, x, y):  # pragma: no cover - compiled
     """MuJoCo's triangulated surface (m) at one point (x, y) (m, world); see :meth:`HeightField.height`."""
     u = min(max((x - ox) * inv_cell, 0.0), ncol - 1.0)
@@ -29,14 +30,14 @@ def height_at(flat, nrow, ncol, ox, oy, inv_cell, x, y):  # pragma: no cover - c
     return h00 + fv * (hm - h00) + fu * (h11 - hm)
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def heights_into(flat, nrow, ncol, ox, oy, inv_cell, xs, ys, out):  # pragma: no cover - compiled
     """MuJoCo's triangulated surface at (xs[k], ys[k]) into out[k]; see :meth:`HeightField.height`."""
     for k in range(xs.shape[0]):
         out[k] = height_at(flat, nrow, ncol, ox, oy, inv_cell, xs[k], ys[k])
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def normals_into(flat, nrow, ncol, ox, oy, inv_cell, points, out):  # pragma: no cover - compiled
     """Upward unit normal of the surface triangle under (points[k, 0], points[k, 1]) into out[k]."""
     for k in range(points.shape[0]):
@@ -58,7 +59,7 @@ def normals_into(flat, nrow, ncol, ox, oy, inv_cell, points, out):  # pragma: no
         out[k, 2] = 1.0 / norm
 
 
-@nb.njit(cache=False, nogil=True)
+@njit(nogil=True)
 def patch_stats_into(flat, nrow, ncol, ox, oy, cell, k, radius, xs, ys, out):  # pragma: no cover - compiled
     """:meth:`HeightField.patch_stats` of (xs[n], ys[n]) into out[n] = (plane slope, plane normal (3),
     max slope, roughness, height min, height max); same arithmetic as ``patch_stats_numpy``."""

@@ -55,6 +55,10 @@ class TerrainSpec:
         checked = KINDS[self.kind].validate(dict(self.params), f"terrain[{self.kind}]")
         object.__setattr__(self, "params", types.MappingProxyType(checked))
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled and copied as its kind and a plain dict of its parameters (a read-only mapping does not pickle)."""
+        return (TerrainSpec, (self.kind, dict(self.params)))
+
     def to_dict(self) -> dict[str, Any]:
         """``{"kind": ..., "params": {...}}`` (the suite-file form; arrays stay numpy arrays)."""
         return {"kind": self.kind, "params": dict(self.params)}

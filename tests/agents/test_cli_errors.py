@@ -200,6 +200,9 @@ CASES: dict[str, Case] = {
     "export out is a directory": Case(
         lambda t, m: ["export", "--policy", str(m / "flat.zip"), "--out", str(t)], ("--out", "directory")
     ),
+    "export out exists": Case(
+        lambda t, m: ["export", "--policy", str(m / "flat.zip"), "--out", str(a_file(t))], ("--out", "--overwrite")
+    ),
     "export out under a file": Case(
         lambda t, m: ["export", "--policy", str(m / "flat.zip"), "--out", str(a_file(t) / "p.onnx")], ("--out",)
     ),
@@ -207,6 +210,17 @@ CASES: dict[str, Case] = {
     "train out not empty": Case(
         lambda t, m: ["train", "--out", str(non_empty(t, "rl_meta.json")), "--no-progress"],
         ("--out", "rl_meta.json", "--overwrite"),
+    ),
+    "train expert config not JSON": Case(
+        lambda t, m: ["train", "--expert-config", "{adaptation", "--out", str(t / "run")], ("--expert-config", "JSON")
+    ),
+    "train expert adaptation": Case(
+        lambda t, m: ["train", "--expert-config", '{"adaptation": "hips"}', "--out", str(t / "run")],
+        ("expert.adaptation", "'none', 'knee', 'learned'", "hips"),
+    ),
+    "evaluate expert adaptation": Case(
+        lambda t, m: evaluate_argv(t, "--expert-config", '{"adaptation": "hips"}', policy="expert"),
+        ("adaptation", "'none', 'knee', 'learned'", "hips"),
     ),
 }
 

@@ -169,9 +169,12 @@ def test_cli_end_to_end_zero_policy(tmp_path, capsys):
     out = tmp_path / "out"
     rc = main(["evaluate", "--policy", "zero", "--suite", str(suite), "--out", str(out), "--no-progress"])
     assert rc == 0
-    assert "report.md" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "report.md" in printed
+    assert "target" not in printed  # flat and rough 4 cm, but one seed each and a 0.5 m goal: no target judged
     res = strict_json(out / "results.json")
     assert res["suite"] == "tiny" and res["policy"] == "zero"
+    assert res["targets"] == [] and res["command_targets"] == []
     assert [(e["terrain"], e["seed"]) for e in res["episodes"]] == [("flat", 0), ("rough", 3)]
     for e in res["episodes"]:
         for field in ISSUE_FIELDS:
@@ -342,10 +345,30 @@ def test_targets_apply_to_matching_entries_only():
     assert "success rate 80% < 90%" in rows[1]["why_not"] and "1 success(es)" in rows[1]["why_not"]
     slow = check_targets(entries[:1], [{**by_entry[0], "mean_speed_success": 0.05}], goal_distance=5.0)
     assert slow[0]["passed"] is False and "mean speed" in slow[0]["why_not"]
-    short = check_targets(entries[:1], by_entry[:1], goal_distance=1.0)
-    assert short[0]["passed"] is False and "goal" in short[0]["why_not"]
+    few = check_targets(entries[:1], [{**by_entry[0], "episodes": 3, "successes": 3, "successes_index_ok": 3}], 5.0)
+    assert few[0]["passed"] is False and few[0]["why_not"] == "3 < 10 episodes"  # --episodes 3 on a target entry
+    assert check_targets(entries[:1], by_entry[:1], goal_distance=1.0) == []  # a short walk judges no target
+    one_seed = [TerrainEntry("rough", {"amplitude": 0.04}, (0,))]
+    assert check_targets(one_seed, [{**by_entry[0], "episodes": 1}], goal_distance=5.0) == []
     randomized = [TerrainEntry("rough", {"amplitude": 0.04}, tuple(range(10)), "mild")]
     assert check_targets(randomized, by_entry[:1], goal_distance=5.0) == []  # the targets are nominal-world ones
+
+
+def test_the_smoke_suite_judges_no_target_and_the_targets_suite_all_of_them():
+    """Perfect results on every entry: the targets suite passes its six targets; smoke (1 m, one seed) has none."""
+    from agents.evaluation.suites import load_suite
+    from agents.evaluation.targets import TARGETS, check_targets
+
+    def perfect(suite):
+        n = len(suite.terrains[0].seeds)
+        group = {"episodes": n, "successes": n, "successes_index_ok": n, "success_rate": 1.0, "mean_speed_success": 0.2}
+        return [{"entry": i, **group} for i in range(len(suite.terrains))]
+
+    targets = load_suite("targets")
+    rows = check_targets(targets.terrains, perfect(targets), targets.goal_distance)
+    assert sorted(r["target"] for r in rows) == sorted(t.name for t in TARGETS) and all(r["passed"] for r in rows)
+    smoke = load_suite("smoke")
+    assert check_targets(smoke.terrains, perfect(smoke), smoke.goal_distance) == []
 
 
 class InstrumentedPolicy:

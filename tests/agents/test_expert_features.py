@@ -11,7 +11,6 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from agents.rl.expert_features import (
-    ADAPTATION_FEATURE_FIELDS,
     EXPERT_FEATURE_FIELDS,
     EXPERT_FEATURE_SIZE,
     expert_features,
@@ -109,7 +108,6 @@ def test_the_documented_layout_is_the_code():
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "rl.md").read_text()
     assert observation_table(EXPERT_FEATURE_FIELDS) in doc
-    assert observation_table(ADAPTATION_FEATURE_FIELDS) in doc
 
 
 def test_a_non_finite_plan_gives_finite_features(monkeypatch):

@@ -1,4 +1,6 @@
-"""The adaptive knee gains: the law by hand, its fixed point on a synthetic knee, and in the residual env."""
+"""The expert's adaptive gains: the knee law by hand, its fixed point on a synthetic knee, the schedule that applies
+a law to the torques, ``ExpertConfig(adaptation=...)`` in the env (its call and its fast lane), under the residual,
+and in a model folder."""
 
 from __future__ import annotations
 
@@ -8,9 +10,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents.rl import gain_adaptation as GA
+import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.control.adaptation import ADAPTATIONS, AdaptiveGains, make_adaptation
+from agents.control.adaptation import knee as GA
+from agents.control.adaptation.learned import LearnedGainAdaptation, estimator_digest
+from agents.expert import ExpertConfig, attach_expert
 from agents.rl.config import TrainConfigError, load_train_config
-from agents.rl.residual_env import ResidualController, make_residual_env
+from agents.rl.residual_env import make_residual_env
 
 KNEES = [2, 5, 8, 11]
 
@@ -49,7 +55,7 @@ def test_a_knee_at_strength_s_settles_near_one_over_s(strength):
     law = GA.KneeGainAdaptation(period=0.02)
     for k in range(1000):  # 20 s
         u = np.full(12, 0.4 * np.sin(2 * np.pi * k * 0.02 / 1.1) + 0.2)
-        e = 3.0 * (1.0 - strength * law.gain) * u  # 3 rad per unit of unmet load: the fit of docs/rl.md, run 7
+        e = 3.0 * (1.0 - strength * law.gain) * u  # 3 rad per unit of unmet load: the fit of docs/rl.md
         law.update(e, u, time_since_reset=k * 0.02)
     np.testing.assert_allclose(law.gain[KNEES], 1.0 / strength, rtol=0.02)
 
@@ -57,84 +63,178 @@ def test_a_knee_at_strength_s_settles_near_one_over_s(strength):
 def test_bad_arguments_are_named():
     with pytest.raises(ValueError, match="period"):
         GA.KneeGainAdaptation(period=0.0)
-    with pytest.raises(ValueError, match=r"gain_adaptation must be one of \['none', 'knee', 'learned'\]"):
-        GA.check_gain_adaptation("hip")
-    with pytest.raises(ValueError, match="gain_adaptation must be one of"):
-        make_residual_env(terrain="flat", gain_adaptation=None)
-    with pytest.raises(TrainConfigError, match="gain_adaptation"):
-        load_train_config(None, {"gain_adaptation": "hips"})
-    with pytest.raises(TrainConfigError, match="gain_adaptation 'none'"):
-        load_train_config(None, {"residual": False, "expert_features": False, "gain_adaptation": "knee"})
+    assert ADAPTATIONS == ("none", "knee", "learned")
+    for bad in ("hip", None, 1, "Knee"):
+        with pytest.raises(ValueError, match=r"^ExpertConfig\.adaptation must be one of \['none', 'knee', 'learned'\]"):
+            ExpertConfig(adaptation=bad)
+    with pytest.raises(ValueError, match=r"^adaptation must be one of \['none', 'knee', 'learned'\], got 'hip'"):
+        make_adaptation("hip", 0.02, np.ones(12))
+    assert make_adaptation("none", 0.02, np.ones(12)) is None
+    with pytest.raises(ValueError, match=r"^ResidualConfig\.expert\.adaptation must be one of"):
+        make_residual_env(terrain="flat", expert={"adaptation": None})
+    with pytest.raises(TrainConfigError, match=r"^expert\.adaptation must be one of \['none', 'knee', 'learned'\]"):
+        load_train_config(None, {"expert": {"adaptation": "hips"}})
+    with pytest.raises(TrainConfigError, match=r"^expert: unknown field\(s\) \['adaption'\]"):
+        load_train_config(None, {"expert": {"adaption": "knee"}})
+    with pytest.raises(TrainConfigError, match=r"expert \{\}"):
+        load_train_config(None, {"residual": False, "expert_features": False, "expert": {"adaptation": "knee"}})
+    for removed in ("gain_adaptation", "adaptation_features"):
+        with pytest.raises(TrainConfigError, match=rf"^{removed}: unknown field"):
+            load_train_config(None, {removed: "knee"})
 
 
-class _PlannedExpert:
-    """A stub expert with a plan: fixed torques, planned joint angles ``q_ref`` (rad)."""
+class _Law:
+    """A law that records what it is fed and moves its gains by a known amount at every update."""
 
-    def __init__(self, tau: np.ndarray, q_ref: np.ndarray) -> None:
-        self.tau, self.q_ref = tau, q_ref
+    def __init__(self, period: float) -> None:
+        self.period = period
+        self.gain = np.ones(12)
+        self.fed: list[tuple[np.ndarray, np.ndarray, float]] = []
 
-    def reset(self, model, data, terrain) -> None:
-        pass
+    def reset(self) -> None:
+        self.gain[:] = 1.0
+        self.fed = []
 
-    def planned_now(self, t: float):
-        return types.SimpleNamespace(q_joints=self.q_ref), 0.0
-
-    def __call__(self, model, data, action) -> np.ndarray:
-        return self.tau.copy()
+    def update(self, joint_pos_error: np.ndarray, load: np.ndarray, time_since_reset: float) -> None:
+        self.fed.append((joint_pos_error.copy(), load.copy(), time_since_reset))
+        self.gain += 0.01 * np.arange(12)
 
 
-def test_the_controller_updates_once_per_control_step_and_scales_the_knees():
-    limit = np.full(12, 120.0)
+def test_the_gains_update_at_each_control_steps_first_physics_step_and_scale_the_torques():
+    """:class:`AdaptiveGains` over 40 control steps of 10 physics steps (2 ms) after a reset at t = 0.3 s: the
+    law is fed planned minus measured angles and torque / limit at t = 0.3 + k 0.02 s (k >= 1), and every physics
+    step returns the torques times the gains of that moment."""
+    limit = np.linspace(40.0, 150.0, 12)
+    law = _Law(0.02)
+    gains = AdaptiveGains(law, limit)
+    q_ref, q = np.full(12, 0.05), np.linspace(-0.1, 0.1, 12)
+    planned = []
+
+    def planned_now(t):
+        planned.append(t)
+        return types.SimpleNamespace(q_joints=q_ref), 0.0
+
+    gains.reset(0.3)
     tau = np.linspace(-60.0, 60.0, 12)
-    expert = _PlannedExpert(tau, q_ref=np.full(12, 0.05))
-    ctrl = ResidualController(expert, limit, 0.5, residual_basis="expert_torque", gain_adaptation="knee")
-    data = types.SimpleNamespace(time=0.0, qpos=np.zeros(19))
-    ctrl.reset(None, data, None)
-    law = GA.KneeGainAdaptation(period=0.02)  # the reference, fed at each control step's first physics step
-    action = np.linspace(1.0, -1.0, 12)
-    for n in range(1, 401):  # 400 physics steps of 2 ms = 40 control steps (updates from 0.5 s on)
-        data.time = n * 0.002
-        if n % 10 == 0:
-            law.update(np.full(12, 0.05), tau / limit, data.time)
-        got = ctrl(None, data, action)
-        np.testing.assert_allclose(got, np.clip(tau * law.gain * (1 + 0.5 * action), -limit, limit), atol=1e-12)
-    assert np.all(law.gain[KNEES] != 1.0)
-    with pytest.raises(ValueError, match="planned_now"):
-        ResidualController(lambda m, d, a: tau, limit, gain_adaptation="knee")
+    expected_gain = np.ones(12)
+    for n in range(1, 401):
+        t = 0.3 + n * 0.002
+        if n % 10 == 0:  # a control step's first physics step: the law moves first
+            expected_gain += 0.01 * np.arange(12)
+        np.testing.assert_array_equal(gains.apply(tau, t, q, planned_now), tau * expected_gain)
+    assert len(law.fed) == 40 and planned == pytest.approx([0.3 + 0.02 * k for k in range(1, 41)])
+    np.testing.assert_array_equal(law.fed[0][0], q_ref - q)
+    np.testing.assert_array_equal(law.fed[0][1], tau / limit)
+    assert [f[2] for f in law.fed] == pytest.approx([0.02 * k for k in range(1, 41)])
+    gains.reset(0.0)
+    assert law.fed == [] and np.all(gains.gain == 1.0)
+
+
+@pytest.mark.parametrize("adaptation", ["knee", "learned"])
+def test_the_adaptive_expert_walks_the_same_in_its_call_and_its_fast_lane(adaptation, monkeypatch):
+    """An attached expert with ``adaptation``, in the extreme world: with its fast lane (``torques_into``: the lane
+    unclipped, the gains and the clip in Python) and with the lane removed (the call every physics step), the same
+    motor commands, trajectory and gains bit for bit; the gains moved, and the lane answered most steps."""
+    runs = []
+    for lane in (True, False):
+        env = gym.make("QuadUneven-v0", terrain="rough", randomization="extreme")
+        expert = attach_expert(env, ExpertConfig(adaptation=adaptation))
+        answers = []
+        real = type(expert).torques_into
+
+        def counted(self, *args, _real=real, _answers=answers, _on=lane):
+            done = _real(self, *args) if _on else False
+            _answers.append(done)
+            return done
+
+        monkeypatch.setattr(type(expert), "torques_into", counted)
+        env.reset(seed=201)
+        d = env.unwrapped.data
+        trace = []
+        for _ in range(120):
+            _, _, terminated, _, _ = env.step(np.zeros(12, dtype=np.float32))
+            trace.append((d.qpos.copy(), d.ctrl.copy(), expert.adaptation.gain.copy()))
+            assert not terminated
+        runs.append((trace, answers))
+        monkeypatch.undo()
+    (with_lane, answers), (without, _) = runs
+    for (q1, u1, g1), (q2, u2, g2) in zip(with_lane, without, strict=True):
+        np.testing.assert_array_equal(u1, u2)
+        np.testing.assert_array_equal(q1, q2)
+        np.testing.assert_array_equal(g1, g2)
+    assert np.abs(with_lane[-1][2] - 1.0).max() > 0.05
+    assert 0.8 * len(answers) < sum(answers) < len(answers)
+
+
+def test_the_gains_multiply_the_controllers_torques_before_the_motor_limit():
+    """One physics step of an adaptive expert's call, by hand: the controller's torques (``last_torques``) times
+    the gains the step ended with."""
+    env = gym.make("QuadUneven-v0", terrain="flat", randomization="extreme")
+    expert = attach_expert(env, ExpertConfig(adaptation="knee"))
+    env.reset(seed=201)
+    for _ in range(100):
+        env.step(np.zeros(12, dtype=np.float32))
+    base = env.unwrapped
+    gain = expert.adaptation.gain
+    assert np.abs(gain - 1.0).max() > 0.05
+    tau = expert(base.model, base.data, np.zeros(12))
+    np.testing.assert_array_equal(tau, expert.last_torques * gain)
 
 
 @pytest.mark.filterwarnings("ignore:.*different from the unwrapped")
-def test_the_adaptive_env_compensates_a_weak_knee_and_passes_both_checkers():
-    """Extreme world, zero action: a knee gain moves towards the inverse of the drawn strength of its motor
-    (the weakest knee gets the largest gain); the env passes Gymnasium's and SB3's checkers."""
+def test_the_knee_adaptation_compensates_a_weak_knee_and_the_residual_env_over_it_passes_both_checkers():
+    """Extreme world: a knee gain of the adaptive expert moves towards the inverse of the drawn strength of its
+    motor (the weakest knee gets the largest gain); the residual env over that expert passes Gymnasium's and SB3's
+    checkers."""
     from gymnasium.utils.env_checker import check_env
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-    env = make_residual_env(
-        terrain="rough",
-        randomization="extreme",
-        residual_scale=0.5,
-        residual_legs="stance",
-        residual_basis="expert_torque",
-        gain_adaptation="knee",
-    )
+    env = gym.make("QuadUneven-v0", terrain="rough", randomization="extreme")
+    expert = attach_expert(env, ExpertConfig(adaptation="knee"))
     env.reset(seed=201)  # knee strengths 0.83, 0.95, 1.30, 0.61 (LF RF LH RH)
     strength = env.unwrapped.episode_draw.motor_strength[KNEES]
     for _ in range(150):  # 3 s
         *_, terminated, _, _ = env.step(np.zeros(12, dtype=np.float32))
         assert not terminated
-    gain = env.unwrapped.controller.adaptation.gain[KNEES]
+    gain = expert.adaptation.gain[KNEES]
     assert np.argmax(gain) == np.argmin(strength)
     assert gain[np.argmin(strength)] > 1.3
-    check_env(env, skip_render_check=True)
-    sb3_check_env(env, warn=True)
-    assert isinstance(gym.make("QuadUnevenResidual-v0", terrain="flat", gain_adaptation="knee"), gym.Env)
+    residual = make_residual_env(
+        terrain="rough", randomization="extreme", residual_scale=0.5, residual_legs="stance",
+        residual_basis="expert_torque", expert=ExpertConfig(adaptation="knee"),
+    )  # fmt: skip
+    assert isinstance(residual.expert.adaptation.law, GA.KneeGainAdaptation)
+    check_env(residual, skip_render_check=True)
+    sb3_check_env(residual, warn=True)
 
 
 @pytest.mark.parametrize("adaptation", ["knee", "learned"])
-def test_a_model_folder_brings_its_adaptation_to_evaluate_and_onnx(tmp_path, adaptation):
-    """``gain_adaptation`` in rl_meta.json: the loader installs the same adaptive controller the training env had,
-    the ONNX metadata names it, and an unknown value is refused by name."""
+def test_zero_residual_over_an_adaptive_expert_is_that_expert(adaptation):
+    """The residual env with zero action over ``ExpertConfig(adaptation=...)`` walks exactly as that expert
+    attached alone (the residual acts on the adapted torques, so zero adds nothing), in the extreme world."""
+    cfg = ExpertConfig(adaptation=adaptation)
+    plain = gym.make("QuadUneven-v0", terrain="rough", randomization="extreme")
+    expert = attach_expert(plain, cfg)
+    residual = make_residual_env(
+        terrain="rough", randomization="extreme", residual_scale=0.5, residual_legs="stance",
+        residual_basis="expert_torque", expert=cfg,
+    )  # fmt: skip
+    plain.reset(seed=201)
+    residual.reset(seed=201)
+    for _ in range(100):
+        plain.step(np.zeros(12, dtype=np.float32))
+        residual.step(np.zeros(12, dtype=np.float32))
+        np.testing.assert_array_equal(plain.unwrapped.data.qpos, residual.unwrapped.data.qpos)
+        np.testing.assert_array_equal(plain.unwrapped.data.ctrl, residual.unwrapped.data.ctrl)
+    np.testing.assert_array_equal(expert.adaptation.gain, residual.expert.adaptation.gain)
+    assert np.abs(expert.adaptation.gain - 1.0).max() > 0.05
+
+
+@pytest.mark.parametrize("adaptation", ["knee", "learned"])
+def test_a_model_folder_brings_its_expert_to_evaluate_and_onnx(tmp_path, adaptation):
+    """``expert: {adaptation: ...}`` in rl_meta.json: the loader installs the expert with that adaptation under
+    the residual, the ONNX metadata records the expert config, and a bad value or a field this reader does not
+    take is refused by name."""
     import json
 
     import onnx
@@ -143,140 +243,45 @@ def test_a_model_folder_brings_its_adaptation_to_evaluate_and_onnx(tmp_path, ada
     from agents.evaluation.policies import make_policy, policy_env_kwargs
     from agents.rl.export import export_onnx
     from agents.rl.model_io import ModelError, read_metadata, write_metadata
-    from agents.rl.residual_env import RESIDUAL_ENV_ID
-    from agents.rl.strength_estimator import LearnedGainAdaptation, estimator_digest
 
-    train_env = gym.make(RESIDUAL_ENV_ID, terrain="flat", gain_adaptation=adaptation)
+    train_env = make_residual_env(terrain="flat", expert=ExpertConfig(adaptation=adaptation))
     model = stable_baselines3.PPO("MlpPolicy", train_env, n_steps=64, batch_size=32, device="cpu", seed=0,
                                   policy_kwargs={"net_arch": [16]})  # fmt: skip
     model.save(tmp_path / "model.zip")
     meta = {"algo": "ppo", "residual": True, "residual_scale": 0.5, "expert_features": True,
             "normalize_obs": False, "env_kwargs": {"terrain": "flat"}, "residual_basis": "expert_torque",
-            "gain_adaptation": adaptation}  # fmt: skip
+            "expert": {"adaptation": adaptation}}  # fmt: skip
     if adaptation == "learned":
         meta["strength_estimator_sha256"] = estimator_digest()
     write_metadata(tmp_path, meta)
     path = tmp_path / "model.zip"
     env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(str(path)), "terrain": "flat"})
-    make_policy(str(path), env)
-    assert env.unwrapped.controller.gain_adaptation == adaptation
+    policy = make_policy(str(path), env)
+    assert policy.expert is env.unwrapped.controller.expert
+    assert policy.expert.config == ExpertConfig(adaptation=adaptation)
     kind = {"knee": GA.KneeGainAdaptation, "learned": LearnedGainAdaptation}[adaptation]
-    assert isinstance(env.unwrapped.controller.adaptation, kind)
+    assert isinstance(policy.expert.adaptation.law, kind)
     export_onnx(path, tmp_path / "p.onnx")
     props = {p.key: p.value for p in onnx.load(str(tmp_path / "p.onnx")).metadata_props}
-    assert json.loads(props["gain_adaptation"]) == adaptation
+    assert json.loads(props["expert"]) == {"adaptation": adaptation}
     if adaptation == "learned":  # a model made with another estimator is refused, not run with this one
         write_metadata(tmp_path, {**meta, "strength_estimator_sha256": "0" * 64})
         with pytest.raises(ModelError, match="strength_estimator_sha256 must be the sha256"):
             read_metadata(path)
-    write_metadata(tmp_path, {**meta, "gain_adaptation": "hip"})
-    with pytest.raises(ModelError, match=r"gain_adaptation must be one of \['none', 'knee', 'learned'\], got 'hip'"):
+    write_metadata(tmp_path, {**meta, "expert": {"adaptation": "hip"}})
+    with pytest.raises(ModelError, match=r"expert\.adaptation must be one of \['none', 'knee', 'learned'\], got 'hip'"):
+        read_metadata(path)
+    write_metadata(tmp_path, {**meta, "expert": {}, "gain_adaptation": adaptation})
+    with pytest.raises(ModelError, match=r"gain_adaptation must be absent or 'none'.*expert: \{adaptation"):
+        read_metadata(path)
+    write_metadata(tmp_path, {**meta, "adaptation_features": True})
+    with pytest.raises(ModelError, match="adaptation_features must be absent or False"):
         read_metadata(path)
 
 
-@pytest.mark.filterwarnings("ignore:.*different from the unwrapped")
-def test_the_adapted_gains_in_the_observation_are_the_controllers_and_pass_both_checkers():
-    """``adaptation_features``: the observation ends with the four knee gains the controller applies."""
-    from gymnasium.utils.env_checker import check_env
-    from stable_baselines3.common.env_checker import check_env as sb3_check_env
-
-    from agents.rl.expert_features import EXPERT_FEATURE_SIZE
-
-    kwargs = dict(terrain="rough", randomization="extreme", residual_scale=0.5, gain_adaptation="knee")
-    plain = make_residual_env(**kwargs)
-    env = make_residual_env(**kwargs, adaptation_features=True)
-    obs, _ = env.reset(seed=201)
-    plain_obs, _ = plain.reset(seed=201)
-    assert obs.shape == (plain_obs.shape[0] + 4,) and env.observation_space.shape == obs.shape
-    assert env.observation_space.shape[0] == env.unwrapped.observation_space.shape[0] + EXPERT_FEATURE_SIZE + 4
-    np.testing.assert_array_equal(obs[-4:], 1.0)
-    for _ in range(100):  # 2 s: the gains move from 1
-        obs, *_ = env.step(np.zeros(12, dtype=np.float32))
-        plain_obs, *_ = plain.step(np.zeros(12, dtype=np.float32))
-    gain = env.unwrapped.controller.adaptation.gain[KNEES]
-    assert np.abs(gain - 1.0).max() > 0.05
-    np.testing.assert_array_equal(obs[-4:], gain.astype(np.float32))
-    np.testing.assert_array_equal(obs[:-4], plain_obs)  # the rest is the observation without them
-    check_env(env, skip_render_check=True)
-    sb3_check_env(env, warn=True)
-
-
-@pytest.mark.parametrize(
-    ("kwargs", "field"),
-    [
-        ({"gain_adaptation": "none", "adaptation_features": True}, "adaptation_features"),
-        ({"gain_adaptation": "knee", "expert_features": False, "adaptation_features": True}, "adaptation_features"),
-        ({"gain_adaptation": "knee", "adaptation_features": "yes"}, "adaptation_features"),
-    ],
-)
-def test_adaptation_features_without_the_adaptation_are_refused_by_name(kwargs, field):
-    with pytest.raises(ValueError, match=rf"^{field}"):
-        make_residual_env(terrain="flat", **kwargs)
-
-
-def test_adaptation_features_in_a_config_need_the_knee_adaptation(tmp_path):
-    import yaml
-
-    from agents.rl.config import default_config_path
-
-    raw = yaml.safe_load(default_config_path("ppo").read_text())
-    path = tmp_path / "c.yaml"
-    path.write_text(yaml.safe_dump({**raw, "adaptation_features": True, "gain_adaptation": "none"}))
-    with pytest.raises(TrainConfigError, match=r"^adaptation_features: true needs .*gain_adaptation: knee"):
-        load_train_config(path)
-    path.write_text(yaml.safe_dump({**raw, "adaptation_features": True, "gain_adaptation": "knee"}))
-    assert load_train_config(path).adaptation_features is True
-
-
-@pytest.mark.filterwarnings("ignore:.*different from the unwrapped")
-def test_evaluate_builds_the_training_observation_with_the_adapted_gains(tmp_path):
-    """A model folder with ``adaptation_features``: the loaded policy sees, step for step, the observation the
-    training env gives (the adapted gains included), and the ONNX layout names the gains' slice."""
-    import json
-
-    import onnx
-    import stable_baselines3
-
-    from agents.evaluation.policies import make_policy, policy_env_kwargs
-    from agents.rl.export import export_onnx
-    from agents.rl.model_io import ModelError, read_metadata, write_metadata
-
-    kwargs = dict(terrain="flat", randomization="extreme", residual_scale=0.5, residual_basis="expert_torque")
-    train_env = make_residual_env(**kwargs, gain_adaptation="knee", adaptation_features=True)
-    model = stable_baselines3.PPO("MlpPolicy", train_env, n_steps=64, batch_size=32, device="cpu", seed=0,
-                                  policy_kwargs={"net_arch": [16]})  # fmt: skip
-    model.save(tmp_path / "model.zip")
-    meta = {"algo": "ppo", "residual": True, "residual_scale": 0.5, "expert_features": True,
-            "normalize_obs": False, "env_kwargs": {}, "residual_basis": "expert_torque",
-            "gain_adaptation": "knee", "adaptation_features": True}  # fmt: skip
-    write_metadata(tmp_path, meta)
-    path = tmp_path / "model.zip"
-    env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(str(path)), "terrain": "flat", "randomization": "extreme"})
-    policy = make_policy(str(path), env)
-    seen = []
-    predict = policy.model.predict
-    policy.model.predict = lambda obs, **kw: (seen.append(np.array(obs)), predict(obs, **kw))[1]
-    obs, _ = env.reset(seed=7)
-    train_obs, _ = train_env.reset(seed=7)
-    for _ in range(60):
-        action, _ = policy.predict(obs)
-        np.testing.assert_array_equal(seen[-1], train_obs)
-        obs, *_ = env.step(action)
-        train_obs, *_ = train_env.step(action)
-    assert np.abs(seen[-1][-4:] - 1.0).max() > 0  # the gains moved, and both sides saw the same
-    export_onnx(path, tmp_path / "p.onnx")
-    props = {p.key: p.value for p in onnx.load(str(tmp_path / "p.onnx")).metadata_props}
-    n = train_env.observation_space.shape[0]
-    assert json.loads(props["observation_layout"])["adapted_knee_gain"] == [n - 4, n]
-    assert json.loads(props["adaptation_features"]) is True
-    write_metadata(tmp_path, {**meta, "gain_adaptation": "none"})
-    with pytest.raises(ModelError, match=r"adaptation_features must be false, or true with gain_adaptation 'knee'"):
-        read_metadata(path)
-
-
-def test_a_training_run_with_adaptation_features_records_them_and_loads_for_evaluate(tmp_path):
-    """``quad-uneven train`` writes ``adaptation_features`` into rl_meta.json, so the loaded policy's observation
-    (env + expert features + the four gains) fits the trained network."""
+def test_a_training_run_records_its_expert_config_and_evaluate_rebuilds_it(tmp_path):
+    """``quad-uneven train`` with ``expert: {adaptation: knee, friction: 0.6}``: rl_meta.json records those
+    fields, and the loaded policy's expert has that config (the round trip of a model folder's expert)."""
     import json
 
     import yaml
@@ -289,15 +294,18 @@ def test_a_training_run_with_adaptation_features_records_them_and_loads_for_eval
     raw.update(
         timesteps=32, n_envs=1, max_episode_steps=16, eval_freq=0, checkpoint_freq=0, terrain="flat",
         hyperparams={"n_steps": 32, "batch_size": 16, "n_epochs": 1}, policy_kwargs={"net_arch": [8]},
-        gain_adaptation="knee", adaptation_features=True,
+        expert={"adaptation": "knee", "friction": 0.6},
     )  # fmt: skip
     (tmp_path / "c.yaml").write_text(yaml.safe_dump(raw))
     train(load_train_config(tmp_path / "c.yaml"), tmp_path / "run", progress=False)
-    assert json.loads((tmp_path / "run" / "rl_meta.json").read_text())["adaptation_features"] is True
+    meta = json.loads((tmp_path / "run" / "rl_meta.json").read_text())
+    assert meta["expert"] == {"friction": 0.6, "adaptation": "knee"}
+    assert "strength_estimator_sha256" not in meta and "gain_adaptation" not in meta
+    assert json.loads((tmp_path / "run" / "train_config.json").read_text())["expert"] == raw["expert"]
     path = str(tmp_path / "run" / "model.zip")
     env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(path), "terrain": "flat"})
     policy = make_policy(path, env)
-    assert policy.adaptation is env.unwrapped.controller.adaptation
+    assert policy.expert.config == ExpertConfig(adaptation="knee", friction=0.6)
     obs, _ = env.reset(seed=0)
     action, _ = policy.predict(obs)
     assert action.shape == (12,)

@@ -59,14 +59,19 @@ def _recorded_observations(env, n: int = 200) -> np.ndarray:
 
 
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
-def test_onnx_export_matches_predict(tmp_path, algo):
+def test_onnx_export_matches_predict(tmp_path, algo, capfd, recwarn):
     import onnx
     import onnxruntime as ort
 
     from agents.cli import main
 
     path, env, _ = _model_folder(tmp_path, algo, np.random.default_rng(0))
+    capfd.readouterr()
+    recwarn.clear()
     assert main(["export", "--policy", str(path), "--out", str(tmp_path / "p.onnx")]) == 0
+    printed = capfd.readouterr()
+    assert "torchvision" not in printed.err and "Warning" not in printed.err, printed.err  # no third-party notes
+    assert not [w for w in recwarn if issubclass(w.category, FutureWarning | DeprecationWarning)]
     policy = load_sb3_policy(path, gym.make("QuadUneven-v0", terrain="flat"), algo)
     obs = _recorded_observations(env)
     want = np.array([policy.predict(o)[0] for o in obs])

@@ -11,6 +11,7 @@ from agents.expert import ExpertConfig, ExpertPolicy, attach_expert
 from agents.rl.expert_features import EXPERT_FEATURE_SIZE
 from agents.rl.residual_env import (
     RESIDUAL_ENV_ID,
+    ResidualConfig,
     ResidualController,
     ResidualExpertEnv,
     install_residual_controller,
@@ -43,7 +44,7 @@ def test_zero_residual_reproduces_the_expert(distribution):
     cfg = ExpertConfig(distribution=distribution)
     plain = gym.make("QuadUneven-v0", terrain="rough", max_episode_steps=STEPS + 1)
     attach_expert(plain, cfg)
-    residual = gym.make(RESIDUAL_ENV_ID, terrain="rough", expert_config=cfg, max_episode_steps=STEPS + 1)
+    residual = gym.make(RESIDUAL_ENV_ID, terrain="rough", expert=cfg, max_episode_steps=STEPS + 1)
     zeros = np.zeros((STEPS, 12), dtype=np.float32)
     a, b = _rollout(plain, zeros, seed=0), _rollout(residual, zeros, seed=0)
     if distribution == "qp":
@@ -63,8 +64,8 @@ def test_a_residual_changes_the_trajectory():
     """The comparison above can fail: a constant residual moves the robot away from the expert's path."""
     cfg = ExpertConfig(distribution="pinv")
     steps = 20
-    zero = gym.make(RESIDUAL_ENV_ID, terrain="flat", expert_config=cfg)
-    push = gym.make(RESIDUAL_ENV_ID, terrain="flat", expert_config=cfg)
+    zero = gym.make(RESIDUAL_ENV_ID, terrain="flat", expert=cfg)
+    push = gym.make(RESIDUAL_ENV_ID, terrain="flat", expert=cfg)
     a = _rollout(zero, np.zeros((steps, 12), dtype=np.float32), seed=0)
     b = _rollout(push, np.full((steps, 12), 0.5, dtype=np.float32), seed=0)
     assert np.abs(a["qpos"][-1] - b["qpos"][-1]).max() > 1e-3
@@ -220,7 +221,7 @@ def test_residual_penalty_is_a_named_reward_term():
         assert info["reward_terms"]["residual"] == pytest.approx(want)
         assert r_paid == pytest.approx(r_plain + want)
         assert info["residual_torque"] == pytest.approx(float(np.mean(np.abs(action) * 12.0)))
-    with pytest.raises(ValueError, match="residual_penalty must be a finite number >= 0"):
+    with pytest.raises(ValueError, match=r"^ResidualConfig\.residual_penalty must be a number in \[0, inf\)"):
         gym.make(RESIDUAL_ENV_ID, terrain="flat", residual_penalty=-1.0)
 
 
@@ -272,8 +273,8 @@ def test_stance_gated_env_equals_the_plain_residual_on_touching_legs():
     assert 0 < gate.sum() < 12  # some leg swings, some stands: the gate is exercised
     expected = np.clip(tau + 0.2 * action.astype(np.float64) * lim * gate, -lim, lim)
     np.testing.assert_allclose(env.unwrapped.data.ctrl, expected, rtol=0, atol=1e-9)
-    plain = make_residual_env(terrain="rough", expert_config=ExpertConfig(distribution="pinv"))
-    gated = make_residual_env(terrain="rough", expert_config=ExpertConfig(distribution="pinv"), residual_legs="stance")
+    plain = make_residual_env(terrain="rough", expert=ExpertConfig(distribution="pinv"))
+    gated = make_residual_env(terrain="rough", expert=ExpertConfig(distribution="pinv"), residual_legs="stance")
     zeros = np.zeros((40, 12), dtype=np.float32)
     np.testing.assert_array_equal(_rollout(plain, zeros, 3)["qpos"], _rollout(gated, zeros, 3)["qpos"])
 
@@ -381,13 +382,13 @@ def test_the_compiled_abs_sum_is_numpys_pairwise_sum(n):
 def test_the_residual_lane_walks_exactly_as_the_call_it_replaces(randomization, monkeypatch):
     """The residual env with ``ResidualController.torques_into`` (through the expert's lane) against the same env
     with it removed: the same torques, trajectory, observations and applied residual (``info["residual_torque"]``)
-    bit for bit, under random residual actions, with the adaptive knee gains and stance gating, in the nominal
-    world and in a randomized one (where the expert steps its own model's copy)."""
+    bit for bit, under random residual actions, over the expert with the adaptive knee gains and stance gating, in
+    the nominal world and in a randomized one (where the expert steps its own model's copy)."""
     runs = []
     for lane in (True, False):
         env = make_residual_env(
             residual_scale=0.5, terrain="rough", residual_legs="stance", residual_basis="expert_torque",
-            gain_adaptation="knee", randomization=randomization,
+            expert=ExpertConfig(adaptation="knee"), randomization=randomization,
         )  # fmt: skip
         answers = []
         real = ResidualController.torques_into
@@ -417,3 +418,64 @@ def test_the_residual_lane_walks_exactly_as_the_call_it_replaces(randomization, 
         np.testing.assert_array_equal(o1, o2)
         assert r1 == r2
     assert 0.8 * len(answers) < sum(answers) < len(answers)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "allowed"),
+    [
+        ("residual_scale", 0.0, r"a number in \(0, 1\]"),
+        ("residual_scale", "big", r"a number in \(0, 1\]"),
+        ("residual_legs", "swing", r"one of \['all', 'stance'\]"),
+        ("residual_basis", None, r"one of \['torque_limit', 'expert_torque'\]"),
+        ("expert_features", "yes", "true or false"),
+        ("residual_penalty", float("inf"), r"a number in \[0, inf\)"),
+        ("expert", {"adaptation": "hips"}, None),
+    ],
+)
+def test_a_bad_residual_config_field_is_refused_by_name(field, value, allowed):
+    """ResidualConfig (and the env built from it, and a mapping of its fields) names the bad field and what it
+    allows; a mapping's expert names the expert's field."""
+    if field == "expert":
+        with pytest.raises(ValueError, match=r"^ResidualConfig\.expert must be an ExpertConfig"):
+            ResidualConfig(expert=value)
+        with pytest.raises(ValueError, match=r"^ResidualConfig\.expert\.adaptation must be one of"):
+            ResidualConfig.from_dict({"expert": value})
+        return
+    message = rf"^ResidualConfig\.{field} must be {allowed}"
+    with pytest.raises(ValueError, match=message):
+        ResidualConfig(**{field: value})
+    with pytest.raises(ValueError, match=message):
+        ResidualConfig.from_dict({field: value})
+    with pytest.raises(ValueError, match=message):
+        make_residual_env(terrain="flat", **{field: value})
+
+
+def test_the_residual_config_round_trips_and_travels_as_one_object():
+    """to_dict / from_dict give back the same frozen config (the expert as its fields that differ from the
+    defaults); the env takes it whole, or its fields as keywords, never both; a misspelt field is refused."""
+    import dataclasses
+    import json
+
+    from agents.control.controller import Gains
+
+    expert = ExpertConfig(adaptation="learned", friction=0.6, durations=(0.4,) * 3 + (0.1,) + (0.4,) * 3,
+                          gains=Gains(kp_joint=800.0))  # fmt: skip
+    cfg = ResidualConfig(residual_scale=0.3, residual_legs="stance", residual_basis="expert_torque",
+                         expert_features=False, residual_penalty=0.5, expert=expert)  # fmt: skip
+    raw = json.loads(json.dumps(cfg.to_dict()))
+    assert raw["expert"] == {
+        "durations": [0.4, 0.4, 0.4, 0.1, 0.4, 0.4, 0.4], "gains": {**dataclasses.asdict(Gains()), "kp_joint": 800.0},
+        "friction": 0.6, "adaptation": "learned",
+    }  # fmt: skip
+    assert ResidualConfig.from_dict(raw) == cfg
+    assert ResidualConfig().to_dict()["expert"] == {}
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cfg.residual_scale = 0.2  # type: ignore[misc]
+    env = make_residual_env(config=cfg, terrain="flat")
+    assert env.config is cfg and env.expert.config is expert and env.controller.residual_legs == "stance"
+    assert not env.expert_features and env.residual_penalty == 0.5
+    assert make_residual_env(config=raw, terrain="flat").config == cfg
+    with pytest.raises(ValueError, match="in config or as keywords, not both"):
+        make_residual_env(config=cfg, residual_scale=0.2, terrain="flat")
+    with pytest.raises(ValueError, match=r"^ResidualConfig: unknown field\(s\) \['residual_scal'\]"):
+        ResidualConfig.from_dict({"residual_scal": 0.2})

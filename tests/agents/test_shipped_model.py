@@ -1,12 +1,12 @@
-"""The shipped models (models/ppo_residual_adaptive, the baseline; models/sac_residual_adaptive, its SAC
-comparison, models/sac_residual_adaptive_continued, that run trained further, and
-models/sac_residual_adaptive_features, with the adapted gains in its observation; models/ppo_residual_gain,
-models/ppo_residual_extreme and models/ppo_residual_hard, its predecessors; models/ppo_scratch): load as data,
-run, match their configs."""
+"""The shipped models (models/ppo_residual_adaptive, the PPO residual over the expert with the knee adaptation;
+models/ppo_scratch, PPO from scratch): load as data, run, match their configs, and carry a model card whose file
+list and sha256 match the folder and whose config and Makefile target retrain it."""
 
 from __future__ import annotations
 
+import hashlib
 import json
+import re
 from pathlib import Path
 
 import gymnasium as gym
@@ -16,21 +16,45 @@ import pytest
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.evaluation.policies import make_policy, policy_env_kwargs
 from agents.rl.config import load_train_config
-from agents.rl.expert_features import ADAPTATION_FEATURE_SIZE, EXPERT_FEATURE_SIZE
+from agents.rl.expert_features import EXPERT_FEATURE_SIZE
 from agents.rl.model_io import SB3Policy, read_metadata
 from agents.rl.residual_env import ResidualController
 
 ROOT = Path(__file__).resolve().parents[2]
 RESIDUAL_MODELS = {
     "ppo_residual_adaptive": ("extreme", "stance", "expert_torque"),
-    "sac_residual_adaptive": ("extreme", "stance", "expert_torque"),
-    "sac_residual_adaptive_continued": ("extreme", "stance", "expert_torque"),
-    "sac_residual_adaptive_features": ("extreme", "stance", "expert_torque"),
-    "ppo_residual_gain": ("extreme", "stance", "expert_torque"),
-    "ppo_residual_extreme": ("extreme", "stance", "torque_limit"),
-    "ppo_residual_hard": ("hard", "all", "torque_limit"),
 }
 """models/NAME (trained by configs/rl/NAME.yaml) -> (its randomization preset, residual_legs, residual_basis)."""
+
+SHIPPED = {"ppo_residual_adaptive": "rl-baseline", "ppo_scratch": "rl-scratch"}
+"""models/NAME (trained by configs/rl/NAME.yaml) -> the Makefile target that retrains it."""
+
+
+def test_models_holds_the_shipped_agents_only():
+    assert sorted(p.name for p in (ROOT / "models").iterdir()) == sorted(SHIPPED)
+
+
+def _recipe(target: str) -> str:
+    """The lines of a Makefile target, from its rule to the next blank line."""
+    match = re.search(rf"^{re.escape(target)}:.*?(?=\n\n|\Z)", (ROOT / "Makefile").read_text(), re.M | re.S)
+    assert match, f"no Makefile target {target}"
+    return match.group(0)
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED))
+def test_the_shipped_model_has_a_card_with_its_files_config_and_target(name):
+    """models/NAME/README.md lists every file of the folder with its sha256, and names the config and the Makefile
+    target that retrains the model into this folder."""
+    folder = ROOT / "models" / name
+    card = (folder / "README.md").read_text()
+    config, target = f"configs/rl/{name}.yaml", SHIPPED[name]
+    assert config in card and f"make {target}" in card
+    recipe = _recipe(target)
+    assert f"--config {config}" in recipe and f"models/{name})" in recipe  # $(call ship,RUN,models/NAME)
+    listed = dict(re.findall(r"^\| `([^`]+)` \| `([0-9a-f]{64})` \|", card, re.M))
+    assert set(listed) == {p.name for p in folder.iterdir()} - {"README.md"}
+    for file, digest in listed.items():
+        assert hashlib.sha256((folder / file).read_bytes()).hexdigest() == digest, file
 
 
 @pytest.mark.parametrize("name", sorted(RESIDUAL_MODELS))
@@ -49,7 +73,7 @@ def test_the_shipped_model_was_trained_with_the_shipped_config(name):
     assert meta["residual"] and meta["expert_features"] and meta["randomization"] == world
     assert meta.get("residual_legs", "all") == legs
     assert meta.get("residual_basis", "torque_limit") == basis
-    assert meta.get("gain_adaptation", "none") == ("knee" if "_adaptive" in name else "none")
+    assert meta.get("expert", {}) == ({"adaptation": "knee"} if "_adaptive" in name else {})
     assert meta["algo"] == name.split("_")[0]
     assert not list(model.parent.glob("*.pkl"))
 
@@ -63,10 +87,10 @@ def test_the_shipped_model_drives_the_expert_in_a_randomized_world(name):
     assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
     assert env.unwrapped.controller.residual_legs == legs
     assert env.unwrapped.controller.residual_basis == basis
-    assert (env.unwrapped.controller.adaptation is not None) == ("_adaptive" in name)
+    assert policy.expert is env.unwrapped.controller.expert
+    assert policy.expert.config.adaptation == ("knee" if "_adaptive" in name else "none")
     assert type(policy.model).__name__ == name.split("_")[0].upper()  # the class rl_meta.json records
-    adapted = ADAPTATION_FEATURE_SIZE if read_metadata(model).get("adaptation_features") else 0
-    assert policy.model.observation_space.shape == (env.observation_space.shape[0] + EXPERT_FEATURE_SIZE + adapted,)
+    assert policy.model.observation_space.shape == (env.observation_space.shape[0] + EXPERT_FEATURE_SIZE,)
     obs, _ = env.reset(seed=100)
     x0 = env.unwrapped.data.qpos[0]
     actions = []
@@ -89,6 +113,7 @@ def test_the_shipped_from_scratch_model_runs_on_the_plain_env():
     assert meta["residual"] is False and meta["env_kwargs"] == {"action_mode": "joint_pd"}
     recorded = load_train_config(SCRATCH.parent / "train_config.json")
     assert recorded.residual is False and recorded.time_limit_min == 35
+    assert recorded == load_train_config(ROOT / "configs/rl/ppo_scratch.yaml")  # make rl-scratch retrains it
     env = gym.make("QuadUneven-v0", terrain="rough", **policy_env_kwargs(str(SCRATCH)))
     policy = make_policy(str(SCRATCH), env)
     assert isinstance(policy, SB3Policy) and env.unwrapped.controller is None

@@ -1,13 +1,14 @@
 """The learned strength estimator: its statistics by hand, its fit, its file, its adaptation law on a synthetic
-joint, and in the residual env."""
+joint, and in the expert (``ExpertConfig(adaptation="learned")``)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from agents.rl import strength_estimator as SE
-from agents.rl.gain_adaptation import GAIN_BOUNDS, START_TIME
+from agents.control.adaptation import learned as SE
+from agents.control.adaptation.knee import GAIN_BOUNDS, START_TIME
+from agents.rl.strength_fit import fit_estimator
 
 F = len(SE.FEATURE_NAMES)
 
@@ -51,7 +52,7 @@ def test_the_fit_learns_a_nonlinear_map_and_numpy_runs_it_as_torch_does():
     kind = rng.integers(0, 3, 4000)
     z = x / x.std(axis=0)
     y = np.tanh(z[:, 0]) * np.array([0.3, -0.2, 0.5])[kind] + 0.1 * z[:, 3] + np.array([0.0, 0.1, -0.1])[kind]
-    est = SE.fit_estimator(x[:3000], y[:3000], kind[:3000], epochs=150)
+    est = fit_estimator(x[:3000], y[:3000], kind[:3000], epochs=150)
     pred = est.predict_kind(x[3000:], kind[3000:])
     assert np.sqrt(np.mean((pred - y[3000:]) ** 2)) < 0.2 * y.std()  # a linear map: 0.73 (the sign flips by kind)
     layers = []
@@ -66,7 +67,7 @@ def test_the_fit_learns_a_nonlinear_map_and_numpy_runs_it_as_torch_does():
     twelve = x[:12]  # predict() takes one row per joint, the joint's kind from its index
     np.testing.assert_allclose(est.predict(twelve), est.predict_kind(twelve, SE.JOINT_KIND), rtol=1e-12)
     with pytest.raises(ValueError, match="too few"):
-        SE.fit_estimator(x[:20], y[:20], kind[:20])
+        fit_estimator(x[:20], y[:20], kind[:20])
 
 
 def _estimator(weights: np.ndarray, bias: float = 0.0) -> SE.StrengthEstimator:
@@ -135,30 +136,35 @@ def test_the_law_settles_every_joint_at_one_over_its_strength():
 
 
 @pytest.mark.filterwarnings("ignore:.*different from the unwrapped")
-def test_the_learned_adaptation_in_the_env_raises_the_weak_knee_and_passes_both_checkers():
-    """Extreme world, zero action, the shipped estimator: after 3 s the weakest knee carries the largest knee
-    gain, above 1 (seed 201's knees: 0.83, 0.95, 1.30, 0.61); the env passes Gymnasium's and SB3's checkers."""
+def test_the_learned_adaptation_in_the_expert_raises_the_weak_knee_and_the_residual_env_passes_both_checkers():
+    """Extreme world, the shipped estimator: after 3 s the expert's weakest knee carries the largest knee gain,
+    above 1 (seed 201's knees: 0.83, 0.95, 1.30, 0.61); the residual env over that expert passes Gymnasium's and
+    SB3's checkers."""
+    import gymnasium as gym
     from gymnasium.utils.env_checker import check_env
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
+    from agents.expert import ExpertConfig, attach_expert
     from agents.rl.residual_env import make_residual_env
 
-    env = make_residual_env(
-        terrain="rough", randomization="extreme", residual_scale=0.5, residual_legs="stance",
-        residual_basis="expert_torque", gain_adaptation="learned",
-    )  # fmt: skip
+    env = gym.make("QuadUneven-v0", terrain="rough", randomization="extreme")
+    expert = attach_expert(env, ExpertConfig(adaptation="learned"))
     env.reset(seed=201)
-    assert isinstance(env.unwrapped.controller.adaptation, SE.LearnedGainAdaptation)
+    assert isinstance(expert.adaptation.law, SE.LearnedGainAdaptation)
     knees = np.arange(2, 12, 3)
     strength = env.unwrapped.episode_draw.motor_strength[knees]
     for _ in range(150):
         *_, terminated, _, _ = env.step(np.zeros(12, dtype=np.float32))
         assert not terminated
-    gain = env.unwrapped.controller.adaptation.gain
+    gain = expert.adaptation.gain
     assert np.argmax(gain[knees]) == np.argmin(strength)
     assert gain[knees][np.argmin(strength)] > 1.1
-    check_env(env, skip_render_check=True)
-    sb3_check_env(env, warn=True)
+    residual = make_residual_env(
+        terrain="rough", randomization="extreme", residual_scale=0.5, residual_legs="stance",
+        residual_basis="expert_torque", expert=ExpertConfig(adaptation="learned"),
+    )  # fmt: skip
+    check_env(residual, skip_render_check=True)
+    sb3_check_env(residual, warn=True)
 
 
 def test_one_collected_episode_pairs_statistics_with_the_drawn_strengths():
@@ -166,7 +172,7 @@ def test_one_collected_episode_pairs_statistics_with_the_drawn_strengths():
     world, with gains inside the adaptation's bounds."""
     import gymnasium as gym
 
-    from agents.rl.strength_data import ENTRIES, collect_episode
+    from agents.rl.strength_fit import ENTRIES, collect_episode
 
     features, target = collect_episode(("rough", 1000, 2.5))
     assert features.shape == (round((2.5 - START_TIME - SE.WARMUP) / 0.02 / 5), 12, F)
@@ -185,10 +191,20 @@ def test_a_training_run_records_the_estimator_it_adapts_with():
     from agents.rl.config import load_train_config
     from agents.rl.training import _metadata
 
-    meta = _metadata(load_train_config(None, {"gain_adaptation": "learned"}))
-    assert meta["gain_adaptation"] == "learned"
+    meta = _metadata(load_train_config(None, {"expert": {"adaptation": "learned"}}))
+    assert meta["expert"] == {"adaptation": "learned"}
     assert meta["strength_estimator_sha256"] == SE.estimator_digest() and len(meta["strength_estimator_sha256"]) == 64
-    assert "strength_estimator_sha256" not in _metadata(load_train_config(None, {"gain_adaptation": "knee"}))
+    assert "strength_estimator_sha256" not in _metadata(load_train_config(None, {"expert": {"adaptation": "knee"}}))
+
+
+def test_the_estimator_ships_as_package_data():
+    """The default estimator is the package's ``data/strength_estimator.npz``, declared as package data."""
+    from pathlib import Path
+
+    assert SE.DEFAULT_ESTIMATOR == Path(SE.__file__).parent / "data" / "strength_estimator.npz"
+    assert SE.DEFAULT_ESTIMATOR.is_file()
+    pyproject = (Path(__file__).resolve().parents[2] / "pyproject.toml").read_text()
+    assert '"agents.control.adaptation" = ["data/*.npz"]' in pyproject
 
 
 def test_the_fit_command_refits_saved_samples_and_names_bad_options(tmp_path, capsys):

@@ -64,7 +64,10 @@ def test_weights_and_bad_mixes():
 
 
 def test_training_env_of_a_terrain_list_with_randomization():
-    env = make_train_env(["flat", {"kind": "stairs", "params": {"riser": 0.05}}], 0.1, 5, {}, "mild", True)
+    from agents.rl.residual_env import ResidualConfig
+
+    terrains = ["flat", {"kind": "stairs", "params": {"riser": 0.05}}]
+    env = make_train_env(terrains, 5, {}, "mild", ResidualConfig(residual_scale=0.1))
     _, info = env.reset(seed=0)
     seen = set()
     for _ in range(6):
@@ -90,5 +93,5 @@ def test_config_terrain_list_and_randomization_are_validated():
         validate(TrainConfig(randomization="stormy"))
     with pytest.raises(TrainConfigError, match="env_kwargs may not set"):
         validate(TrainConfig(env_kwargs={"randomization": "hard"}))
-    shipped = load_train_config("configs/rl/ppo_residual_hard.yaml")
-    assert len(shipped.terrain) == 3 and shipped.randomization == "hard" and shipped.expert_features
+    shipped = load_train_config("configs/rl/ppo_residual_adaptive.yaml")
+    assert len(shipped.terrain) == 6 and shipped.randomization == "extreme" and shipped.expert_features

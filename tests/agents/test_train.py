@@ -85,9 +85,8 @@ def test_argparse_rejects_unknown_algo_and_non_integer_timesteps(tmp_path, capsy
         ({"residual_legs": "swing"}, "residual_legs"),
         ({"residual": False, "expert_features": False, "residual_legs": "stance"}, "residual"),
         ({"residual_basis": "gain"}, "residual_basis"),
-        ({"initial_action": 1.5}, "initial_action"),
         ({"residual": False, "expert_features": False, "residual_basis": "expert_torque"}, "residual"),
-        ({"residual": False, "expert_features": False, "initial_action": 0.2}, "residual"),
+        ({"initial_action": 0.2}, "initial_action"),  # not a field
     ],
 )
 def test_bad_config_fields_are_named(tmp_path, changes, field):
@@ -192,7 +191,7 @@ def test_tiny_run_from_scratch_evaluates_on_the_plain_env(tmp_path):
     from agents.rl.training import train
 
     shipped = load_train_config(Path("configs/rl/ppo_scratch.yaml"))
-    assert shipped.residual is False and shipped.time_limit_min == 50
+    assert shipped.residual is False and shipped.time_limit_min == 35
     cfg = load_train_config(
         write_config(tmp_path / "c.yaml", residual=False, expert_features=False, residual_penalty=0.0)
     )
@@ -225,14 +224,13 @@ def test_residual_policy_installs_expert_and_normalizes(tmp_path):
             checkpoint_freq=0,
             residual_legs="stance",
             residual_basis="expert_torque",
-            initial_action=0.4,
         )
     )
     train(cfg, tmp_path / "run", progress=False)
     path = str(tmp_path / "run" / "model.zip")
     meta_path = tmp_path / "run" / "rl_meta.json"
     meta = json.loads(meta_path.read_text())
-    assert (meta["residual_legs"], meta["residual_basis"], meta["initial_action"]) == ("stance", "expert_torque", 0.4)
+    assert (meta["residual_legs"], meta["residual_basis"]) == ("stance", "expert_torque")
     env = gym.make("QuadUneven-v0", terrain="flat", **policy_env_kwargs(path))
     policy = make_policy(path, env)
     assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
@@ -270,21 +268,20 @@ def test_wall_clock_limit_stops_training_and_still_saves(tmp_path):
 
 
 @pytest.mark.parametrize("algo", ["PPO", "SAC"])
-@pytest.mark.parametrize("initial", [0.0, 0.6, -0.3])
-def test_untrained_agent_commands_the_initial_action(algo, initial):
-    """The mean-action layer starts constant: the untrained deterministic agent commands ``initial_action`` on
-    every joint (0: the expert), through SAC's tanh squashing too."""
+def test_untrained_agent_commands_zero(algo):
+    """The mean-action layer starts at zero: the untrained deterministic agent commands 0 on every joint (the
+    expert), through SAC's tanh squashing too."""
     import gymnasium as gym
     import stable_baselines3
 
-    from agents.rl.training import _constant_mean_action
+    from agents.rl.training import _zero_mean_action
 
     env = gym.wrappers.RescaleAction(gym.make("Pendulum-v1"), -1.0, 1.0)
     model = getattr(stable_baselines3, algo)("MlpPolicy", env, policy_kwargs={"net_arch": [8]}, device="cpu", seed=0)
     obs = np.stack([env.observation_space.sample() for _ in range(5)])
-    assert np.abs(model.predict(obs, deterministic=True)[0] - initial).max() > 0  # not so by SB3's own init
-    _constant_mean_action(model, initial)
-    np.testing.assert_allclose(model.predict(obs, deterministic=True)[0], initial, atol=1e-6)
+    assert np.abs(model.predict(obs, deterministic=True)[0]).max() > 0  # not so by SB3's own init
+    _zero_mean_action(model)
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], 0.0)
 
 
 def test_sigterm_stops_training_and_still_saves(tmp_path, monkeypatch):

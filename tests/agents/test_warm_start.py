@@ -1,5 +1,5 @@
 """How a SAC residual run starts: --init-from (a warm start takes the saved weights, optimizers, temperature and
-statistics), actor_warmup_steps (the critics learn first) and initial_std (the untrained actor's exploration std)."""
+statistics), and the untrained actor's exploration std."""
 
 from __future__ import annotations
 
@@ -107,7 +107,7 @@ def test_a_warm_started_run_trains_and_records_its_origin(saved_run, tmp_path):
     ("changes", "message"),
     [
         ({"residual_scale": 0.2}, "residual_scale"),
-        ({"gain_adaptation": "knee"}, "gain_adaptation"),
+        ({"expert": {"adaptation": "knee"}}, "expert"),
         ({"expert_features": False}, "expert_features"),
         ({"policy_kwargs": {"net_arch": [8]}}, "does not fit"),
     ],
@@ -142,38 +142,6 @@ def test_a_from_scratch_model_continues_too(tmp_path):
     assert summary["init_timesteps"] == 16 and summary["timesteps"] == 16
 
 
-@pytest.mark.parametrize("warmup", [64, 32])
-def test_actor_warmup_keeps_the_untrained_actor_while_the_critics_learn(tmp_path, warmup):
-    """actor_warmup_steps: during the warm-up the actor's mean layer keeps its untrained values (weights 0, bias
-    the initial action) and the temperature its initial 0.1, while the critics' Adam steps; after it, both move."""
-    from stable_baselines3.common.save_util import load_from_zip_file
-
-    from agents.rl.training import train
-
-    cfg = load_train_config(write_config(tmp_path / "c.yaml", actor_warmup_steps=warmup, timesteps=64))
-    train(cfg, tmp_path / "run", progress=False)
-    _, params, variables = load_from_zip_file(tmp_path / "run" / "model.zip", device="cpu", load_data=False)
-    mu_weight = params["policy"]["actor.mu.weight"].numpy()
-    critic_steps = {int(s["step"]) for s in params["critic.optimizer"]["state"].values()}
-    actor_steps = {int(s["step"]) for s in params["actor.optimizer"]["state"].values()}
-    assert critic_steps == {64}  # learning_starts 0, one gradient step per env step
-    if warmup >= 64:
-        assert not mu_weight.any() and not params["policy"]["actor.mu.bias"].numpy().any()
-        assert variables["log_ent_coef"].item() == pytest.approx(np.log(0.1), abs=1e-7)
-        assert actor_steps <= {0}  # Adam never stepped
-    else:
-        assert mu_weight.any()
-        assert variables["log_ent_coef"].item() != pytest.approx(np.log(0.1), abs=1e-7)
-        assert actor_steps == {64 - warmup}
-
-
-def test_actor_warmup_is_refused_for_ppo(tmp_path):
-    from agents.rl.config import TrainConfigError
-
-    with pytest.raises(TrainConfigError, match=r"^actor_warmup_steps needs algo: sac"):
-        load_train_config(None, {"algo": "ppo", "actor_warmup_steps": 100})
-
-
 OBS_DIM = 30
 
 
@@ -203,50 +171,8 @@ def _std(tmp_path, **changes) -> np.ndarray:
 
 
 def test_sb3_sac_ignores_log_std_init(tmp_path):
-    """Why initial_std exists: with policy_kwargs.log_std_init -2.3 (std 0.1) SB3's SAC actor starts with a random
-    log-std layer, a std near 1 that varies with the state."""
+    """With policy_kwargs.log_std_init -2.3 (std 0.1) SB3's SAC actor starts with a random log-std layer, a std
+    near 1 that varies with the state; the config warns."""
     with pytest.warns(UserWarning, match=r"^policy_kwargs.log_std_init has no effect on SAC without use_sde"):
-        std = _std(tmp_path, initial_std=None, policy_kwargs={"net_arch": [16], "log_std_init": -2.3})
+        std = _std(tmp_path, policy_kwargs={"net_arch": [16], "log_std_init": -2.3})
     assert np.median(std) > 0.5 and std.std() > 1e-3
-
-
-@pytest.mark.parametrize("initial_std", [0.1, 0.3])
-def test_initial_std_is_the_std_in_every_state(tmp_path, initial_std):
-    std = _std(tmp_path, initial_std=initial_std)
-    np.testing.assert_allclose(std, initial_std, rtol=1e-6)
-
-
-def test_initial_std_survives_the_actor_warmup_and_then_learns(tmp_path):
-    """Held by actor_warmup_steps (zero weights, bias log 0.1 in the saved model), moved by the actor's updates."""
-    from stable_baselines3.common.save_util import load_from_zip_file
-
-    from agents.rl.training import train
-
-    for warmup, name in ((64, "held"), (0, "free")):
-        cfg = load_train_config(write_config(tmp_path / f"{name}.yaml", initial_std=0.1, actor_warmup_steps=warmup))
-        train(cfg, tmp_path / name, progress=False)
-        _, params, _ = load_from_zip_file(tmp_path / name / "model.zip", device="cpu", load_data=False)
-        weight = params["policy"]["actor.log_std.weight"].numpy()
-        bias = params["policy"]["actor.log_std.bias"].numpy()
-        if warmup:
-            assert not weight.any()
-            np.testing.assert_allclose(bias, np.log(0.1), rtol=1e-6)
-        else:
-            assert weight.any() and not np.allclose(bias, np.log(0.1))
-
-
-@pytest.mark.parametrize(
-    ("changes", "message"),
-    [
-        ({"algo": "ppo", "initial_std": 0.1}, r"^initial_std needs algo: sac"),
-        (
-            {"algo": "sac", "initial_std": 0.1, "hyperparams": {"use_sde": True}},
-            r"^initial_std is for SAC without use_sde",
-        ),
-        ({"algo": "sac", "initial_std": 0.0}, r"initial_std"),
-        ({"algo": "sac", "initial_std": "wide"}, r"initial_std"),
-    ],
-)
-def test_bad_initial_std_is_refused_naming_the_field(changes, message):
-    with pytest.raises(TrainConfigError, match=message):
-        load_train_config(None, changes)

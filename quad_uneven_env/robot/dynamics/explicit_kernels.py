@@ -11,6 +11,8 @@ import math
 import numba as nb
 import numpy as np
 
+from quad_uneven_env.jit import njit
+
 NV = 18
 
 _f1 = nb.float64[:]
@@ -18,9 +20,8 @@ _f2 = nb.float64[:, :]
 _f3 = nb.float64[:, :, :]
 
 
-@nb.njit(
+@njit(
     nb.void(_f2, _f2, _f2, _f1, _f1, _f1, _f3, _f2, _f1, _f1, _f3, _f2, _f2, nb.float64[:, :, :, :], _f3),
-    cache=False,
     nogil=True,
 )
 def explicit_terms(

@@ -28,6 +28,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from quad_uneven_env.jit import njit
+
 N_LEGS = 4
 NV = 18
 
@@ -42,7 +44,7 @@ IDX_TRUNK, IDX_SITES, IDX_JNT, IDX_DOF, IDX_BODY, IDX_LEN = 0, 1, 5, 17, 29, 41
 PAR_MASS, PAR_G, PAR_MSUB, PAR_LEN = 0, 1, 4, 16
 
 
-@nb.njit(nb.void(_f1, _i1, _i1, _i1, _f2), cache=False, nogil=True)
+@njit(nb.void(_f1, _i1, _i1, _i1, _f2), nogil=True)
 def expand_csr_lower(M_csr, rowadr, rownnz, colind, M):  # pragma: no cover - compiled
     """Full symmetric M (nv, nv) from MuJoCo's CSR lower triangle (``data.M``)."""
     n = M.shape[0]
@@ -58,9 +60,8 @@ def expand_csr_lower(M_csr, rowadr, rownnz, colind, M):  # pragma: no cover - co
             M[j, i] = v
 
 
-@nb.njit(
+@njit(
     nb.void(_f1, _f1, _i1, _i1, _i1, _f2, _f2, _f2, _f2, _f2, _f2, _i1, _f1, _f2, _f3, _f2, _f1),
-    cache=False,
     nogil=True,
 )
 def mujoco_terms(

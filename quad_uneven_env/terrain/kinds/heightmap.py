@@ -52,9 +52,12 @@ def _load(value: Any, where: str) -> np.ndarray:
         except (OSError, ValueError) as exc:
             raise ValueError(f"{where}.heights: cannot read {str(path)!r} as a .npy array ({exc})") from exc
     try:
-        h = np.array(value, dtype=np.float64)
+        raw = np.asarray(value)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}.heights must be a 2-D array of numbers (m) or a .npy path ({exc})") from exc
+    if raw.dtype.kind not in "iuf":  # bools, strings, complex or objects are not heights
+        raise ValueError(f"{where}.heights must hold real numbers (m; float or int), got dtype {raw.dtype}")
+    h = np.array(raw, dtype=np.float64)
     if h.ndim != 2 or h.shape[0] < 2 or h.shape[1] < 2:
         raise ValueError(
             f"{where}.heights must be a 2-D array (rows along y, columns along x) of at least 2 x 2, "
@@ -83,6 +86,11 @@ def spawn_nodes(p: Params) -> np.ndarray:
 
 def _check(p: dict[str, Any], where: str) -> None:
     p["heights"] = _load(p["heights"], where)
+    if p["origin"] is not None and p["x_start"] != _SHARED["x_start"].default:
+        raise ValueError(
+            f"{where}: origin and x_start both place the grid; give one of them (origin={p['origin']}, "
+            f"x_start={p['x_start']:g} m)"
+        )
     check_spawn_inside(_grid(p), p, where, "origin, x_start or spawn_radius")
     nodes = spawn_nodes(p)
     if nodes.size and float(np.ptp(nodes)) > SPAWN_FLAT_TOLERANCE:
