@@ -15,8 +15,8 @@ step's time goes;
 does not inflate the way it does wall time), split into planning, the plans' reference grids and the rest;
 ``--no-lane``: without the hook's fast lane, ``ExpertPolicy.torques_into``; ``--readable``: the controller's readable
 call at every physics step instead of its compiled step (``hook.compiled = False``); ``--paths REPS``: afterwards the
-same episode with the readable call, the compiled step without the lane and with it, alternated REPS times in this
-process (the machine's drift then falls on all alike), with their cost against the readable call's).
+same episode with the readable call, the compiled step without the lane and with it, walked in lockstep in this
+process (the machine's load then falls on all alike), REPS times, with their speed-up over the readable call).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--readable", action="store_true", help="the readable controller call at every physics step")
     parser.add_argument(
         "--paths", type=int, default=0, metavar="REPS",
-        help="then walk the same episode REPS times with each control path (readable, compiled, compiled + lane)",
+        help="then walk the same episode with each control path (readable, compiled, compiled + lane) REPS times",
     )  # fmt: skip
     args = parser.parse_args(argv)
     split = _StepTimer.install() if args.split else None
@@ -66,7 +66,7 @@ def main(argv: list[str] | None = None) -> None:
     for _ in range(5):
         obs, *_ = env.step(policy.predict(obs)[0])
     if hook_cpu is not None:
-        hook_cpu.wrap(env.unwrapped)
+        hook_cpu.wrap(env.unwrapped, policy)
     obs, info = env.reset(seed=0)
     if split is not None:
         split.clear()
@@ -133,7 +133,7 @@ def main(argv: list[str] | None = None) -> None:
             f"rest {rest / n * 1e6:.0f}"
         )
     if args.paths:
-        _paths(env, policy, args.seconds, args.paths)
+        _paths(args.terrain, config, args.seconds, args.paths)
     if hook_cpu is not None:
         n = round(sim_expert / u.model.opt.timestep)
         h = hook_cpu
@@ -151,6 +151,8 @@ PATHS = {
 }
 """The expert's control paths ``--paths`` compares: the hook's full call with ``hook.compiled`` off, on, and the
 env's fast lane (``torques_into``) in front of it."""
+CHUNK = 50
+"""control steps per turn of ``--paths``."""
 
 
 def _declines(model, data, action, out, limit) -> bool:
@@ -158,42 +160,49 @@ def _declines(model, data, action, out, limit) -> bool:
     return False
 
 
-def _paths(env: gym.Env, policy, seconds: float, reps: int) -> None:
-    """Walk ``seconds`` from ``reset(seed=0)`` ``reps`` times with each of :data:`PATHS`, in turn (reversed every
-    other repetition, so that the machine's drift falls on all alike); print the CPU and wall time per physics step
-    of each, and the readable call's CPU time over each path's (medians of the same run)."""
-    u = env.unwrapped
-    lane = type(policy).torques_into.__get__(policy)
-    cpu: dict[str, list[float]] = {p: [] for p in PATHS}
-    wall: dict[str, list[float]] = {p: [] for p in PATHS}
-    ends: dict[str, np.ndarray] = {}
-    order = list(PATHS)
+def _paths(terrain: str, config, seconds: float, reps: int) -> None:
+    """Walk ``seconds`` from ``reset(seed=0)`` with each of :data:`PATHS` (one env each), in lockstep: turns of
+    :data:`CHUNK` control steps, the order rotating, so that the machine's load falls on all alike; ``reps`` times
+    with new envs. Print each path's thread CPU time per physics step (which a preempting process does not
+    inflate the way it does wall time) and the readable call's over it, turn by turn."""
+    times: dict[str, list[float]] = {p: [] for p in PATHS}
+    same = True
     for rep in range(reps):
-        for path in order if rep % 2 == 0 else order[::-1]:
+        runs = {}
+        for path in PATHS:
+            env = gym.make("QuadUneven-v0", terrain=terrain, max_episode_steps=10**7)
+            policy = attach_expert(env, config)
             policy.hook.compiled = path != "readable"
-            policy.torques_into = lane if path == "lane" else _declines
-            obs, _ = env.reset(seed=0)
-            n = int(seconds / u.dt)
-            c0, t0 = time.process_time(), time.perf_counter()
-            for _ in range(n):
-                obs, _, terminated, _, _ = env.step(policy.predict(obs)[0])
-                if terminated:
-                    break
-            c1, t1 = time.process_time(), time.perf_counter()
-            steps = round(u.data.time / u.model.opt.timestep)
-            cpu[path].append((c1 - c0) / steps * 1e6)
-            wall[path].append((t1 - t0) / steps * 1e6)
-            ends[path] = u.data.qpos.copy()
-    policy.hook.compiled, policy.torques_into = True, lane
-    same = all(np.array_equal(ends[p], ends["readable"]) for p in PATHS)
+            if path != "lane":
+                policy.torques_into = _declines
+            obs, _ = env.reset(seed=1)  # compile outside the timing
+            for _ in range(5):
+                obs, *_ = env.step(policy.predict(obs)[0])
+            runs[path] = [env, policy, env.reset(seed=0)[0]]
+        n = int(seconds / runs["readable"][0].unwrapped.dt)
+        order = list(PATHS)
+        for k, start in enumerate(range(0, n, CHUNK)):
+            r = (k + rep) % len(order)
+            for path in order[r:] + order[:r]:
+                env, policy, obs = runs[path]
+                u, s0 = env.unwrapped, env.unwrapped.data.time
+                c0 = time.thread_time()
+                for _ in range(min(CHUNK, n - start)):
+                    obs, *_ = env.step(policy.predict(obs)[0])
+                cpu = time.thread_time() - c0
+                runs[path][2] = obs
+                times[path].append(cpu / round((u.data.time - s0) / u.model.opt.timestep) * 1e6)
+        end = runs["readable"][0].unwrapped.data.qpos
+        same = same and all(np.array_equal(runs[p][0].unwrapped.data.qpos, end) for p in PATHS)
+    reference = np.array(times["readable"])
     ended = "the same" if same else "DIFFERENT"
-    print(f"control paths, {reps} alternated repetitions of {seconds:g} s (end states {ended}), per physics step:")
-    reference = float(np.median(cpu["readable"]))
+    print(f"control paths, {reps} x {seconds:g} s in turns of {CHUNK} control steps (end states {ended}):")
     for path, what in PATHS.items():
-        c, w = np.array(cpu[path]), np.array(wall[path])
+        t = np.array(times[path])
+        ratio = reference / t
         print(
-            f"  {path:9s} CPU median {np.median(c):6.1f} us (min {c.min():6.1f}), wall median {np.median(w):6.1f} us; "
-            f"readable / this {reference / np.median(c):4.2f}: {what}"
+            f"  {path:9s} CPU us per physics step: median {np.median(t):6.1f}, mean {t.mean():6.1f}; readable / this "
+            f"{np.mean(ratio):4.2f} +- {np.std(ratio) / np.sqrt(len(ratio)):.2f} (turns' mean): {what}"
         )
 
 
@@ -230,17 +239,26 @@ class _HookCPU:
         expert_module.plan_gait_cycle = timed_plan
         return timer
 
-    def wrap(self, env) -> None:
-        """Time ``env``'s hook (after ``attach_expert``)."""
-        hook, clock = env._controller, time.thread_time_ns
+    def wrap(self, env, expert) -> None:
+        """Time the hook of ``env`` (unwrapped), whose controller ``expert`` is (after ``attach_expert``): a
+        controller that holds it as ``.expert``, forwards the reset and times the call (the env then makes the call
+        at every physics step: no fast lane)."""
+        timer, clock = self, time.thread_time_ns
 
-        def timed(model, data, action):
-            t = clock()
-            tau = hook(model, data, action)
-            self.hook += clock() - t
-            return tau
+        class Timed:
+            def __init__(self) -> None:
+                self.expert = expert
 
-        env._controller = timed
+            def reset(self, model, data, terrain) -> None:
+                expert.reset(model, data, terrain)
+
+            def __call__(self, model, data, action):
+                t = clock()
+                tau = expert(model, data, action)
+                timer.hook += clock() - t
+                return tau
+
+        env.set_controller(Timed())
 
     def clear(self) -> None:
         self.hook = self.plan = self.grid = 0
