@@ -250,6 +250,8 @@ def _zero_mean_action(model: Any) -> None:
     head = getattr(model.policy, "action_net", None)
     if head is None:
         head = model.actor.mu
+    if isinstance(head, torch.nn.Sequential):  # SAC with use_sde: the linear layer, then a Hardtanh
+        head = head[0]
     with torch.no_grad():
         head.weight.zero_()
         head.bias.zero_()

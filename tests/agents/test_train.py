@@ -267,17 +267,20 @@ def test_wall_clock_limit_stops_training_and_still_saves(tmp_path):
     assert (tmp_path / "run" / "model.zip").is_file()
 
 
-@pytest.mark.parametrize("algo", ["PPO", "SAC"])
-def test_untrained_agent_commands_zero(algo):
+@pytest.mark.parametrize(("algo", "sde"), [("PPO", False), ("SAC", False), ("SAC", True)])
+def test_untrained_agent_commands_zero(algo, sde):
     """The mean-action layer starts at zero: the untrained deterministic agent commands 0 on every joint (the
-    expert), through SAC's tanh squashing too."""
+    expert), through SAC's tanh squashing and its gSDE head too."""
     import gymnasium as gym
     import stable_baselines3
 
     from agents.rl.training import _zero_mean_action
 
     env = gym.wrappers.RescaleAction(gym.make("Pendulum-v1"), -1.0, 1.0)
-    model = getattr(stable_baselines3, algo)("MlpPolicy", env, policy_kwargs={"net_arch": [8]}, device="cpu", seed=0)
+    kwargs = {"use_sde": True} if sde else {}
+    model = getattr(stable_baselines3, algo)(
+        "MlpPolicy", env, policy_kwargs={"net_arch": [8]}, device="cpu", seed=0, **kwargs
+    )
     obs = np.stack([env.observation_space.sample() for _ in range(5)])
     assert np.abs(model.predict(obs, deterministic=True)[0]).max() > 0  # not so by SB3's own init
     _zero_mean_action(model)
