@@ -422,7 +422,7 @@ def run_export_command(args: argparse.Namespace) -> int:
         raise ModelError(f"--out {str(args.out)!r} exists; pass --overwrite to replace it")
     prepare_output_dir(args.out.parent, keep=True, field="--out's folder")
     try:
-        path = export_onnx(args.policy, args.out, args.algo, args.allow_pickle)
+        path = export_onnx(args.policy, args.out, args.algo, args.allow_pickle, out_field="--out")
     except ImportError as err:
         raise ModelError(f"export needs the 'export' extra (pip install -e \".[export]\"): {err}") from None
     print(f"onnx: {path.resolve()}")

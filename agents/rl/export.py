@@ -28,6 +28,7 @@ import numpy as np
 
 from agents.rl.model_io import (
     META_DEFAULTS,
+    META_FILE,
     ModelError,
     ModelSpaces,
     load_obs_normalization,
@@ -92,13 +93,22 @@ def _quiet_exporter() -> Iterator[None]:
         registration.setLevel(level)
 
 
-def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None, allow_pickle: bool = False) -> Path:
+def export_onnx(
+    model_path: str | Path,
+    out: str | Path,
+    algo: str | None = None,
+    allow_pickle: bool = False,
+    out_field: str = "out",
+) -> Path:
     """Write the ONNX file of the SB3 model ``model_path`` (with its ``rl_meta.json`` and statistics) to ``out``.
+
+    The model folder is read and checked by :mod:`agents.rl.model_io`; ``out`` is written once, at the end.
 
     :param algo: ``"ppo"`` or ``"sac"`` (default: the metadata's, else ppo).
     :param allow_pickle: load pickled files of older runs (trusted files only; see :mod:`agents.rl.model_io`).
+    :param out_field: the name messages give ``out`` (the CLI's ``--out``).
     :return: the path written.
-    :raises ModelError: on an unusable model folder.
+    :raises ModelError: on an unusable model folder, or ``out`` that cannot be written (naming ``out_field``).
     """
     import gymnasium as gym
     import onnx
@@ -111,11 +121,15 @@ def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None
         raise ModelError(f"policy: SB3 model file {str(model_path)!r} does not exist")
     meta = read_metadata(model_path) or {}
     algo = algo or meta.get("algo") or "ppo"
-    env = gym.make("QuadUneven-v0", **metadata_env_kwargs(model_path))
+    try:
+        env = gym.make("QuadUneven-v0", **metadata_env_kwargs(model_path))
+    except (ValueError, TypeError) as err:  # the env's own checks of the recorded arguments
+        msg = str(err).split(" was raised from the environment creator")[0]
+        raise ModelError(f"policy: {model_path.parent / META_FILE}: env_kwargs: {msg}") from None
     try:
         spaces = ModelSpaces(env, meta or None)
         model = load_sb3_model(model_path, algo, spaces, allow_pickle)  # type: ignore[arg-type]
-        norm = load_obs_normalization(model_path, meta or None, allow_pickle)
+        norm = load_obs_normalization(model_path, meta or None, allow_pickle, spaces.observation_space.shape)
         space = env.action_space
         module = _policy_module(model, norm, np.asarray(space.low, float), np.asarray(space.high, float))
         n_obs = spaces.observation_space.shape[0]
@@ -123,15 +137,14 @@ def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None
         torque_limit = env.unwrapped.idx.torque_limit.tolist()
     finally:
         env.close()
-    out.parent.mkdir(parents=True, exist_ok=True)
     dummy = torch.zeros(1, n_obs, dtype=torch.float32)
     batch = torch.export.Dim("batch", min=1)
     with _quiet_exporter():
-        torch.onnx.export(
-            module, (dummy,), str(out), input_names=["obs"], output_names=["action"],
+        program = torch.onnx.export(
+            module, (dummy,), None, input_names=["obs"], output_names=["action"],
             dynamic_shapes=({0: batch},), dynamo=True, verbose=False,
         )  # fmt: skip
-    graph = onnx.load(str(out))
+    graph = program.model_proto
     props = {
         "observation_layout": json.dumps(layout),
         "observation_normalization": "folded" if norm is not None else "none",
@@ -149,7 +162,11 @@ def export_onnx(model_path: str | Path, out: str | Path, algo: str | None = None
         "env_kwargs": json.dumps(meta.get("env_kwargs", {})),
     }
     onnx.helper.set_model_props(graph, props)
-    onnx.save(graph, str(out))
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        onnx.save(graph, str(out))
+    except OSError as err:
+        raise ModelError(f"{out_field} {str(out)!r} cannot be written ({err.strerror or err})") from None
     return out
 
 

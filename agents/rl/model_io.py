@@ -19,9 +19,14 @@ A model without metadata is loaded as a plain SB3 policy on the env as given.
 from __future__ import annotations
 
 import collections
+import dataclasses
+import io
 import json
+import math
 import pickle
+import re
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -57,21 +62,89 @@ class ModelError(ValueError):
     """A model file, its metadata or its normalisation statistics cannot be used."""
 
 
-def read_metadata(model_path: str | Path) -> dict[str, Any] | None:
-    """The ``rl_meta.json`` next to ``model_path`` (None if there is none).
+META_FIELD_TYPES: dict[str, tuple[str, ...]] = {
+    "format": ("string",),
+    "algo": ("string",),
+    "residual": ("bool",),
+    "residual_scale": ("number",),
+    "residual_legs": ("string",),
+    "residual_basis": ("string",),
+    "expert_features": ("bool",),
+    "expert": ("object",),
+    "strength_estimator_sha256": ("string",),
+    "env_id": ("string",),
+    "env_kwargs": ("object",),
+    "normalize_obs": ("bool",),
+    "terrain": ("string", "object", "list"),
+    "randomization": ("string", "object", "null"),
+    "max_episode_steps": ("integer", "null"),
+    "seed": ("integer", "null"),
+    "stable_baselines3": ("string",),
+    "init_from": ("string",),
+    "gain_adaptation": ("string",),
+    "adaptation_features": ("bool",),
+}
+"""The JSON type(s) of every field ``quad-uneven train`` records in ``rl_meta.json`` (other fields are not read).
+A bool is a JSON ``true``/``false`` (never ``"no"`` or ``0``), a number a finite JSON number."""
 
-    :raises ModelError: if the file exists but is not valid metadata.
+_JSON_TYPES: dict[str, tuple[str, Any]] = {
+    "bool": ("true or false", lambda v: isinstance(v, bool)),
+    "number": ("a finite number", lambda v: type(v) in (int, float) and math.isfinite(v)),
+    "integer": ("an integer", lambda v: type(v) is int),
+    "string": ("a string", lambda v: isinstance(v, str)),
+    "object": ("a JSON object", lambda v: isinstance(v, dict)),
+    "list": ("a list", lambda v: isinstance(v, list)),
+    "null": ("null", lambda v: v is None),
+}
+"""JSON type name -> (its description in messages, its test on a decoded value)."""
+
+
+def check_json_type(value: Any, kinds: tuple[str, ...], where: str) -> None:
+    """Refuse ``value`` unless it is of one of the JSON types ``kinds`` (names of :data:`_JSON_TYPES`).
+
+    :raises ModelError: ``where must be <types>, got <value> of type <type>``.
+    """
+    if not any(_JSON_TYPES[k][1](value) for k in kinds):
+        allowed = " or ".join(_JSON_TYPES[k][0] for k in kinds)
+        raise ModelError(f"{where} must be {allowed}, got {_short(value)} of type {type(value).__name__}")
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+def read_metadata(model_path: str | Path) -> dict[str, Any] | None:
+    """The ``rl_meta.json`` next to ``model_path`` (None if there is none), every field checked.
+
+    The file must be UTF-8 JSON, an object with ``format`` :data:`META_FORMAT`, each field of
+    :data:`META_FIELD_TYPES` of its JSON type, and the fields the evaluation uses valid (:func:`_check_metadata`).
+
+    :raises ModelError: naming the file and the field if the file exists but is not valid metadata.
     """
     path = Path(model_path).parent / META_FILE
     if not path.is_file():
         return None
     try:
-        meta = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as err:
-        raise ModelError(f"{path}: unreadable metadata ({err})") from None
+        meta = json.loads(path.read_bytes().decode("utf-8"), parse_constant=_refuse_constant)
+    except OSError as err:
+        raise ModelError(f"{path}: unreadable metadata ({err.strerror or err})") from None
+    except UnicodeDecodeError as err:
+        raise ModelError(f"{path}: metadata must be UTF-8 text, byte {err.start} is not ({err.reason})") from None
+    except (json.JSONDecodeError, RecursionError) as err:
+        raise ModelError(f"{path}: metadata is not valid JSON ({err})") from None
+    except ValueError as err:  # NaN or Infinity (_refuse_constant)
+        raise ModelError(f"{path}: metadata is not strict JSON ({err})") from None
     if not isinstance(meta, dict) or meta.get("format") != META_FORMAT:
         raise ModelError(f"{path}: format must be {META_FORMAT!r}")
+    for name, kinds in META_FIELD_TYPES.items():
+        if name in meta:
+            check_json_type(meta[name], kinds, f"{path}: {name}")
     return _check_metadata(meta, path)
+
+
+def _refuse_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number")
 
 
 def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
@@ -102,11 +175,6 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
                     f"made with ({estimator_digest()[:12]}... is installed), got {str(digest)[:12]!r}: the model's "
                     "gains would come from another estimator"
                 )
-    env_kwargs = meta.get("env_kwargs")
-    if env_kwargs is not None and not isinstance(env_kwargs, dict):
-        raise ModelError(f"{path}: env_kwargs must be a mapping of QuadUneven-v0 arguments, got {env_kwargs!r}")
-    if not isinstance(meta.get("normalize_obs", False), bool):
-        raise ModelError(f"{path}: normalize_obs must be true or false, got {meta.get('normalize_obs')!r}")
     return meta
 
 
@@ -192,19 +260,23 @@ class SB3Policy:
         return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
 
 
-def load_obs_normalization(model_path: Path, meta: dict[str, Any] | None, allow_pickle: bool = False) -> Any:
+def load_obs_normalization(
+    model_path: Path, meta: dict[str, Any] | None, allow_pickle: bool = False, shape: tuple[int, ...] | None = None
+) -> Any:
     """The observation statistics saved with ``model_path`` (an :class:`ObsNormalization`), or None.
 
-    Reads ``X_obs_norm.npz`` (arrays only). A run from before that format has SB3's pickled
-    ``X_vecnormalize.pkl``: unpickling can run code from the file, so it is read only with
-    ``allow_pickle`` (``quad-uneven evaluate --allow-pickle``), for files you trust.
+    Reads ``X_obs_norm.npz`` (arrays only, checked by :meth:`ObsNormalization.load`). A run from before that
+    format has SB3's pickled ``X_vecnormalize.pkl``: unpickling can run code from the file, so it is read only
+    with ``allow_pickle`` (``quad-uneven evaluate --allow-pickle``), for files you trust.
 
-    :raises ModelError: when the statistics are missing, unreadable, or a pickle without ``allow_pickle``.
+    :param shape: the model's observation shape (:class:`ModelSpaces`), which the statistics must have.
+    :raises ModelError: when the statistics are missing, unreadable, of another shape, or a pickle without
+        ``allow_pickle``.
     """
     npz = norm_path(model_path)
     if npz.is_file():
         try:
-            return ObsNormalization.load(npz)
+            return ObsNormalization.load(npz, shape)
         except ValueError as err:
             raise ModelError(f"policy: {err}") from None
     pkl = pickle_path(model_path)
@@ -217,9 +289,14 @@ def load_obs_normalization(model_path: Path, meta: dict[str, Any] | None, allow_
         try:
             with pkl.open("rb") as f:
                 vn = pickle.load(f)  # the user opted in for this file
-            return ObsNormalization.from_vecnormalize(vn) if vn.norm_obs else None
+            norm = ObsNormalization.from_vecnormalize(vn) if vn.norm_obs else None
         except Exception as err:  # a truncated or foreign pickle raises anything from EOFError to AttributeError
             raise ModelError(f"policy: {pkl} is not readable VecNormalize statistics ({type(err).__name__})") from None
+        if norm is not None and shape is not None and norm.mean.shape != tuple(shape):
+            raise ModelError(
+                f"policy: {pkl}: the statistics have shape {norm.mean.shape}, the model's observation {tuple(shape)}"
+            )
+        return norm
     if meta is not None and meta.get("normalize_obs"):
         raise ModelError(
             f"policy: {model_path} was trained with normalised observations but {npz.name} is missing next to it"
@@ -237,43 +314,233 @@ _BUFFER_KEYS = ("ep_info_buffer", "ep_success_buffer")
 """Pickled episode-statistics deques: empty on a safe load."""
 
 
-def zip_data(path: Path) -> dict[str, Any]:
-    """The ``data`` JSON of an SB3 model zip, without deserialising anything."""
+MAX_ENTRY_BYTES = 256 * 2**20
+"""Largest uncompressed entry of a model zip read (bytes): far above the networks ``quad-uneven train`` makes."""
+
+ZIP_ENTRIES = ("data", "_stable_baselines3_version", "system_info.txt")
+"""Entries of an SB3 model zip besides its ``NAME.pth`` tensor files."""
+
+_PTH_ENTRY = re.compile(r"(?P<name>[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)\.pth")
+"""A tensor file: ``policy.pth``, ``policy.optimizer.pth``, ``pytorch_variables.pth``, ... (an attribute path)."""
+
+_VARIABLES = ("pytorch_variables", "tensors")
+"""Names of the ``.pth`` file of an SB3 zip that holds loose tensors (SAC's ``log_ent_coef``) and not a state
+dict (``tensors`` in SB3 < 0.9)."""
+
+DATA_FIELD_TYPES: dict[str, tuple[str, ...]] = {
+    "policy_kwargs": ("object",),
+    "verbose": ("integer",),
+    "num_timesteps": ("integer",),
+    "seed": ("integer", "null"),
+    "n_envs": ("integer",),
+    "n_steps": ("integer",),
+    "batch_size": ("integer",),
+    "n_epochs": ("integer",),
+    "buffer_size": ("integer",),
+    "learning_starts": ("integer",),
+    "gradient_steps": ("integer",),
+    "target_update_interval": ("integer",),
+    "sde_sample_freq": ("integer",),
+    "use_sde": ("bool",),
+    "normalize_advantage": ("bool",),
+    "optimize_memory_usage": ("bool",),
+    "learning_rate": ("number",),
+    "gamma": ("number",),
+    "gae_lambda": ("number",),
+    "tau": ("number",),
+    "vf_coef": ("number",),
+    "max_grad_norm": ("number",),
+}
+"""JSON types of the plain fields of an SB3 zip's ``data`` that building the model reads (when not pickled)."""
+
+_POSITIVE_DATA_FIELDS = ("n_envs", "n_steps", "batch_size", "n_epochs", "buffer_size")
+"""``data`` fields that size the model's buffers: integers >= 1."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelZip:
+    """The checked content of an SB3 model zip (:func:`read_model_zip`): JSON data and tensors, nothing unpickled."""
+
+    data: dict[str, Any]
+    """the ``data`` entry: SB3's attributes, pickled ones still as ``{":serialized:": ...}`` entries."""
+    params: dict[str, dict[str, Any]]
+    """state dicts by attribute path (``policy``, ``policy.optimizer``, ``actor.optimizer``, ...)."""
+    variables: dict[str, Any]
+    """loose tensors by attribute path (``pytorch_variables.pth``; SAC's ``log_ent_coef``), else empty."""
+
+
+def read_model_zip(path: str | Path, where: str = "policy") -> ModelZip:
+    """Read and check the SB3 model zip ``path`` without running code from it.
+
+    Checked: that it is a zip, its entry names (:data:`ZIP_ENTRIES` and ``NAME.pth``, each once) and
+    sizes (:data:`MAX_ENTRY_BYTES`), that ``data`` is a UTF-8 JSON object whose plain fields have their
+    JSON types (:data:`DATA_FIELD_TYPES`), and that every ``.pth`` entry loads with
+    ``torch.load(weights_only=True)`` (a pickled object in it is refused, never run) as a dict of tensors
+    (a state dict, an optimizer's state dict, or loose tensors).
+
+    :param where: the name the messages start with (the option that gave ``path``).
+    :raises ModelError: ``where: PATH: ...`` naming the entry (and field) at fault.
+    """
+    path = Path(path)
     try:
         with zipfile.ZipFile(path) as z:
-            return json.loads(z.read("data"))
-    except (zipfile.BadZipFile, KeyError, OSError, json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise ModelError(f"policy: {path} is not an SB3 model zip ({type(err).__name__}: {err})") from None
+            infos = z.infolist()
+            _check_entries(infos, path, where)
+            raw = {info.filename: _read_entry(z, info) for info in infos}
+    except ModelError:
+        raise
+    except FileNotFoundError:
+        raise ModelError(f"{where}: SB3 model file {str(path)!r} does not exist") from None
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, EOFError, OSError, RuntimeError,
+            NotImplementedError, ValueError) as err:  # fmt: skip
+        # a damaged archive (BadZipFile, zlib.error, EOFError), an encrypted entry (RuntimeError), a compression
+        # method zipfile lacks (NotImplementedError), or a file that cannot be read (OSError)
+        raise ModelError(f"{where}: {path} is not a readable SB3 model zip ({type(err).__name__}: {err})") from None
+    data = _parse_data(raw["data"], path, where)
+    params: dict[str, dict[str, Any]] = {}
+    variables: dict[str, Any] = {}
+    for name, blob in raw.items():
+        m = _PTH_ENTRY.fullmatch(name)
+        if m is None:
+            continue
+        content = _load_tensors(blob, path, name, where)
+        if m["name"] in _VARIABLES:
+            variables = content
+        else:
+            params[m["name"]] = content
+    return ModelZip(data, params, variables)
 
 
-def _safe_custom_objects(path: Path, cls: Any, env: gym.Env) -> dict[str, Any]:
+def _check_entries(infos: list[zipfile.ZipInfo], path: Path, where: str) -> None:
+    names = [info.filename for info in infos]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise ModelError(f"{where}: {path} holds the entry {repeated[0]!r} more than once")
+    for info in infos:
+        if info.filename not in ZIP_ENTRIES and not _PTH_ENTRY.fullmatch(info.filename):
+            raise ModelError(
+                f"{where}: {path} holds an entry {_short(info.filename)}; an SB3 model zip holds "
+                f"{', '.join(ZIP_ENTRIES)} and NAME.pth tensor files (NAME an attribute path such as policy.optimizer)"
+            )
+        if info.file_size > MAX_ENTRY_BYTES:
+            raise ModelError(
+                f"{where}: {path} entry {info.filename!r} is {info.file_size} bytes uncompressed, more than the "
+                f"{MAX_ENTRY_BYTES} this loader reads"
+            )
+    if "data" not in names:
+        raise ModelError(f"{where}: {path} has no 'data' entry (not an SB3 model zip)")
+
+
+def _read_entry(z: zipfile.ZipFile, info: zipfile.ZipInfo) -> bytes:
+    """The bytes of one entry, never more than :data:`MAX_ENTRY_BYTES` (whatever its header says)."""
+    with z.open(info) as f:
+        blob = f.read(MAX_ENTRY_BYTES + 1)
+    if len(blob) > MAX_ENTRY_BYTES:
+        raise zipfile.BadZipFile(f"entry {info.filename!r} is longer than its header says")
+    return blob
+
+
+def _parse_data(blob: bytes, path: Path, where: str) -> dict[str, Any]:
+    try:
+        data = json.loads(blob.decode("utf-8"))
+    except UnicodeDecodeError as err:
+        raise ModelError(f"{where}: {path} entry 'data' must be UTF-8 JSON, byte {err.start} is not") from None
+    except (json.JSONDecodeError, RecursionError) as err:
+        raise ModelError(f"{where}: {path} entry 'data' is not valid JSON ({err})") from None
+    if not isinstance(data, dict):
+        raise ModelError(f"{where}: {path} entry 'data' must be a JSON object, got a {type(data).__name__}")
+    for key, kinds in DATA_FIELD_TYPES.items():
+        value = data.get(key)
+        if key in data and not _is_serialized(value):
+            check_json_type(value, kinds, f"{where}: {path} data.{key}")
+            if key in _POSITIVE_DATA_FIELDS and value < 1:
+                raise ModelError(f"{where}: {path} data.{key} must be an integer >= 1, got {value!r}")
+    return data
+
+
+def _is_serialized(entry: Any) -> bool:
+    """Is ``entry`` of an SB3 zip's ``data`` a pickled object (``{":type:": ..., ":serialized:": base64}``)?"""
+    return isinstance(entry, dict) and ":serialized:" in entry
+
+
+def _load_tensors(blob: bytes, path: Path, entry: str, where: str) -> dict[str, Any]:
+    """A ``.pth`` entry read by ``torch.load(weights_only=True)``: tensors and plain containers, no other object."""
+    import torch
+
+    try:
+        content = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
+    except Exception as err:  # torch's parser of untrusted bytes: any failure means unreadable
+        # weights_only refuses every pickled object (pickle.UnpicklingError) without running it; a damaged file
+        # raises RuntimeError, EOFError, KeyError, ... from torch's zip reader and unpickler
+        first = str(err).strip().splitlines()[0] if str(err).strip() else ""
+        raise ModelError(
+            f"{where}: {path} entry {entry!r} is not a tensor file torch loads with weights_only "
+            f"({type(err).__name__}{': ' + _short(first, 120) if first else ''}); pickled objects are never loaded"
+        ) from None
+    if not isinstance(content, dict) or not all(isinstance(k, str) for k in content):
+        raise ModelError(
+            f"{where}: {path} entry {entry!r} must hold a dict of named tensors, got {type(content).__name__}"
+        )
+    if Path(entry).stem in _VARIABLES or not Path(entry).stem.endswith("optimizer"):
+        bad = [k for k, v in content.items() if not (isinstance(v, torch.Tensor) or v is None)]
+        if bad:
+            raise ModelError(f"{where}: {path} entry {entry!r}: {bad[0]!r} must be a tensor")
+    elif not (isinstance(content.get("state"), dict) and isinstance(content.get("param_groups"), list)):
+        raise ModelError(f"{where}: {path} entry {entry!r} must be an optimizer state dict (state, param_groups)")
+    return content
+
+
+def zip_data(path: Path, where: str = "policy") -> dict[str, Any]:
+    """The ``data`` JSON of an SB3 model zip, checked (:func:`read_model_zip`), without deserialising anything."""
+    return read_model_zip(path, where).data
+
+
+_SPACE_TYPES = {"observation_space": "observation space", "action_space": "action space"}
+
+
+def _check_recorded_spaces(data: dict[str, Any], env: Any, path: Path) -> None:
+    """The spaces a model zip records (JSON beside their pickle): present, of ``env``'s space class and shape.
+
+    :raises ModelError: naming the space, what the file records and what the env has.
+    """
+    for key, label in _SPACE_TYPES.items():
+        space, entry = getattr(env, key), data.get(key)
+        if not _is_serialized(entry):
+            raise ModelError(f"policy: {path} data.{key} must be a recorded space, got {_short(entry)}")
+        recorded, want = entry.get(":type:"), type(space).__qualname__
+        if not (isinstance(recorded, str) and recorded.endswith(f".{want}'>")):  # gym's or gymnasium's class
+            raise ModelError(f"policy: {path} data.{key} is a {_short(recorded)}, the env's {label} a {want}")
+        shape = entry.get("_shape")
+        if not (isinstance(shape, list) and all(type(n) is int for n in shape)):
+            raise ModelError(f"policy: {path} data.{key}._shape must be a list of integers, got {_short(shape)}")
+        if tuple(shape) != tuple(space.shape):
+            raise ModelError(
+                f"policy: {path} was trained for an {label} of shape {tuple(shape)}, the env has {tuple(space.shape)}"
+            )
+    if not _is_serialized(data.get("policy_class")):
+        raise ModelError(f"policy: {path} data.policy_class must be a recorded policy class")
+
+
+def _safe_custom_objects(data: dict[str, Any], path: Path, cls: Any, env: gym.Env) -> dict[str, Any]:
     """Replacements for every pickled entry of the zip's ``data``, so that SB3 unpickles nothing.
 
-    The observation and action spaces come from ``env`` (their recorded shapes must match), the policy
+    The observation and action spaces come from ``env`` (checked against the recorded ones before), the policy
     and buffer classes are the algorithm's own, schedules are constants (unused by ``predict``).
 
-    :raises ModelError: on a shape mismatch or a pickled entry this loader does not know.
+    :raises ModelError: on a pickled entry this loader does not know.
     """
     from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
     from stable_baselines3.common.utils import ConstantSchedule
 
-    data = zip_data(path)
     custom: dict[str, Any] = {}
     for key, entry in data.items():
-        if not (isinstance(entry, dict) and ":serialized:" in entry):
+        if not _is_serialized(entry):
             continue
         if key in ("observation_space", "action_space"):
-            space = getattr(env, key)
-            shape = entry.get("_shape")
-            if shape is not None and tuple(shape) != tuple(space.shape):
-                raise ModelError(
-                    f"policy: {path} was trained for an {key.replace('_', ' ')} of shape {tuple(shape)}, "
-                    f"the env has {tuple(space.shape)}"
-                )
-            custom[key] = space
+            custom[key] = getattr(env, key)
         elif key == "policy_class":
             custom[key] = cls.policy_aliases["MlpPolicy"]
-            if entry.get("__module__") not in (None, custom[key].__module__):
+            if entry.get("__module__") not in (None, custom[key].__module__):  # JSON beside the pickle
                 raise ModelError(
                     f"policy: {path} holds a policy class from {entry['__module__']!r}, not {cls.__name__}'s "
                     f"MlpPolicy (a model of another algo? --algo loads {cls.__name__} models)"
@@ -296,24 +563,38 @@ def _safe_custom_objects(path: Path, cls: Any, env: gym.Env) -> dict[str, Any]:
     return custom
 
 
+_BUILD_ERRORS = (ValueError, KeyError, TypeError, AttributeError, IndexError, ArithmeticError, MemoryError,
+                 RuntimeError, EOFError, OSError, ImportError, pickle.UnpicklingError, zipfile.BadZipFile)  # fmt: skip
+"""What SB3's ``load`` raises on a zip whose checked content still does not build a model (a ``data`` field of
+the right type but a value the algorithm rejects; with ``allow_pickle``, anything a pickle raises on loading)."""
+
+
 def load_sb3_model(path: str | Path, algo: str, env: gym.Env, allow_pickle: bool = False) -> Any:
     """An SB3 model loaded for prediction on ``env``'s spaces, without running code from the file.
 
-    SB3 zips hold cloudpickled entries (spaces, schedules, classes) beside the weights; they are replaced
-    (:func:`_safe_custom_objects`), and the weights are read by ``torch.load(weights_only=True)``.
-    ``allow_pickle`` loads the file as SB3 does (trusted files only).
+    The zip is checked first (:func:`read_model_zip`: entries, ``data``, tensors), and its recorded spaces must
+    be of ``env``'s types and shapes. SB3 zips hold cloudpickled entries (spaces, schedules, classes) beside
+    the weights; they are replaced (:func:`_safe_custom_objects`), and the weights are read by
+    ``torch.load(weights_only=True)``. ``allow_pickle`` unpickles those ``data`` entries as SB3 does (trusted
+    files only); the ``.pth`` tensor files are never unpickled.
 
-    :raises ModelError: on an unreadable zip, a space mismatch or an unknown pickled entry.
+    :raises ModelError: naming the file (and entry or field) on an unreadable or crafted zip, a space mismatch or
+        an unknown pickled entry.
     """
     import stable_baselines3
 
     path = Path(path)
     cls = getattr(stable_baselines3, algo.upper())
-    custom = None if allow_pickle else _safe_custom_objects(path, cls, env)
+    content = read_model_zip(path)
+    _check_recorded_spaces(content.data, env, path)
+    custom = None if allow_pickle else _safe_custom_objects(content.data, path, cls, env)
     try:
         return cls.load(path, device="cpu", custom_objects=custom)
-    except (ValueError, KeyError, RuntimeError, zipfile.BadZipFile, EOFError, OSError) as err:
-        raise ModelError(f"policy: {path} cannot be loaded as {algo.upper()} ({type(err).__name__}: {err})") from None
+    except _BUILD_ERRORS as err:
+        first = (str(err).strip().splitlines() or [""])[0]
+        raise ModelError(
+            f"policy: {path} cannot be loaded as {algo.upper()} ({type(err).__name__}: {_short(first, 160)})"
+        ) from None
 
 
 def _describe(space: Any) -> str:
@@ -382,7 +663,7 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
     if meta is not None and meta.get("algo") not in (None, algo):
         raise ModelError(f"algo: {path} was trained with {meta['algo']!r}; pass --algo {meta['algo']}, got {algo!r}")
     spaces_of = ModelSpaces(env, meta)
-    normalizer = load_obs_normalization(path, meta, allow_pickle)
+    normalizer = load_obs_normalization(path, meta, allow_pickle, spaces_of.observation_space.shape)
     model = load_sb3_model(path, algo, spaces_of, allow_pickle)  # type: ignore[arg-type]
     check_spaces(model, spaces_of, path)  # type: ignore[arg-type]
     expert = None
@@ -394,19 +675,26 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
 
 
 __all__ = [
+    "DATA_FIELD_TYPES",
+    "MAX_ENTRY_BYTES",
     "META_DEFAULTS",
+    "META_FIELD_TYPES",
     "META_FILE",
     "META_FORMAT",
     "RESIDUAL_META_FIELDS",
+    "ZIP_ENTRIES",
     "ModelError",
     "ModelSpaces",
+    "ModelZip",
     "SB3Policy",
+    "check_json_type",
     "check_spaces",
     "load_obs_normalization",
     "load_sb3_model",
     "load_sb3_policy",
     "metadata_env_kwargs",
     "read_metadata",
+    "read_model_zip",
     "residual_config_of",
     "write_metadata",
     "zip_data",

@@ -11,10 +11,14 @@ from __future__ import annotations
 import dataclasses
 import re
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+STAT_KEYS = ("mean", "var", "epsilon", "clip")
+"""The arrays of a statistics ``.npz`` (:meth:`ObsNormalization.save`)."""
 
 NORM_SUFFIX = "_obs_norm.npz"
 """``X.zip`` -> ``X_obs_norm.npz``; an SB3 checkpoint ``P_N_steps.zip`` -> ``P_obs_norm_N_steps.npz``."""
@@ -54,22 +58,47 @@ class ObsNormalization:
         return path
 
     @classmethod
-    def load(cls, path: str | Path) -> ObsNormalization:
+    def load(cls, path: str | Path, shape: tuple[int, ...] | None = None) -> ObsNormalization:
         """Read statistics written by :meth:`save` (no pickles: a crafted file cannot run code).
 
-        :raises ValueError: naming the file and what is wrong with it.
+        The file must hold exactly the arrays ``mean``, ``var`` (real, finite, 1-D, of one length; ``var >= 0``),
+        ``epsilon`` and ``clip`` (real scalars, finite, > 0).
+
+        :param shape: the observation's shape the statistics must have (None: not checked).
+        :raises ValueError: naming the file and the array at fault.
         """
+        where = f"observation statistics {str(path)!r}"
         try:
-            with np.load(Path(path), allow_pickle=False) as z:
-                mean, var = np.asarray(z["mean"], dtype=float), np.asarray(z["var"], dtype=float)
-                epsilon, clip = float(z["epsilon"]), float(z["clip"])
-        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as err:
-            raise ValueError(f"observation statistics {str(path)!r} are unreadable: {err}") from None
-        if mean.shape != var.shape or not (np.isfinite(mean).all() and np.isfinite(var).all() and (var >= 0).all()):
-            raise ValueError(f"observation statistics {str(path)!r}: mean/var must be finite, var >= 0, same shape")
-        if not (epsilon > 0 and clip > 0):
-            raise ValueError(f"observation statistics {str(path)!r}: epsilon and clip must be > 0")
-        return cls(mean, var, epsilon, clip)
+            loaded = np.load(Path(path), allow_pickle=False)
+            if not isinstance(loaded, np.lib.npyio.NpzFile):  # a lone .npy array
+                raise ValueError("not an .npz archive of named arrays")
+            with loaded as z:
+                arrays = {k: z[k] for k in z.files}
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
+                RuntimeError) as err:  # fmt: skip
+            # a damaged or foreign file; ValueError also for a pickled (object) array, which is never loaded
+            raise ValueError(f"{where} are unreadable: {err}") from None
+        if sorted(arrays) != sorted(STAT_KEYS):
+            raise ValueError(f"{where} must hold the arrays {list(STAT_KEYS)}, got {sorted(arrays)}")
+        for key, a in arrays.items():
+            if a.dtype.kind not in "iuf":
+                raise ValueError(f"{where}: {key} must hold real numbers, got dtype {a.dtype}")
+            if not np.isfinite(a).all():
+                raise ValueError(f"{where}: {key} must be finite, got NaN or inf")
+        mean, var = arrays["mean"].astype(float), arrays["var"].astype(float)
+        if mean.ndim != 1 or var.shape != mean.shape:
+            raise ValueError(f"{where}: mean and var must be 1-D of one length, got shapes {mean.shape}, {var.shape}")
+        if (var < 0).any():
+            raise ValueError(f"{where}: var must be >= 0")
+        if shape is not None and mean.shape != tuple(shape):
+            raise ValueError(
+                f"{where}: mean and var must have the observation's shape {tuple(shape)}, got {mean.shape} "
+                "(statistics of a model for another observation)"
+            )
+        for key in ("epsilon", "clip"):
+            if arrays[key].shape != () or not arrays[key] > 0:
+                raise ValueError(f"{where}: {key} must be a number > 0, got {arrays[key].tolist()!r}")
+        return cls(mean, var, float(arrays["epsilon"]), float(arrays["clip"]))
 
 
 def norm_path(model_path: str | Path) -> Path:
@@ -91,4 +120,4 @@ def pickle_path(model_path: str | Path) -> Path | None:
     return next((c for c in candidates if c.is_file()), None)
 
 
-__all__ = ["NORM_SUFFIX", "ObsNormalization", "norm_path", "pickle_path"]
+__all__ = ["NORM_SUFFIX", "STAT_KEYS", "ObsNormalization", "norm_path", "pickle_path"]

@@ -1,11 +1,11 @@
 """Continue training from a saved model (``quad-uneven train --init-from DIR``): a warm start.
 
 The new run builds its model from its own config, as any run does, and then takes the saved model's
-weights, optimizer states and learned variables (SAC's entropy temperature) through SB3's
-``load_from_zip_file``, which reads tensors only (``torch.load(weights_only=True)``): nothing in the
-file is unpickled. The observation statistics come from the ``.npz`` next to the model and keep their
-weight (the saved run's step count), so the first new rollouts do not reset them. The replay buffer of
-an off-policy model is not saved and starts empty.
+weights, optimizer states and learned variables (SAC's entropy temperature) read by
+:func:`agents.rl.model_io.read_model_zip`, which reads tensors only (``torch.load(weights_only=True)``) and
+checks every entry: nothing in the file is unpickled. The observation statistics come from the ``.npz`` next to
+the model and keep their weight (the saved run's step count), so the first new rollouts do not reset them.
+The replay buffer of an off-policy model is not saved and starts empty.
 
 The saved model must have been trained for the same env: every field that changes the observation, the
 action or what an action does (:data:`ENV_FIELDS`) must be equal in its ``rl_meta.json`` and in the metadata a
@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.rl.config import TrainConfigError
-from agents.rl.model_io import META_DEFAULTS, META_FILE, ModelError, read_metadata, zip_data
+from agents.rl.model_io import META_DEFAULTS, META_FILE, ModelError, read_metadata, read_model_zip
 from agents.rl.normalization import ObsNormalization, norm_path
 
 ENV_FIELDS = (
@@ -60,11 +60,17 @@ def check_init_model(init_from: str | Path, expected: dict[str, Any]) -> tuple[P
     path = init_model_path(init_from)
     try:
         meta = read_metadata(path)
-        data = zip_data(path)
+        data = read_model_zip(path, where="init_from").data
     except ModelError as err:
-        raise TrainConfigError(f"init_from: {err}") from None
+        message = str(err)
+        raise TrainConfigError(message if message.startswith("init_from") else f"init_from: {message}") from None
     if meta is None:
         raise TrainConfigError(f"init_from: {path} has no {META_FILE} next to it (a model of quad-uneven train?)")
+    if meta.get("normalize_obs") and norm_path(path).is_file():  # checked here, before the run's --out is touched
+        try:
+            ObsNormalization.load(norm_path(path))
+        except ValueError as err:
+            raise TrainConfigError(f"init_from: {err}") from None
     for name in ENV_FIELDS:
         theirs = meta.get(name, META_DEFAULTS.get(name))
         mine = expected.get(name, META_DEFAULTS.get(name))
@@ -88,30 +94,29 @@ def warm_start(model: Any, path: Path, steps: int) -> None:
     :raises TrainConfigError: ``init_from: ...`` if the networks differ (another ``net_arch``, observation or
         action size), or the model was trained with observation statistics and they are missing.
     """
-    from stable_baselines3.common.save_util import load_from_zip_file, recursive_setattr
+    from stable_baselines3.common.save_util import recursive_setattr
 
     try:
-        _, params, variables = load_from_zip_file(path, device="cpu", load_data=False)
-        model.set_parameters(params, exact_match=True, device="cpu")
-        for name, value in (variables or {}).items():
+        content = read_model_zip(path, where="init_from")  # tensors only, every entry checked
+    except ModelError as err:
+        raise TrainConfigError(str(err)) from None
+    try:
+        model.set_parameters(content.params, exact_match=True, device="cpu")
+        for name, value in content.variables.items():
             if value is not None:
                 recursive_setattr(model, f"{name}.data", value.data)
-    except (RuntimeError, ValueError, KeyError, AttributeError) as err:
-        reason = f"{type(err).__name__}: {err}"
+    except (RuntimeError, ValueError, KeyError, TypeError, AttributeError, IndexError) as err:
+        # tensors of other shapes (RuntimeError), other or missing modules (ValueError), an optimizer state of
+        # another layout (KeyError, TypeError, IndexError), a variable the model lacks (AttributeError)
+        reason = f"{type(err).__name__}: {(str(err).strip().splitlines() or [''])[0][:200]}"
         raise TrainConfigError(f"init_from: {path} does not fit the config's model ({reason})") from None
     vn = model.get_vec_normalize_env()
     if vn is None or not vn.norm_obs:
         return
-    stats_path = norm_path(path)
     try:
-        stats = ObsNormalization.load(stats_path)
+        stats = ObsNormalization.load(norm_path(path), vn.obs_rms.mean.shape)
     except ValueError as err:
         raise TrainConfigError(f"init_from: {err}") from None
-    if stats.mean.shape != vn.obs_rms.mean.shape:
-        raise TrainConfigError(
-            f"init_from: {stats_path} holds statistics of shape {stats.mean.shape}, the env's observation is "
-            f"{vn.obs_rms.mean.shape}"
-        )
     vn.obs_rms.mean = stats.mean.copy()
     vn.obs_rms.var = stats.var.copy()
     vn.obs_rms.count = float(max(steps, 1))
