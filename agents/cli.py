@@ -416,9 +416,13 @@ def run_export_command(args: argparse.Namespace) -> int:
     from agents.rl.export import export_onnx
     from agents.rl.model_io import ModelError
 
-    if args.out.is_dir():
+    try:
+        is_dir, exists = args.out.is_dir(), args.out.exists()
+    except OSError as err:  # e.g. a name longer than the file system allows
+        raise ModelError(f"--out {str(args.out)!r} cannot be written ({err.strerror or err})") from None
+    if is_dir:
         raise ModelError(f"--out {str(args.out)!r} is a directory; give the .onnx file to write")
-    if args.out.exists() and not args.overwrite:
+    if exists and not args.overwrite:
         raise ModelError(f"--out {str(args.out)!r} exists; pass --overwrite to replace it")
     prepare_output_dir(args.out.parent, keep=True, field="--out's folder")
     try:

@@ -25,6 +25,7 @@ import json
 import math
 import pickle
 import re
+import warnings
 import zipfile
 import zlib
 from pathlib import Path
@@ -468,7 +469,9 @@ def _load_tensors(blob: bytes, path: Path, entry: str, where: str) -> dict[str, 
     import torch
 
     try:
-        content = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():  # torch's notes on a crafted file's pickle protocol: the error says it all
+            warnings.simplefilter("ignore")
+            content = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
     except Exception as err:  # torch's parser of untrusted bytes: any failure means unreadable
         # weights_only refuses every pickled object (pickle.UnpicklingError) without running it; a damaged file
         # raises RuntimeError, EOFError, KeyError, ... from torch's zip reader and unpickler
@@ -495,6 +498,18 @@ def zip_data(path: Path, where: str = "policy") -> dict[str, Any]:
     return read_model_zip(path, where).data
 
 
+def recorded_shape(data: dict[str, Any], key: str, path: Path, where: str = "policy") -> tuple[int, ...]:
+    """The shape an SB3 zip's ``data`` records for its space ``key`` (``observation_space`` or ``action_space``).
+
+    :raises ModelError: if the space or its ``_shape`` (a list of integers >= 0) is not recorded.
+    """
+    entry = data.get(key)
+    shape = entry.get("_shape") if _is_serialized(entry) else None
+    if not (isinstance(shape, list) and all(type(n) is int and n >= 0 for n in shape)):
+        raise ModelError(f"{where}: {path} data.{key}._shape must be a list of integers, got {_short(shape)}")
+    return tuple(shape)
+
+
 _SPACE_TYPES = {"observation_space": "observation space", "action_space": "action space"}
 
 
@@ -510,10 +525,8 @@ def _check_recorded_spaces(data: dict[str, Any], env: Any, path: Path) -> None:
         recorded, want = entry.get(":type:"), type(space).__qualname__
         if not (isinstance(recorded, str) and recorded.endswith(f".{want}'>")):  # gym's or gymnasium's class
             raise ModelError(f"policy: {path} data.{key} is a {_short(recorded)}, the env's {label} a {want}")
-        shape = entry.get("_shape")
-        if not (isinstance(shape, list) and all(type(n) is int for n in shape)):
-            raise ModelError(f"policy: {path} data.{key}._shape must be a list of integers, got {_short(shape)}")
-        if tuple(shape) != tuple(space.shape):
+        shape = recorded_shape(data, key, path)
+        if shape != tuple(space.shape):
             raise ModelError(
                 f"policy: {path} was trained for an {label} of shape {tuple(shape)}, the env has {tuple(space.shape)}"
             )
@@ -695,6 +708,7 @@ __all__ = [
     "metadata_env_kwargs",
     "read_metadata",
     "read_model_zip",
+    "recorded_shape",
     "residual_config_of",
     "write_metadata",
     "zip_data",

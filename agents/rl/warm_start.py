@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.rl.config import TrainConfigError
-from agents.rl.model_io import META_DEFAULTS, META_FILE, ModelError, read_metadata, read_model_zip
+from agents.rl.model_io import META_DEFAULTS, META_FILE, ModelError, read_metadata, read_model_zip, recorded_shape
 from agents.rl.normalization import ObsNormalization, norm_path
 
 ENV_FIELDS = (
@@ -61,6 +61,7 @@ def check_init_model(init_from: str | Path, expected: dict[str, Any]) -> tuple[P
     try:
         meta = read_metadata(path)
         data = read_model_zip(path, where="init_from").data
+        shape = recorded_shape(data, "observation_space", path, where="init_from")
     except ModelError as err:
         message = str(err)
         raise TrainConfigError(message if message.startswith("init_from") else f"init_from: {message}") from None
@@ -68,7 +69,7 @@ def check_init_model(init_from: str | Path, expected: dict[str, Any]) -> tuple[P
         raise TrainConfigError(f"init_from: {path} has no {META_FILE} next to it (a model of quad-uneven train?)")
     if meta.get("normalize_obs") and norm_path(path).is_file():  # checked here, before the run's --out is touched
         try:
-            ObsNormalization.load(norm_path(path))
+            ObsNormalization.load(norm_path(path), shape)
         except ValueError as err:
             raise TrainConfigError(f"init_from: {err}") from None
     for name in ENV_FIELDS:
