@@ -318,6 +318,9 @@ _BUFFER_KEYS = ("ep_info_buffer", "ep_success_buffer")
 MAX_ENTRY_BYTES = 256 * 2**20
 """Largest uncompressed entry of a model zip read (bytes): far above the networks ``quad-uneven train`` makes."""
 
+MAX_ENTRIES = 64
+"""Most entries a model zip may hold (SB3 writes 5 to 9)."""
+
 ZIP_ENTRIES = ("data", "_stable_baselines3_version", "system_info.txt")
 """Entries of an SB3 model zip besides its ``NAME.pth`` tensor files."""
 
@@ -413,8 +416,10 @@ def read_model_zip(path: str | Path, where: str = "policy") -> ModelZip:
 
 
 def _check_entries(infos: list[zipfile.ZipInfo], path: Path, where: str) -> None:
+    if len(infos) > MAX_ENTRIES:
+        raise ModelError(f"{where}: {path} holds {len(infos)} entries; an SB3 model zip holds at most {MAX_ENTRIES}")
     names = [info.filename for info in infos]
-    repeated = sorted({n for n in names if names.count(n) > 1})
+    repeated = sorted(n for n, count in collections.Counter(names).items() if count > 1)
     if repeated:
         raise ModelError(f"{where}: {path} holds the entry {repeated[0]!r} more than once")
     for info in infos:
@@ -475,10 +480,9 @@ def _load_tensors(blob: bytes, path: Path, entry: str, where: str) -> dict[str, 
     except Exception as err:  # torch's parser of untrusted bytes: any failure means unreadable
         # weights_only refuses every pickled object (pickle.UnpicklingError) without running it; a damaged file
         # raises RuntimeError, EOFError, KeyError, ... from torch's zip reader and unpickler
-        first = str(err).strip().splitlines()[0] if str(err).strip() else ""
         raise ModelError(
-            f"{where}: {path} entry {entry!r} is not a tensor file torch loads with weights_only "
-            f"({type(err).__name__}{': ' + _short(first, 120) if first else ''}); pickled objects are never loaded"
+            f"{where}: {path} entry {entry!r} is not a tensor file torch.load(weights_only=True) reads "
+            f"({_torch_reason(err)}); pickled objects in it are never loaded"
         ) from None
     if not isinstance(content, dict) or not all(isinstance(k, str) for k in content):
         raise ModelError(
@@ -491,6 +495,19 @@ def _load_tensors(blob: bytes, path: Path, entry: str, where: str) -> dict[str, 
     elif not (isinstance(content.get("state"), dict) and isinstance(content.get("param_groups"), list)):
         raise ModelError(f"{where}: {path} entry {entry!r} must be an optimizer state dict (state, param_groups)")
     return content
+
+
+_TORCH_REFUSAL = re.compile(r"Unsupported (?:global: GLOBAL \S+|operand \d+)")
+"""What torch's weights-only unpickler refused, in its long message."""
+
+
+def _torch_reason(err: Exception) -> str:
+    """``err`` of ``torch.load`` in a few words: its type and what the weights-only unpickler refused (or its
+    first line)."""
+    refused = _TORCH_REFUSAL.search(str(err))
+    lines = str(err).strip().splitlines()
+    detail = refused[0] if refused else _short(lines[0], 120) if lines else ""
+    return f"{type(err).__name__}: {detail}" if detail else type(err).__name__
 
 
 def zip_data(path: Path, where: str = "policy") -> dict[str, Any]:
@@ -689,6 +706,7 @@ def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: boo
 
 __all__ = [
     "DATA_FIELD_TYPES",
+    "MAX_ENTRIES",
     "MAX_ENTRY_BYTES",
     "META_DEFAULTS",
     "META_FIELD_TYPES",

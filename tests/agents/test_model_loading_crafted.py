@@ -260,6 +260,7 @@ ENTRY_CASES: dict[str, tuple[Callable[[dict[str, bytes]], object], tuple[str, ..
     "non-tensor value": (_entry("policy.pth", torch_saved({"w": 1})), ("policy.pth", "'w' must be a tensor")),
     "not a dict": (_entry("policy.pth", torch_saved([torch.zeros(2)])), ("policy.pth", "dict of named tensors")),
     "garbage tensors": (_entry("policy.pth", b"\x00" * 64), ("policy.pth", "weights_only")),
+    "too many entries": (lambda e: e.update({f"x{i}.pth": b"" for i in range(64)}), ("entries", "at most 64")),
     "optimizer state of another layout": (
         _entry("policy.optimizer.pth", torch_saved({"x": torch.zeros(1)})),
         ("policy.optimizer.pth", "optimizer state dict"),
@@ -283,6 +284,14 @@ def test_tensors_of_another_shape_are_refused(trained, folder, tmp_path, capsys)
     every_command(folder, tmp_path, trained[0], capsys, "model.zip", "RuntimeError", commands=("evaluate", "export"))
     # a warm start finds out when the config's model is built, in the run's folder: the error is the same one line
     fails_in_one_line(train_argv(folder, tmp_path, trained[0]), capsys, "init_from", "does not fit", "RuntimeError")
+
+
+def test_an_entry_larger_than_the_cap_is_refused_from_its_header(folder, monkeypatch):
+    from agents.rl import model_io
+
+    monkeypatch.setattr(model_io, "MAX_ENTRY_BYTES", 1000)  # data holds about 19 kB
+    with pytest.raises(model_io.ModelError, match=r"entry 'data' is \d+ bytes uncompressed, more than the 1000"):
+        model_io.read_model_zip(folder / "model.zip")
 
 
 def test_a_zip_entry_repeated_is_refused(trained, folder, tmp_path, capsys):
