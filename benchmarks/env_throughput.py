@@ -13,7 +13,8 @@ Three protocols, each printing ratios measured in the same run:
    (:data:`CONTACT_VARIANTS`, applied to the compiled model at run time).
 3. **SB3 PPO training** (``--ppo-steps``, 0 to skip): ``PPO.learn`` wall time for QuadUneven-v0,
    QuadUnevenResidual-v0 and Ant-v5 with the same PPO settings (2 envs in a DummyVecEnv, the
-   hyperparameters of configs/rl/ppo_residual.yaml, torch on 1 thread), env steps/s.
+   hyperparameters of configs/rl/ppo_residual.yaml, torch on 1 thread), env steps/s; the residual env twice, with
+   SB3's default exploration std (1) and with the training config's (0.08). Kernels are compiled before timing.
 
 Usage: ``python benchmarks/env_throughput.py [--steps N] [--random-steps N] [--random-seeds K] [--ppo-steps N]
 [--ablation]``.
@@ -193,8 +194,11 @@ def measure_random_seeds(
     return out
 
 
-def measure_ppo(env_id: str, steps: int, seed: int = RANDOM_SEED, **kwargs) -> dict[str, float]:
-    """Wall time of SB3 ``PPO.learn(steps)`` on 2 envs (DummyVecEnv), env steps/s (updates included)."""
+def measure_ppo(
+    env_id: str, steps: int, seed: int = RANDOM_SEED, log_std_init: float = 0.0, **kwargs
+) -> dict[str, float]:
+    """Wall time of SB3 ``PPO.learn(steps)`` on 2 envs (DummyVecEnv), env steps/s (updates included).
+    ``log_std_init``: the policy's initial log exploration std (SB3's default 0, std 1)."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
@@ -223,7 +227,7 @@ def measure_ppo(env_id: str, steps: int, seed: int = RANDOM_SEED, **kwargs) -> d
         gae_lambda=0.95,
         clip_range=0.2,
         max_grad_norm=0.5,
-        policy_kwargs={"net_arch": [128, 128]},
+        policy_kwargs={"net_arch": [128, 128], "log_std_init": log_std_init},
         seed=seed,
         device="cpu",
         verbose=0,
@@ -300,7 +304,13 @@ def main(argv: list[str] | None = None) -> None:
     if args.ppo_steps > 0:
         rows = {
             "QuadUneven-v0 (rough)": measure_ppo("QuadUneven-v0", args.ppo_steps, terrain="rough"),
-            "QuadUnevenResidual-v0 (rough)": measure_ppo("QuadUnevenResidual-v0", args.ppo_steps, terrain="rough"),
+            "QuadUnevenResidual-v0 (rough, std 1)": measure_ppo(
+                "QuadUnevenResidual-v0", args.ppo_steps, terrain="rough"
+            ),
+            # configs/rl/ppo_residual.yaml's exploration: std 0.08 (log_std_init -2.5)
+            "QuadUnevenResidual-v0 (rough, std 0.08)": measure_ppo(
+                "QuadUnevenResidual-v0", args.ppo_steps, log_std_init=-2.5, terrain="rough"
+            ),
             "Ant-v5": measure_ppo("Ant-v5", args.ppo_steps),
         }
         ant = rows["Ant-v5"]["env_steps_per_s"]

@@ -1,5 +1,6 @@
-"""The package as a user installs it: a wheel built from this checkout, installed outside it, used from another
-directory (the shipped configs are package data; nothing is read from the repository)."""
+"""The package as a user installs it: ``python -m build`` gives an sdist and a wheel built from that sdist; the
+wheel, installed outside the checkout, is used from another directory (the shipped configs are package data;
+nothing is read from the repository)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import json
 import os
 import subprocess
 import sys
+import tarfile
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -32,20 +35,53 @@ print(json.dumps({"package": quad_uneven_env.__file__, "configs": str(CONFIG_DIR
 
 
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory) -> Path:
-    """A wheel of this checkout installed (without its dependencies, which the test's interpreter has) into a
-    fresh folder."""
-    work = tmp_path_factory.mktemp("wheel")
-    build = [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", str(ROOT), "-w"]
-    subprocess.run([*build, str(work / "dist")], check=True, capture_output=True, cwd=work)
-    (wheel,) = (work / "dist").glob("quad_uneven-*.whl")
-    site = work / "site"
+def dist(tmp_path_factory) -> Path:
+    """``python -m build`` of this checkout (the sdist, then the wheel built from the unpacked sdist), with the
+    build tools of the test's interpreter."""
+    out = tmp_path_factory.mktemp("dist")
+    build = [sys.executable, "-m", "build", "--no-isolation", "-o", str(out), str(ROOT)]
+    result = subprocess.run(build, capture_output=True, text=True, cwd=out)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    return out
+
+
+@pytest.fixture(scope="module")
+def installed(dist, tmp_path_factory) -> Path:
+    """The wheel installed (without its dependencies, which the test's interpreter has) into a fresh folder."""
+    (wheel,) = dist.glob("quad_uneven-*.whl")
+    site = tmp_path_factory.mktemp("site")
     subprocess.run(
         [sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],
         check=True,
         capture_output=True,
     )
     return site
+
+
+def _shipped_configs() -> set[str]:
+    return {p.relative_to(ROOT / "configs").as_posix() for p in (ROOT / "configs").rglob("*.yaml")}
+
+
+def test_the_sdist_and_the_wheel_carry_everything_they_need(dist):
+    (sdist,) = dist.glob("quad_uneven-*.tar.gz")
+    with tarfile.open(sdist) as tar:
+        names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
+    for needed in ("pyproject.toml", "setup.py", "README.md", "LICENSE", "CHANGELOG.md", "CITATION.cff"):
+        assert needed in names
+    assert {f"configs/{c}" for c in _shipped_configs()} <= names
+    assert "agents/control/adaptation/data/strength_estimator.npz" in names
+
+    (wheel,) = dist.glob("quad_uneven-*.whl")
+    with zipfile.ZipFile(wheel) as whl:
+        files = set(whl.namelist())
+        (metadata,) = (n for n in files if n.endswith(".dist-info/METADATA"))
+        meta = whl.read(metadata).decode()
+    assert {f"quad_uneven_env/configs/{c}" for c in _shipped_configs()} <= files
+    assert {"quad_uneven_env/py.typed", "planners/py.typed", "agents/py.typed"} <= files
+    assert "agents/control/adaptation/data/strength_estimator.npz" in files
+    assert not any(n.startswith(("tests/", "models/", "docs/")) for n in files)
+    assert "License-Expression: MIT" in meta
+    assert "Requires-Dist: mujoco" in meta
 
 
 def _run(site: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:

@@ -211,6 +211,16 @@ class ComputedTorqueController:
         objects that fix its argument types (StepArguments, GridArguments, limit, out, the stance mode) and its
         code (see :mod:`quad_uneven_env.compiled_call`)."""
 
+    def __getstate__(self) -> dict[str, Any]:
+        """``copy.deepcopy`` and pickle: everything but the compiled step's records and entry points (numba objects,
+        which neither copy nor pickle); the copy rebuilds them at its first compiled step."""
+        if self._grid_step is not None:
+            self._settle_grid_step()
+        state = dict(self.__dict__)
+        state["_step_cache"] = state["_grid_cache"] = None
+        state["_grid_calls"] = {}
+        return state
+
     @property
     def last(self) -> IDResult | None:
         """The inverse-dynamics result of the last call (diagnostics; read it before the next call)."""

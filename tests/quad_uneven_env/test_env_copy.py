@@ -10,6 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+import agents.rl  # noqa: F401  (registers QuadUnevenResidual-v0)
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 
 CASES = {
@@ -47,6 +48,24 @@ def test_a_copy_steps_as_the_original(case, how):
         for x, y in zip(a, b, strict=True):
             np.testing.assert_array_equal(x, y)
     assert twin.unwrapped.data is not env.unwrapped.data
+
+
+@pytest.mark.parametrize("how", sorted(COPIES))
+def test_a_copy_of_the_residual_env_steps_as_the_original(how):
+    """The expert (planner, physics-rate hook, compiled control step) is copied with its env and drives the copy."""
+    env = gym.make("QuadUnevenResidual-v0", max_episode_steps=20)
+    rng = np.random.default_rng(2)
+    env.reset(seed=5)
+    for a in rng.uniform(-0.5, 0.5, size=(6, 12)).astype(np.float32):
+        env.step(a)
+    twin = COPIES[how](env)
+    assert twin.unwrapped.data is not env.unwrapped.data
+    actions = rng.uniform(-0.5, 0.5, size=(18, 12)).astype(np.float32)  # past the 20-step limit: a reset too
+    ours, theirs = _roll(twin, actions), _roll(env, actions)
+    assert len(ours) == len(theirs) == 19
+    for a, b in zip(ours, theirs, strict=True):
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
 
 
 def test_stepping_a_copy_leaves_the_original_alone():

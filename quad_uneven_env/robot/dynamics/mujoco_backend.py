@@ -81,6 +81,13 @@ class MujocoDynamics:
         self._bound: mujoco.MjData | None = None
         self._views: tuple = ()
 
+    def __getstate__(self) -> dict:
+        """``copy.deepcopy`` and pickle: without the views of the bound data (a copy would hold stale arrays in
+        place of views of its own data); they are taken again at the copy's first call."""
+        state = dict(self.__dict__)
+        state["_bound"], state["_views"] = None, ()
+        return state
+
     def data_views(self, data: mujoco.MjData) -> tuple:
         """The MjData arrays the kernel reads (views kept while ``data`` is the same object)."""
         if data is not self._bound:
