@@ -356,9 +356,7 @@ def robot_data_dir() -> Path:
     try:
         dist = importlib.metadata.distribution(DATA_PACKAGE)
     except importlib.metadata.PackageNotFoundError:
-        raise ValueError(
-            f"robot models need the {DATA_PACKAGE!r} package: pip install 'quad-uneven[robots]'"
-        ) from None
+        raise ValueError(f"robot models need the {DATA_PACKAGE!r} package: pip install 'quad-uneven[robots]'") from None
     root = Path(str(dist.locate_file(_ROBOT_DATA_ROOT)))
     if not root.is_dir():
         raise ValueError(f"{DATA_PACKAGE} {dist.version} has no {_ROBOT_DATA_ROOT} folder (need version >= 4.4)")
@@ -555,9 +553,16 @@ def from_urdf(
             P = model.jointPlacements[jid]
             joints.append(
                 JointDescription(
-                    model.names[jid], np.array(P.translation, dtype=float), np.array(P.rotation, dtype=float),
-                    axis, rng, tau, arm.get(kind, 0.0), damp.get(kind, 0.0), inertia(jid),
-                )  # fmt: skip
+                    model.names[jid],
+                    np.array(P.translation, dtype=float),
+                    np.array(P.rotation, dtype=float),
+                    axis,
+                    rng,
+                    tau,
+                    arm.get(kind, 0.0),
+                    damp.get(kind, 0.0),
+                    inertia(jid),
+                )
             )
             q_index.append(iq)
         foot = str(spec["foot"])

@@ -39,8 +39,8 @@ def axis_rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
 def leg_fk_B(leg: LegDescription, q_leg: np.ndarray) -> np.ndarray:
     """Foot point (..., 3) in the trunk frame (m) for joint angles ``q_leg`` (..., 3) = (HAA, HFE, KFE)."""
     q = np.asarray(q_leg, dtype=float)
-    p = np.zeros(q.shape[:-1] + (3,))
-    R = np.broadcast_to(np.eye(3), q.shape[:-1] + (3, 3))
+    p = np.zeros((*q.shape[:-1], 3))
+    R = np.broadcast_to(np.eye(3), (*q.shape[:-1], 3, 3))
     for i, j in enumerate(leg.joints):
         p = p + R @ j.pos
         R = R @ j.rot @ axis_rotation(j.axis, q[..., i])
@@ -97,7 +97,7 @@ def _chain(leg: LegDescription, q_stand: np.ndarray) -> _Chain:
     sigma = float(np.sign(a3 @ a2))
     lat = float(alpha[1] + (u1 + u2) @ a2)
     # branches from the standing pose
-    q1, q2, q3 = q_stand
+    q1, _q2, q3 = q_stand
     f = leg_fk_B(leg, q_stand)
     r = f - h
     w_n = float((axis_rotation(a1, -q1) @ r) @ n)  # the foot's n coordinate before HAA turns
