@@ -379,7 +379,9 @@ class QuadUnevenEnv(gym.Env):
         self._fall = FallCheck(self.termination)
         # Where each foot stands at reset (trunk frame, x y): below its hip (the paper's robot), or where the
         # standing pose puts it (a URDF robot).
-        self._feet_home_B = hip_positions_B(self.robot_cfg) if self.robot_cfg is not None else standing_feet_B(self.robot)
+        self._feet_home_B = (
+            hip_positions_B(self.robot_cfg) if self.robot_cfg is not None else standing_feet_B(self.robot)
+        )
         # Row 0 is the point under the base, the rest the height scan grid.
         self._scan_B = np.vstack([np.zeros((1, 2)), height_scan_points_B(self.height_scan)])
 
