@@ -15,10 +15,18 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 __version__ = "0.2.0"
 
-__all__ = ["ENV_ID", "__version__", "register_envs"]
+__all__ = ["ENV_ID", "__version__", "register_envs", "robots"]
 
 ENV_ID = "QuadUneven-v0"
 """Gymnasium id of :class:`quad_uneven_env.env.QuadUnevenEnv`."""
+
+
+def robots() -> list[str]:
+    """Names of the shipped robots, each a ``robot=`` of ``gym.make("QuadUneven-v0", robot=...)``: the paper's
+    Table-1 robot and the URDF robots of ``configs/robot/`` (these need the ``robots`` extra)."""
+    from quad_uneven_env.robot.description import robot_names
+
+    return robot_names()
 
 
 def register_envs() -> None:

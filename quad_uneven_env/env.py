@@ -24,7 +24,6 @@ from quad_uneven_env.config import (
     RewardWeights,
     RobotConfig,
     TerminationLimits,
-    load_robot_config,
 )
 from quad_uneven_env.fields import Param, from_mapping
 from quad_uneven_env.measurement import StepMeasurement
@@ -47,7 +46,10 @@ from quad_uneven_env.randomization import (
     load_randomization,
 )
 from quad_uneven_env.rewards import COMMAND_REWARD_TERMS, REWARD_TERMS, command_reward_terms, reward_terms
+from quad_uneven_env.robot.description import RobotDescription, load_robot
+from quad_uneven_env.robot.description_model import description_scene_mjcf, standing_feet_B
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
+from quad_uneven_env.robot.leg_chain import feet_ik_B
 from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT, PhysicsOptions, scene_mjcf
 from quad_uneven_env.spatial import yaw_of_quat
 from quad_uneven_env.termination import FallCheck
@@ -255,7 +257,8 @@ class QuadUnevenEnv(gym.Env):
     constraint solve, i.e. at the start of that 2 ms step.
 
     **Arguments**: ``terrain`` (kind name or ``{"kind": ..., **params}``, see docs/terrain.md;
-    default ``"rough"``), ``robot`` (config name or YAML path, default ``"paper"``), ``controller``
+    default ``"rough"``), ``robot`` (a name of :func:`quad_uneven_env.robots`, or a robot YAML path: a Table-1
+    config or a URDF robot's, see docs/robots.md; default ``"paper"``), ``controller``
     (None or a :class:`PhysicsController`), ``reward_weights``, ``termination``, ``height_scan``
     (mappings of :mod:`quad_uneven_env.config`'s fields), and the scalars below, each checked at make
     time by type and range (a bool is not a number; the error names the argument and its allowed
@@ -318,7 +321,10 @@ class QuadUnevenEnv(gym.Env):
         self._check_controller(controller)
 
         self.randomization: RandomizationConfig | None = load_randomization(randomization)
-        self.robot_cfg: RobotConfig = load_robot_config(robot)
+        self.robot: RobotDescription = load_robot(robot)
+        """the robot's description (any robot: the paper's, a shipped URDF robot's or a user's YAML)."""
+        self.robot_cfg: RobotConfig | None = self.robot.config
+        """the paper robot's Table-1 config (None for a URDF robot)."""
         self.terrain = Terrain(parse_terrain_spec(terrain))
         self.reward_weights: RewardWeights = from_mapping(RewardWeights, reward_weights, "reward_weights")
         self.termination: TerminationLimits = from_mapping(TerminationLimits, termination, "termination")
@@ -342,12 +348,20 @@ class QuadUnevenEnv(gym.Env):
         self._controller = controller
         self._episode_steps = 0
 
-        xml = scene_mjcf(
-            self.robot_cfg,
-            self.terrain.hfield_asset_xml(),
-            self.terrain.hfield_geom_xml(self.robot_cfg.friction),
-            PhysicsOptions(timestep=float(timestep)),
-        )
+        if self.robot_cfg is not None:  # the paper's robot: its own MJCF generator (Table 1)
+            xml = scene_mjcf(
+                self.robot_cfg,
+                self.terrain.hfield_asset_xml(),
+                self.terrain.hfield_geom_xml(self.robot_cfg.friction),
+                PhysicsOptions(timestep=float(timestep)),
+            )
+        else:
+            xml = description_scene_mjcf(
+                self.robot,
+                self.terrain.hfield_asset_xml(),
+                self.terrain.hfield_geom_xml(self.robot.friction),
+                PhysicsOptions(timestep=float(timestep)),
+            )
         route_mujoco_warnings()
         self.model = mujoco.MjModel.from_xml_string(xml)
         # Divergence must end the episode visibly, not be hidden by MuJoCo's automatic reset.
@@ -363,7 +377,11 @@ class QuadUnevenEnv(gym.Env):
         self._gravity = self.model.opt.gravity.copy()
         self._g = float(-self._gravity[2])
         self._fall = FallCheck(self.termination)
-        self._hips_B = hip_positions_B(self.robot_cfg)
+        # Where each foot stands at reset (trunk frame, x y): below its hip (the paper's robot), or where the
+        # standing pose puts it (a URDF robot).
+        self._feet_home_B = (
+            hip_positions_B(self.robot_cfg) if self.robot_cfg is not None else standing_feet_B(self.robot)
+        )
         # Row 0 is the point under the base, the rest the height scan grid.
         self._scan_B = np.vstack([np.zeros((1, 2)), height_scan_points_B(self.height_scan)])
 
@@ -393,7 +411,7 @@ class QuadUnevenEnv(gym.Env):
             self.model,
             self.data,
             self.idx,
-            self.robot_cfg.foot_radius,
+            self.robot.foot_radius,
             self._scan_B,
             self._fields,
             self.observation_space.low,
@@ -551,15 +569,24 @@ class QuadUnevenEnv(gym.Env):
         """Standing pose over the spawn point: each foot on the terrain below its hip."""
         cfg = self.robot_cfg
         x0, y0 = self.terrain.spawn_xy
-        feet_xy = self._hips_B[:, :2] + np.array([x0, y0])
+        feet_xy = self._feet_home_B[:, :2] + np.array([x0, y0])
         ground = np.asarray(self.terrain.height(feet_xy[:, 0], feet_xy[:, 1]), dtype=float)
-        base_z = float(np.mean(ground)) + NOMINAL_HIP_HEIGHT + cfg.foot_radius
         qpos = np.zeros(C.NQ)
-        qpos[:3] = (x0, y0, base_z)
         qpos[3] = 1.0
-        for i, leg in enumerate(C.LEG_NAMES):
-            target_H = np.array([0.0, 0.0, ground[i] + cfg.foot_radius - base_z])
-            qpos[7 + 3 * i : 10 + 3 * i] = leg_ik_hip(target_H, cfg.thigh.length, cfg.shank.length, C.KNEE_SIGN[leg])
+        if cfg is None:  # a URDF robot: the standing pose's feet, each moved to the terrain under it
+            r = self.robot.foot_radius
+            base_z = float(np.mean(ground - self._feet_home_B[:, 2])) + r
+            targets = self._feet_home_B.copy()
+            targets[:, 2] = ground + r - base_z
+            qpos[7:] = feet_ik_B(self.robot, targets)
+        else:
+            base_z = float(np.mean(ground)) + NOMINAL_HIP_HEIGHT + cfg.foot_radius
+            for i, leg in enumerate(C.LEG_NAMES):
+                target_H = np.array([0.0, 0.0, ground[i] + cfg.foot_radius - base_z])
+                qpos[7 + 3 * i : 10 + 3 * i] = leg_ik_hip(
+                    target_H, cfg.thigh.length, cfg.shank.length, C.KNEE_SIGN[leg]
+                )
+        qpos[:3] = (x0, y0, base_z)
         qpos[7:] = np.clip(qpos[7:], self._joint_lo, self._joint_hi)
         return qpos
 

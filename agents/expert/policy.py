@@ -41,6 +41,12 @@ class ExpertPolicy:
     """
 
     def __init__(self, env: gym.Env, config: ExpertConfig | None = None) -> None:
+        robot = env.unwrapped.robot
+        if robot.config is None:
+            raise ValueError(
+                f"attach_expert: the expert plans and controls the paper's robot only (robot='paper' or a Table-1 "
+                f"config), got the URDF robot {robot.name!r}; drive it with a zero, PD or learned policy"
+            )
         self.config = config or ExpertConfig()
         self.env = env.unwrapped
         u, cfgx = self.env, self.config

@@ -111,11 +111,7 @@ def _trunk_xml(cfg: RobotConfig, with_camera: bool, limb: str = "") -> str:
     half = np.asarray(b.size) / 2.0
     hips = hip_positions_B(cfg)
     legs = "".join(_leg_xml(cfg, leg, hips[i], limb) for i, leg in enumerate(C.LEG_NAMES))
-    camera = (
-        f'<camera name="{C.TRACK_CAMERA}" mode="trackcom" pos="0.3 -1.7 0.75" xyaxes="1 0 0 0 0.4 1"/>'
-        if with_camera
-        else ""
-    )
+    camera = track_camera_xml() if with_camera else ""
     h0 = NOMINAL_HIP_HEIGHT + cfg.foot_radius
     return f"""
     <body name="{C.TRUNK_BODY}" pos="0 0 {h0:.10g}">
@@ -187,8 +183,28 @@ def scene_mjcf(
     :param hfield_geom: the ``<geom type="hfield" .../>`` element of the terrain.
     """
     p = physics or PhysicsOptions()
-    limb = f'priority="1" solref="{p.limb_timeconst():.6g} {p.contact_dampratio:.6g}"'
-    return f"""<mujoco model="{cfg.name}_on_terrain">
+    return scene_document(
+        cfg.name, _trunk_xml(cfg, with_camera=True, limb=limb_attributes(p)), actuators_xml(cfg), hfield_asset,
+        hfield_geom, p,
+    )  # fmt: skip
+
+
+def limb_attributes(physics: PhysicsOptions) -> str:
+    """MJCF attributes of the trunk, thigh and shank geoms: their own contact time constant (priority 1)."""
+    return f'priority="1" solref="{physics.limb_timeconst():.6g} {physics.contact_dampratio:.6g}"'
+
+
+def track_camera_xml() -> str:
+    """The camera that follows the robot (a child of the trunk body)."""
+    return f'<camera name="{C.TRACK_CAMERA}" mode="trackcom" pos="0.3 -1.7 0.75" xyaxes="1 0 0 0 0.4 1"/>'
+
+
+def scene_document(
+    name: str, trunk: str, actuators: str, hfield_asset: str, hfield_geom: str, p: PhysicsOptions
+) -> str:
+    """The scene around a robot: options, contact defaults, sky, the terrain, ``trunk`` (the robot's body
+    tree), ``actuators`` (``<motor>`` lines) and the contact sensors of :func:`contact_sensors_xml`."""
+    return f"""<mujoco model="{name}_on_terrain">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{p.timestep:.6g}" integrator="{p.integrator}" cone="{p.cone}" jacobian="{p.jacobian}" impratio="{p.impratio:.6g}">
     <flag nativeccd="{"enable" if p.native_ccd else "disable"}"/>
@@ -208,10 +224,10 @@ def scene_mjcf(
   </asset>
   <worldbody>
     <light name="sun" directional="true" pos="0 0 5" dir="-0.3 0.3 -1" castshadow="true"/>
-    {hfield_geom}{_trunk_xml(cfg, with_camera=True, limb=limb)}
+    {hfield_geom}{trunk}
   </worldbody>
   <actuator>
-{actuators_xml(cfg)}
+{actuators}
   </actuator>
   <sensor>
 {contact_sensors_xml()}
