@@ -11,7 +11,7 @@ Minari is the optional ``datasets`` extra; this package imports it only when a d
 Formats and what the recorded action is: docs/datasets.md.
 """
 
-from agents.datasets.collect import CollectInterrupted, collect, collect_task
+from agents.datasets.run import CollectInterrupted, collect, collect_task
 from agents.datasets.minari_io import (
     DatasetsUnavailable,
     dataset_id_for,

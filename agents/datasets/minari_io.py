@@ -33,7 +33,7 @@ __all__ = [
     "write_dataset",
 ]
 
-DATASETS_EXTRA_HINT = "pip install 'quad-uneven[datasets]'"
+DATASETS_EXTRA_HINT = 'pip install -e ".[datasets]"'
 """How to install Minari (the ``datasets`` extra)."""
 
 EPISODE_JSON_KEYS = ("terrain", "randomization", "command", "waypoints", "env_kwargs", "randomization_drawn")
