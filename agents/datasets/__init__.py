@@ -11,7 +11,6 @@ Minari is the optional ``datasets`` extra; this package imports it only when a d
 Formats and what the recorded action is: docs/datasets.md.
 """
 
-from agents.datasets.run import CollectInterrupted, collect, collect_task
 from agents.datasets.minari_io import (
     DatasetsUnavailable,
     dataset_id_for,
@@ -21,6 +20,7 @@ from agents.datasets.minari_io import (
     load_collected,
 )
 from agents.datasets.recorder import INFO_FIELDS, EpisodeRecorder, TorqueRecorder, recorded_action
+from agents.datasets.run import CollectInterrupted, collect, collect_task
 
 __all__ = [
     "INFO_FIELDS",

@@ -81,7 +81,7 @@ def collected(tmp_path_factory):
 
 
 def test_the_dataset_loads_with_minari_and_has_the_documented_fields(collected, monkeypatch):
-    suite, out = collected
+    _, out = collected
     summary = json.loads((out / "collect.json").read_text())
     assert summary["dataset_id"] == "quad-uneven-smoke-short-expert-v0"
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(out))
@@ -164,7 +164,7 @@ def test_recover_environment_is_the_first_episodes_env_and_steps(collected):
     obs, _ = env.reset(seed=meta["seed"])
     ep = dataset[0]
     np.testing.assert_array_equal(obs, ep.observations[0])
-    obs, reward, terminated, truncated, _ = env.step(ep.actions[0])
+    obs, reward, terminated, _, _ = env.step(ep.actions[0])
     assert obs.shape == ep.observations.shape[1:] and np.isfinite(reward) and not terminated
 
 
