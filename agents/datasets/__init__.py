@@ -19,7 +19,7 @@ from agents.datasets.minari_io import (
     import_minari,
     load_collected,
 )
-from agents.datasets.recorder import INFO_FIELDS, EpisodeRecorder, TorqueRecorder, recorded_action
+from agents.datasets.recorder import INFO_FIELDS, EpisodeRecorder, TorqueRecorder, TorqueReplay, recorded_action
 from agents.datasets.run import CollectInterrupted, collect, collect_task
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "DatasetsUnavailable",
     "EpisodeRecorder",
     "TorqueRecorder",
+    "TorqueReplay",
     "collect",
     "collect_task",
     "dataset_id_for",

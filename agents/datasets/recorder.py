@@ -19,7 +19,7 @@ import numpy as np
 
 from quad_uneven_env import constants as C
 
-__all__ = ["INFO_FIELDS", "EpisodeRecorder", "TorqueRecorder", "info_fields", "recorded_action"]
+__all__ = ["INFO_FIELDS", "EpisodeRecorder", "TorqueRecorder", "TorqueReplay", "info_fields", "recorded_action"]
 
 INFO_FIELDS: dict[str, tuple[str, str]] = {
     "time": ("s", "simulated time of the observation"),
@@ -36,8 +36,8 @@ INFO_FIELDS: dict[str, tuple[str, str]] = {
     "diverged": ("-", "the step failed and was undone (the episode ends there)"),
     "torques": (
         "N m",
-        "(frame_skip, 12) float32 joint torques applied at each physics step of the control step just taken "
-        "(zeros at the reset)",
+        "(frame_skip, 12) joint torques applied at each physics step of the control step just taken (zeros at the "
+        "reset)",
     ),
     "planned_stance": ("-", "(4,) feet the expert's current plan has in stance at the observation's time"),
     "gait_phase": ("-", "phase of the expert's current gait cycle in [0, 1]"),
@@ -48,8 +48,9 @@ INFO_FIELDS: dict[str, tuple[str, str]] = {
 }
 """The infos of a collected step: name -> (unit, meaning); one row per observation (the reset's and each step's)."""
 
-_DTYPES = {"foot_contact": bool, "planned_stance": bool, "diverged": bool, "torques": np.float32}
-"""Infos stored as other than float64 (the physics-rate torques as float32: they are most of a step's bytes)."""
+_DTYPES = {"foot_contact": bool, "planned_stance": bool, "diverged": bool}
+"""Infos stored as booleans (the others as float64: the torques exactly as applied, so that replaying them at
+physics rate reproduces the episode, :class:`TorqueReplay`)."""
 
 _COPIED = ("edge_moments", "contact_forces", "foot_contact", "cog", "cog_vel", "feet_pos", "push_force")
 """Arrays of the env's ``info`` copied as they are."""
@@ -232,3 +233,29 @@ class EpisodeRecorder:
         for k, v in self.reward_terms.items():
             out[f"infos/reward_terms/{k}"] = np.asarray(v[: n + 1], dtype=np.float64)
         return out
+
+
+class TorqueReplay:
+    """A physics-rate controller that applies an episode's recorded torques again, one row per physics step.
+
+    Installed in the episode's env (``env.unwrapped.set_controller``) before the reset with the episode's seed, it
+    reproduces the episode's trajectory when the env applies torques without delay (no ``latency`` in its
+    randomization; with a latency of k physics steps the env would apply each row k steps late). Past the last row
+    it applies zero torques.
+
+    :param torques: (N, frame_skip, 12) N m, the episode's ``infos["torques"][1:]`` (or (N x frame_skip, 12)).
+    """
+
+    def __init__(self, torques: np.ndarray) -> None:
+        self.torques = np.asarray(torques, dtype=np.float64).reshape(-1, C.N_JOINTS)
+        self._n = 0
+
+    def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any) -> None:
+        """Start from the first row again."""
+        self._n = 0
+
+    def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
+        """The next row (N m)."""
+        n = self._n
+        self._n = n + 1
+        return self.torques[n].copy() if n < len(self.torques) else np.zeros(C.N_JOINTS)

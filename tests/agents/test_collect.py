@@ -21,6 +21,7 @@ import agents.datasets.run as collect_module  # noqa: E402
 from agents.datasets import (  # noqa: E402
     CollectInterrupted,
     TorqueRecorder,
+    TorqueReplay,
     collect,
     episode_env,
     episode_metadata,
@@ -109,7 +110,7 @@ def test_the_dataset_loads_with_minari_and_has_the_documented_fields(collected, 
         }  # fmt: skip
         for k, shape in shapes.items():
             assert infos[k].shape == (n + 1, *shape), k
-        assert infos["torques"].dtype == np.float32 and infos["planned_stance"].dtype == bool
+        assert infos["torques"].dtype == np.float64 and infos["planned_stance"].dtype == bool
         assert set(infos["reward_terms"]) >= {"forward_progress", "stability"}
         assert all(v.shape == (n + 1,) for v in infos["reward_terms"].values())
         np.testing.assert_allclose(np.diff(infos["time"]), u.dt, atol=1e-9)
@@ -124,7 +125,7 @@ def test_the_infos_torques_average_to_the_recorded_action(collected):
     for ep in episodes_of(dataset):
         torques = ep.infos["torques"]
         assert not torques[0].any()  # the reset: no physics step yet
-        np.testing.assert_allclose(torques[1:].astype(float).mean(axis=1) / limit, ep.actions, atol=1e-6)
+        np.testing.assert_allclose(torques[1:].mean(axis=1) / limit, ep.actions, atol=1e-6)
 
 
 def test_the_observed_previous_action_is_the_recorded_action(collected):
@@ -166,6 +167,20 @@ def test_recover_environment_is_the_first_episodes_env_and_steps(collected):
     np.testing.assert_array_equal(obs, ep.observations[0])
     obs, reward, terminated, _, _ = env.step(ep.actions[0])
     assert obs.shape == ep.observations.shape[1:] and np.isfinite(reward) and not terminated
+
+
+def test_replaying_the_physics_rate_torques_reproduces_the_episode(collected):
+    """The infos' torques are exactly what was applied: replayed at physics rate they walk the same trajectory."""
+    _, out = collected
+    dataset = load_collected(out)
+    ep = dataset[1]  # rough terrain
+    env = episode_env(dataset, 1)
+    env.unwrapped.set_controller(TorqueReplay(ep.infos["torques"][1:]))
+    obs, _ = env.reset(seed=episode_metadata(dataset, 1)["seed"])
+    for t, action in enumerate(ep.actions):
+        obs, reward, *_ = env.step(action)  # the action is ignored under a controller, but shows in prev_action
+        np.testing.assert_array_equal(obs, ep.observations[t + 1], err_msg=f"step {t}")
+        assert reward == ep.rewards[t]
 
 
 def test_the_same_command_twice_gives_identical_arrays_with_workers(collected, tmp_path):
