@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml setup.py Makefile
 	$(PY) -m pip install -q --upgrade pip
 	# The CPU build of torch first: a bare `torch` requirement would pull a multi-GB CUDA build.
 	$(PY) -m pip install -q "torch==2.13.0"
-	$(PY) -m pip install -q -e ".[dev,export,tensorboard,distributed,docs,robots]"
+	$(PY) -m pip install -q -e ".[dev,export,tensorboard,distributed,datasets,docs,robots]"
 	@# Headless rendering needs an EGL (or OSMesa) library; install it from Debian if missing.
 	@MUJOCO_GL=egl $(PY) -c "import mujoco; mujoco.GLContext(16, 16).make_current()" 2>/dev/null || \
 	  (command -v apt-get >/dev/null && (apt-get update -qq && apt-get install -y -qq libegl1 libgl1 libosmesa6 >/dev/null) || \

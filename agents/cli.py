@@ -285,6 +285,94 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------------------------- collect
+def add_collect_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``collect`` subcommand on ``sub`` (its handler is in ``func``)."""
+    p = sub.add_parser(
+        "collect",
+        help="record the scripted expert over a suite's episodes as a Minari dataset (the 'datasets' extra)",
+        description="Run the scripted expert over every (terrain, seed) of a suite as 'quad-uneven evaluate' does and "
+        "record each step (observation, action = mean applied torque / motor limit, reward, termination, "
+        "truncation, and infos: physics-rate torques, stability, contact forces, the expert's plan) into the "
+        "Minari dataset DIR/DATASET_ID/data (load it with MINARI_DATASETS_PATH=DIR, or "
+        "agents.datasets.load_collected(DIR); docs/datasets.md). Exit code 2 on an invalid suite, policy, env kwargs "
+        "or output directory; 130 when interrupted (the finished episodes are kept: continue with --resume).",
+    )
+    p.add_argument("--policy", required=True, help="'expert' (the scripted expert; the only policy collect records)")
+    p.add_argument("--suite", required=True, help=f"shipped suite name {suite_names()} or the path of a suite .yaml")
+    p.add_argument("--out", type=Path, required=True, help="output directory DIR")
+    p.add_argument("--episodes", type=int, default=None, help="at most N seeds per terrain entry (default: all)")
+    p.add_argument("--seed", type=int, default=0, help="offset added to every seed of the suite (default 0)")
+    p.add_argument("--workers", type=int, default=1, help="parallel episode processes (default 1; same dataset)")
+    p.add_argument(
+        "--env-kwargs", default="{}", help="JSON object of extra QuadUneven-v0 arguments, e.g. '{\"frame_skip\": 5}'"
+    )
+    p.add_argument(
+        "--expert-config",
+        default="{}",
+        help="JSON object of agents.expert.ExpertConfig fields, e.g. '{\"friction\": 0.8}' (default: the defaults)",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the collection recorded in DIR: its finished episodes are kept, the others run (refused if "
+        "the suite, env kwargs, expert config, --episodes or --seed differ)",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="DIR may hold an earlier collection: delete its outputs first (other files are kept); without it, or "
+        "--resume, a non-empty DIR is refused",
+    )
+    p.add_argument(
+        "--episode-wall-limit",
+        type=float,
+        default=DEFAULT_WALL_TIME_LIMIT,
+        help="s of wall-clock time after which an episode is ended as 'wall_time_limit' "
+        f"(default {DEFAULT_WALL_TIME_LIMIT:g})",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_collect_command)
+    return p
+
+
+def run_collect_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven collect``: 0 on success, 2 on an invalid suite, policy, argument or missing extra."""
+    from agents.datasets import collect  # its module imports Minari only when it writes
+
+    env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
+    expert_config = _json_object(args.expert_config, "--expert-config")
+    if args.episodes is not None and args.episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    if not args.episode_wall_limit > 0:  # also refuses nan
+        raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
+    if args.policy != "expert":
+        raise ValueError(f"--policy must be 'expert' (collect records the scripted expert), got {args.policy!r}")
+    suite = _suite_option(args.suite)
+    with sigterm_as_keyboard_interrupt():
+        summary = collect(
+            suite,
+            args.out,
+            policy=args.policy,
+            episodes=args.episodes,
+            seed=args.seed,
+            workers=args.workers,
+            env_kwargs=env_kwargs,
+            expert_config=expert_config,
+            progress=not args.no_progress,
+            resume=args.resume,
+            overwrite=args.overwrite,
+            wall_time_limit=args.episode_wall_limit,
+        )
+    print(
+        f"{summary['episodes']} episodes, {summary['steps']} steps ({summary['successes']} reached the goal) in "
+        f"dataset {summary['dataset_id']}: {summary['dataset_path']}"
+    )
+    return 0
+
+
 # --------------------------------------------------------------------------------------------- train
 def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register the ``train`` subcommand on ``sub`` (its handler is in ``func``)."""
@@ -786,7 +874,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="quad-uneven", description="Quadruped locomotion on uneven terrain")
     sub = parser.add_subparsers(dest="command", required=True)
     for add in (
-        add_demo_parser, add_evaluate_parser, add_train_parser, add_export_parser, add_paper_parser,
+        add_demo_parser, add_evaluate_parser, add_collect_parser, add_train_parser, add_export_parser, add_paper_parser,
         add_plan_paper_parser, add_robustness_parser, add_compare_parser, add_select_parser, add_sweep_parser,
         add_fit_strength_parser,
     ):  # fmt: skip

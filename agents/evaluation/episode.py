@@ -10,7 +10,7 @@ import dataclasses
 import time
 import traceback
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -117,6 +117,24 @@ class EpisodeResult:
     """for an entry's first episode: ``heights`` (m), ``origin`` (m), ``cell_size`` (m) of its surface."""
 
 
+class EpisodeObserver(Protocol):
+    """What :func:`run_task` hands each step of an episode to (``quad-uneven collect`` records them with one).
+
+    ``start`` runs once the env and the policy are built, before the reset (it may install a physics-rate
+    controller that wraps the policy's); ``reset`` sees the reset's observation and info, ``step`` every
+    ``env.step``'s return right after it. An exception raised by ``reset`` or ``step`` ends the episode as an
+    ``error``, as one of the policy would.
+    """
+
+    def start(self, env: gym.Env, policy: Any) -> None: ...
+
+    def reset(self, obs: np.ndarray, info: dict[str, Any]) -> None: ...
+
+    def step(
+        self, action: np.ndarray, obs: np.ndarray, reward: float, terminated: bool, truncated: bool, info: dict
+    ) -> None: ...
+
+
 def make_env(task: EpisodeTask, cfg: EvalConfig, render: bool = False) -> gym.Env:
     """The QuadUneven-v0 env of ``task`` with the policy's arguments and a time limit of ``cfg.time_limit``.
 
@@ -167,8 +185,10 @@ def _policy_phase(policy: Any) -> str | None:
     return None
 
 
-def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
+def run_task(task: EpisodeTask, cfg: EvalConfig, observer: EpisodeObserver | None = None) -> EpisodeResult:
     """Run one episode; never raises for a policy or env error inside the episode (recorded as ``error``).
+
+    ``observer`` (optional) sees the episode's reset and every step (:class:`EpisodeObserver`).
 
     Success: the COG has travelled ``goal_distance`` along +x (``info["distance"]``) before any fall and
     within the time limit; for an entry with waypoints, every waypoint reached (in order) before any fall and
@@ -181,6 +201,8 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     env = make_env(task, cfg, render=video)
     u = env.unwrapped
     policy = make_policy(cfg.policy, env, cfg.algo, cfg.allow_pickle, cfg.expert_config)
+    if observer is not None:
+        observer.start(env, policy)
     dt = u.dt
     g = float(-u.model.opt.gravity[2])
     writer, video_path, frame_every = None, None, max(1, round(1.0 / (VIDEO_FPS * dt)))
@@ -216,6 +238,8 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
     residual_torque = getattr(u.controller, "residual_torque", None)  # a ResidualController's (N m)
     residual_sum = 0.0
     try:
+        if observer is not None:
+            observer.reset(obs, info)
         if writer is not None:
             writer.append_data(env.render())
         while True:
@@ -228,8 +252,10 @@ def run_task(task: EpisodeTask, cfg: EvalConfig) -> EpisodeResult:
                 commands.append(u.command)  # in effect during the step
             action, state = policy.predict(obs, state=state, episode_start=start, deterministic=True)
             start = np.zeros(1, dtype=bool)
-            obs, _, terminated, truncated, info = env.step(action)
+            obs, reward, terminated, truncated, info = env.step(action)
             step += 1
+            if observer is not None:
+                observer.step(action, obs, reward, terminated, truncated, info)
             if residual_torque is not None:
                 residual_sum += residual_torque(action)
             times.append(float(u.data.time))

@@ -46,7 +46,7 @@ from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_sui
 from agents.evaluation.targets import check_command_targets, check_targets
 from agents.outputs import OutputError, write_json_atomic
 
-__all__ = ["EvaluationInterrupted", "evaluate", "make_policy", "write_results"]
+__all__ = ["EvaluationInterrupted", "evaluate", "make_policy", "preflight", "run_tasks", "write_results"]
 
 
 def _ignore_sigint() -> None:
@@ -54,18 +54,22 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _run_all(
+def run_tasks(
     tasks: list[EpisodeTask],
     cfg: EvalConfig,
     workers: int,
     progress: bool,
-    on_result: Callable[[EpisodeResult], None],
+    on_result: Callable[[Any], None],
     backend: str = "pool",
     address: str | None = None,
     ship_code: bool = False,
+    runner: Callable[[EpisodeTask, EvalConfig], Any] = run_task,
 ) -> None:
     """Run every task, in ``workers`` spawned processes if > 1 (``backend="ray"``: as Ray tasks, see
     :func:`agents.evaluation.ray_backend.run_on_ray`), handing each result to ``on_result`` as it ends.
+
+    :param runner: the episode function, ``runner(task, cfg)`` (a module-level function: the processes import it;
+        the Ray backend runs :func:`run_task` only).
 
     An interrupt (Ctrl-C, or SIGTERM under :func:`agents.interrupts.sigterm_as_keyboard_interrupt`)
     stops the workers at once; the results already handed on are kept by the caller.
@@ -82,13 +86,13 @@ def _run_all(
             return
         if workers <= 1:
             for t in tasks:
-                on_result(run_task(t, cfg))
+                on_result(runner(t, cfg))
                 bar.update(1)
             return
         ctx = multiprocessing.get_context("spawn")  # MuJoCo (and its GL contexts) + fork is fragile
         pool = ctx.Pool(workers, initializer=_ignore_sigint)
         try:
-            for result in pool.imap_unordered(functools.partial(run_task, cfg=cfg), tasks, chunksize=1):
+            for result in pool.imap_unordered(functools.partial(runner, cfg=cfg), tasks, chunksize=1):
                 on_result(result)
                 bar.update(1)
         except BaseException:  # an error or an interrupt: do not wait for the running episodes
@@ -102,7 +106,7 @@ def _run_all(
         bar.close()
 
 
-def _preflight(tasks: list[EpisodeTask], cfg: EvalConfig) -> None:
+def preflight(tasks: list[EpisodeTask], cfg: EvalConfig) -> None:
     """Build the first episode's env and policy, and every randomized entry's env, here: bad env kwargs,
     randomization (e.g. a latency beyond the control period) or policies fail before any episode.
 
@@ -229,7 +233,7 @@ def evaluate(
         allow_pickle=allow_pickle,
         expert_config=dict(expert_config or {}),
     )
-    _preflight(tasks, cfg)
+    preflight(tasks, cfg)
     if not resuming:
         start_run(out, identity)
     done = load_records(out, tasks) if resuming else {}
@@ -245,7 +249,7 @@ def evaluate(
 
     try:
         n = workers if backend == "ray" else min(workers, max(1, len(todo)))
-        _run_all(todo, cfg, n, progress, keep, backend, address, ship_code)
+        run_tasks(todo, cfg, n, progress, keep, backend, address, ship_code)
     except KeyboardInterrupt:
         raise EvaluationInterrupted(out, len(done), len(tasks)) from None
 

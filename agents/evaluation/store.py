@@ -106,33 +106,40 @@ def run_identity(
     }
 
 
-def open_output_dir(out: Path, resume: bool, overwrite: bool) -> Path:
+def open_output_dir(
+    out: Path, resume: bool, overwrite: bool, outputs: Sequence[str] = EVAL_OUTPUTS, what: str = "evaluation"
+) -> Path:
     """Check and create ``out`` before any work: a file fails, an earlier run's outputs are refused.
 
     With ``resume``, a directory holding an earlier run is kept (:func:`check_resume` compares it);
-    with ``overwrite``, that run's outputs (``EVAL_OUTPUTS``) are deleted and other files kept.
+    with ``overwrite``, that run's outputs (``outputs``, default ``EVAL_OUTPUTS``) are deleted and other files kept.
 
+    :param what: the command's kind of directory, for the messages (``"evaluation"``, ``"collect"``).
     :raises OutputError: naming the directory and what is wrong with it.
     """
     if resume and overwrite:
         raise OutputError("--resume and --overwrite exclude each other (continue a run, or start it again)")
     if resume and out.is_dir() and any(out.iterdir()) and not (out / RUN_FILE).is_file():
         raise OutputError(
-            f"--resume: {str(out)!r} holds no {RUN_FILE} (not an evaluation directory, or one that never "
-            "started); pass --overwrite to start a new run there"
+            f"--resume: {str(out)!r} holds no {RUN_FILE} (not {'an' if what[0] in 'aeiou' else 'a'} {what} "
+            "directory, or one that never started); pass --overwrite to start a new run there"
         )
     hint = (
         "pass --resume to continue the run recorded there, --overwrite to delete its outputs (other files are "
         "kept), or choose another directory"
     )
-    return prepare_output_dir(out, EVAL_OUTPUTS, overwrite=overwrite, keep=resume, field="--out", hint=hint)
+    return prepare_output_dir(out, outputs, overwrite=overwrite, keep=resume, field="--out", hint=hint)
 
 
-def check_resume(out: Path, identity: Mapping[str, Any]) -> bool:
+def check_resume(
+    out: Path, identity: Mapping[str, Any], run_format: str = RUN_FORMAT, keys: Sequence[str] = IDENTITY_KEYS
+) -> bool:
     """Whether ``out`` holds a run to continue; refuse one that differs from ``identity``.
 
+    :param run_format: the ``format`` its ``run.json`` must have (default: an evaluation's).
+    :param keys: the fields of ``run.json`` that must be equal (default ``IDENTITY_KEYS``).
     :return: False if ``out`` has no ``run.json`` (a fresh run), True if it has a matching one.
-    :raises OutputError: if ``run.json`` is unreadable or differs in a field of ``IDENTITY_KEYS`` (named).
+    :raises OutputError: if ``run.json`` is unreadable, of another format or differs in a field of ``keys`` (named).
     """
     path = out / RUN_FILE
     if not path.is_file():
@@ -141,9 +148,9 @@ def check_resume(out: Path, identity: Mapping[str, Any]) -> bool:
         recorded = json.loads(path.read_text())
     except (OSError, ValueError) as err:
         raise OutputError(f"--resume: {path} is unreadable ({err}); pass --overwrite to start over") from None
-    if not isinstance(recorded, dict) or recorded.get("format") != RUN_FORMAT:
-        raise OutputError(f"--resume: {path} is not a {RUN_FORMAT} run file; pass --overwrite to start over")
-    for key in IDENTITY_KEYS:
+    if not isinstance(recorded, dict) or recorded.get("format") != run_format:
+        raise OutputError(f"--resume: {path} is not a {run_format} run file; pass --overwrite to start over")
+    for key in keys:
         if recorded.get(key, {} if key == "expert_config" else None) != identity.get(key):
             raise OutputError(
                 f"--resume: {key} differs from the run recorded in {path} (recorded {recorded.get(key)!r}, "
