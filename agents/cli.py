@@ -14,8 +14,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 from agents.evaluation.episode import DEFAULT_WALL_TIME_LIMIT
 from agents.evaluation.policies import SB3_ALGOS
@@ -33,6 +35,19 @@ EXIT_USAGE = 2
 
 EXIT_INTERRUPTED = 130
 """Exit code after Ctrl-C or SIGTERM (128 + SIGINT), once the finished work has been kept."""
+
+
+class UsageError(ValueError):
+    """A command line that argparse refuses (an unknown option, a value of the wrong type, a missing option)."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose errors are :class:`UsageError` (one ``error: ...`` line from :func:`main`, exit
+    code 2, as every other invalid input) instead of the usage text; ``--help`` prints the help as usual."""
+
+    def error(self, message: str) -> NoReturn:
+        """Raise :class:`UsageError` naming the option, with where to find the allowed forms."""
+        raise UsageError(f"{message} (see {self.prog} --help)")
 
 
 def demo(out: Path, terrain: str, seed: int, distance: float, video: bool) -> dict:
@@ -223,6 +238,16 @@ def _json_object(text: str, option: str) -> dict:
     return value
 
 
+def _model_file_options(args: argparse.Namespace) -> None:
+    """Refuse ``--algo`` and ``--allow-pickle`` for a named policy (they only concern a model .zip)."""
+    if args.policy in ("zero", "expert"):
+        for option, given in (("--algo", args.algo is not None), ("--allow-pickle", args.allow_pickle)):
+            if given:
+                raise ValueError(
+                    f"{option} is for a model .zip (--policy PATH.zip), got --policy {args.policy!r}: drop {option}"
+                )
+
+
 def _suite_option(name: str) -> Suite:
     """The suite of a ``--suite`` option; :raises SuiteError: naming it."""
     try:
@@ -243,6 +268,12 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
     if (args.address is not None or args.ship_code) and args.backend != "ray":
         raise ValueError("--address and --ship-code need --backend ray")
+    if args.workers is not None and args.address is not None:
+        raise ValueError(
+            f"--workers sets the processes here or the CPUs of a local Ray; the cluster given by --address "
+            f"{args.address!r} has its own CPUs: drop --workers {args.workers}"
+        )
+    _model_file_options(args)
     workers = args.workers if args.workers is not None else DEFAULT_LOCAL_CPUS if args.backend == "ray" else 1
     if not args.episode_wall_limit > 0:  # also refuses nan
         raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
@@ -374,6 +405,11 @@ def run_train_command(args: argparse.Namespace) -> int:
         "init_from": args.init_from,
     }
     cfg = load_train_config(args.config, overrides)
+    if not cfg.residual and args.residual_scale is not None:
+        raise ValueError(
+            f"--residual-scale is for a residual agent; the config {args.config or 'default'!r} has residual: "
+            f"false (a policy from scratch): drop --residual-scale {args.residual_scale}"
+        )
     if args.randomization is not None:
         randomization = None if args.randomization.lower() == "none" else args.randomization
         cfg = validate(dataclasses.replace(cfg, randomization=randomization))
@@ -521,28 +557,42 @@ def add_robustness_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentP
     return p
 
 
+def _number_list(text: str, option: str) -> list[float]:
+    """``text`` as comma-separated finite numbers; :raises ValueError: naming ``option`` and the allowed form."""
+    values = []
+    for item in (v.strip() for v in text.split(",")):
+        try:
+            value = float(item)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise ValueError(
+                f"{option} must be comma-separated finite numbers (e.g. 0.8,0.6,0.4), got {text!r} ({item!r} is not)"
+            )
+        values.append(value)
+    return values
+
+
 def run_robustness_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven robustness``: 0 on success, 2 on invalid input."""
     from agents.evaluation.robustness import robustness_sweep
 
-    try:
-        values = None if args.values is None else [float(v) for v in args.values.split(",") if v.strip()]
-        if args.workers < 1:
-            raise ValueError(f"--workers must be >= 1, got {args.workers}")
-        summary = robustness_sweep(
-            args.factor,
-            args.out,
-            values=values,
-            seeds=args.seeds,
-            workers=args.workers,
-            policy=args.policy,
-            goal_distance=args.goal,
-            expert_config=None if args.model is None else {"model": args.model},
-            progress=not args.no_progress,
-        )
-    except ValueError as e:  # PolicyError, SuiteError, ... are ValueErrors
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    values = None if args.values is None else _number_list(args.values, "--values")
+    if args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    if args.model is not None and args.policy != "expert":
+        raise ValueError(f"--model is the expert's model, for --policy expert only, got --policy {args.policy!r}")
+    summary = robustness_sweep(
+        args.factor,
+        args.out,
+        values=values,
+        seeds=args.seeds,
+        workers=args.workers,
+        policy=args.policy,
+        goal_distance=args.goal,
+        expert_config=None if args.model is None else {"model": args.model},
+        progress=not args.no_progress,
+    )
     for pt in summary["points"]:
         index = pt["mean_stability_index"]
         print(
@@ -779,8 +829,8 @@ def run_sweep_command(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
     """The ``quad-uneven`` parser with every subcommand."""
-    parser = argparse.ArgumentParser(prog="quad-uneven", description="Quadruped locomotion on uneven terrain")
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = ArgumentParser(prog="quad-uneven", description="Quadruped locomotion on uneven terrain")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=ArgumentParser)
     for add in (
         add_demo_parser, add_evaluate_parser, add_train_parser, add_export_parser, add_paper_parser,
         add_plan_paper_parser, add_robustness_parser, add_compare_parser, add_select_parser, add_sweep_parser,
@@ -796,8 +846,8 @@ def _one_line(text: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``quad-uneven``: the subcommand's exit code; 2 (one line on stderr) on invalid input."""
-    args = build_parser().parse_args(argv)
     try:
+        args = build_parser().parse_args(argv)
         return args.func(args)
     except ValueError as err:  # every validation error of the library (SuiteError, PolicyError, OutputError, ...)
         print(f"error: {_one_line(err)}", file=sys.stderr)
