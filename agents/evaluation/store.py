@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from agents.evaluation.episode import EpisodeResult
+from agents.evaluation.results_io import ResultsError, load_record, read_json
 from agents.evaluation.suites import EpisodeTask, Suite
 from agents.outputs import OutputError, prepare_output_dir, write_json_atomic
 
@@ -138,9 +140,9 @@ def check_resume(out: Path, identity: Mapping[str, Any]) -> bool:
     if not path.is_file():
         return False
     try:
-        recorded = json.loads(path.read_text())
-    except (OSError, ValueError) as err:
-        raise OutputError(f"--resume: {path} is unreadable ({err}); pass --overwrite to start over") from None
+        recorded = read_json(path)
+    except ResultsError as err:
+        raise OutputError(f"--resume: {err}; pass --overwrite to start over") from None
     if not isinstance(recorded, dict) or recorded.get("format") != RUN_FORMAT:
         raise OutputError(f"--resume: {path} is not a {RUN_FORMAT} run file; pass --overwrite to start over")
     for key in IDENTITY_KEYS:
@@ -202,11 +204,18 @@ def write_episode(out: Path, result: EpisodeResult) -> Path:
     return write_json_atomic(_record_path(out, index), result.record)
 
 
-def load_records(out: Path, tasks: Sequence[EpisodeTask]) -> dict[int, dict[str, Any]]:
-    """The records of the finished episodes of ``tasks`` in ``out`` (index -> record).
+RESUME_HINT = "delete it to run that episode again, or pass --overwrite to start the run over"
+"""What a refused episode file of a run to resume suggests."""
 
-    An episode counts as finished if its record parses, matches its task (entry, terrain, seed) and its
-    trace exists; anything else (a missing, partial or foreign file) is run again.
+
+def load_records(out: Path, tasks: Sequence[EpisodeTask]) -> dict[int, dict[str, Any]]:
+    """The records of the finished episodes of ``tasks`` in ``out`` (index -> record), checked.
+
+    An episode counts as finished if its record exists and its trace (and, for an entry's first episode, its
+    terrain) too; one whose trace is missing is run again. A record that is not one this run wrote (not strict
+    JSON, a field of the wrong type or missing, another task's entry, terrain or seed) is refused.
+
+    :raises ResultsError: naming the record file and the field (:func:`agents.evaluation.results_io.load_record`).
     """
     done: dict[int, dict[str, Any]] = {}
     for t in tasks:
@@ -216,31 +225,56 @@ def load_records(out: Path, tasks: Sequence[EpisodeTask]) -> dict[int, dict[str,
         if t.first_of_entry and not _terrain_path(out, t.index).is_file():
             continue
         try:
-            record = json.loads(path.read_text())
-        except (OSError, ValueError):
-            continue
-        if not isinstance(record, dict):
-            continue
-        if (record.get("index"), record.get("entry"), record.get("terrain"), record.get("seed")) != (
-            t.index,
-            t.entry,
-            t.kind,
-            t.seed,
-        ):
-            continue
+            record = load_record(path)
+        except ResultsError as err:
+            raise ResultsError(f"--resume: {err}; {RESUME_HINT}") from None
+        for field, expected in (("index", t.index), ("entry", t.entry), ("terrain", t.kind), ("seed", t.seed)):
+            if record[field] != expected:
+                raise ResultsError(
+                    f"--resume: {path}: {field} must be {expected!r} (episode {t.index} of the run), got "
+                    f"{record[field]!r}; {RESUME_HINT}"
+                )
         done[t.index] = record
     return done
 
 
+TRACE_ARRAYS = ("time", "cog", "feet", "index", "contact", "yaw")
+"""Arrays every trace file holds (the report's plots read them)."""
+
+TERRAIN_ARRAYS = ("heights", "origin", "cell_size")
+"""Arrays every terrain file holds."""
+
+
+def _read_npz(path: Path, required: Sequence[str]) -> dict[str, np.ndarray]:
+    """The arrays of ``path`` (no pickled objects).
+
+    :raises ResultsError: if it is unreadable or lacks one of ``required``.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise ResultsError(f"{path}: not an array file quad-uneven wrote ({err}); {RESUME_HINT}") from None
+    missing = [k for k in required if k not in arrays]
+    if missing:
+        raise ResultsError(f"{path}: array {missing[0]!r} is missing (needed: {list(required)}); {RESUME_HINT}")
+    return arrays
+
+
 def load_results_for_report(out: Path, records: Sequence[Mapping[str, Any]], tasks: Sequence[EpisodeTask]) -> list:
-    """:class:`EpisodeResult` of every entry's first episode (record, trace, terrain), read back for the plots."""
+    """:class:`EpisodeResult` of every entry's first episode (record, trace, terrain), read back for the plots.
+
+    :raises ResultsError: naming a trace or terrain file that is unreadable or lacks an array.
+    """
     firsts = []
     for t in tasks:
         if not t.first_of_entry:
             continue
-        with np.load(_trace_path(out, t.index)) as z:
-            trace = {k: z[k] for k in z.files}
-        with np.load(_terrain_path(out, t.index)) as z:
+        trace = _read_npz(_trace_path(out, t.index), TRACE_ARRAYS)
+        z = _read_npz(_terrain_path(out, t.index), TERRAIN_ARRAYS)
+        try:
             terrain = {"heights": z["heights"], "origin": tuple(z["origin"]), "cell_size": float(z["cell_size"])}
+        except (TypeError, ValueError) as err:
+            raise ResultsError(f"{_terrain_path(out, t.index)}: origin or cell_size is malformed ({err})") from None
         firsts.append(EpisodeResult(dict(records[t.index]), trace, terrain))
     return firsts

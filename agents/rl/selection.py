@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.evaluation.metrics import json_safe
+from agents.evaluation.results_io import ResultsError, load_results
 from agents.evaluation.run import evaluate
 from agents.evaluation.store import RUN_FILE
 from agents.evaluation.suites import Suite, load_suite
@@ -122,10 +123,10 @@ def load_reference(folder: str | Path, suite: Suite, seed: int, episodes: int | 
     """
     folder = Path(folder)
     try:
-        res = json.loads((folder / "results.json").read_text())
-    except (OSError, ValueError) as err:
-        raise SelectionError(f"reference {str(folder)!r}: no readable results.json ({err})") from None
-    meta = res.get("meta", {})
+        res = load_results(folder, summary=True)
+    except ResultsError as err:
+        raise SelectionError(f"reference {str(folder)!r}: {err}") from None
+    meta = res["meta"]
     found = (res.get("suite"), meta.get("seed_offset"), meta.get("episodes_per_entry"))
     if found != (suite.name, seed, episodes):
         raise SelectionError(
