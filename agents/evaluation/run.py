@@ -34,7 +34,9 @@ from agents.evaluation.policies import SB3_ALGOS, PolicyError, make_policy, mode
 from agents.evaluation.ray_backend import BACKENDS, import_ray, run_on_ray
 from agents.evaluation.report import write_report
 from agents.evaluation.store import (
+    RUN_FILE,
     check_resume,
+    episode_files,
     load_records,
     load_results_for_report,
     open_output_dir,
@@ -44,7 +46,7 @@ from agents.evaluation.store import (
 )
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite
 from agents.evaluation.targets import check_command_targets, check_targets
-from agents.outputs import OutputError, write_json_atomic
+from agents.outputs import OutputError, OutputManifest, write_json_atomic
 
 __all__ = ["EvaluationInterrupted", "evaluate", "make_policy", "write_results"]
 
@@ -229,56 +231,62 @@ def evaluate(
         allow_pickle=allow_pickle,
         expert_config=dict(expert_config or {}),
     )
-    _preflight(tasks, cfg)
-    if not resuming:
-        start_run(out, identity)
-    done = load_records(out, tasks) if resuming else {}
-    todo = [t for t in tasks if t.index not in done]
+    with OutputManifest(out, "evaluate") as manifest:
+        _preflight(tasks, cfg)
+        if not resuming:
+            start_run(out, identity)
+        done = load_records(out, tasks) if resuming else {}
+        kept = [p for t in tasks if t.index in done for p in episode_files(out, t.index, t.first_of_entry)]
+        manifest.add([out / RUN_FILE, *kept])  # a resumed run's (one an older version started has no manifest yet)
+        todo = [t for t in tasks if t.index not in done]
 
-    def keep(result: EpisodeResult) -> None:
-        record = json_safe(result.record)
+        def keep(result: EpisodeResult) -> None:
+            record = json_safe(result.record)
+            try:
+                write_episode(out, EpisodeResult(record, result.trace, result.terrain))
+            except OSError as err:
+                raise OutputError(f"--out {str(out)!r}: cannot write episode {record['index']} ({err})") from None
+            index = int(record["index"])
+            video = [out / "videos" / record["video"]] if record.get("video") else []
+            manifest.add([*episode_files(out, index, result.terrain is not None), *video])
+            done[int(record["index"])] = record
+
         try:
-            write_episode(out, EpisodeResult(record, result.trace, result.terrain))
+            n = workers if backend == "ray" else min(workers, max(1, len(todo)))
+            _run_all(todo, cfg, n, progress, keep, backend, address, ship_code)
+        except KeyboardInterrupt:
+            raise EvaluationInterrupted(out, len(done), len(tasks)) from None
+
+        records = [done[t.index] for t in tasks]
+        meta = {
+            "suite_file": suite.source,
+            "goal_distance": suite.goal_distance,
+            "time_limit": suite.time_limit,
+            "episodes_per_entry": episodes,
+            "seed_offset": seed,
+            "workers": workers,
+            "backend": backend,
+            "ray_address": address,
+            "algo": algo if kind == "sb3" else None,
+            "env_kwargs": env_kwargs,
+            "entries": [e.label for e in suite.terrains],
+            "randomization": [e.randomization for e in suite.terrains],
+            "expert_config": dict(expert_config or {}),
+            "expert_model": sorted({str(r["expert_model"]) for r in records if r.get("expert_model")}) or None,
+            "wall_time_limit": float(wall_time_limit),
+            "resumed_episodes": len(tasks) - len(todo),
+            "machines": distinct_machines(records),
+        }
+        results = _results(suite, str(policy), records, meta)
+        try:
+            manifest.add([write_results(out, results)])
+            write_report(results, load_results_for_report(out, records, tasks), meta["entries"], out)
         except OSError as err:
-            raise OutputError(f"--out {str(out)!r}: cannot write episode {record['index']} ({err})") from None
-        done[int(record["index"])] = record
-
-    try:
-        n = workers if backend == "ray" else min(workers, max(1, len(todo)))
-        _run_all(todo, cfg, n, progress, keep, backend, address, ship_code)
-    except KeyboardInterrupt:
-        raise EvaluationInterrupted(out, len(done), len(tasks)) from None
-
-    records = [done[t.index] for t in tasks]
-    meta = {
-        "suite_file": suite.source,
-        "goal_distance": suite.goal_distance,
-        "time_limit": suite.time_limit,
-        "episodes_per_entry": episodes,
-        "seed_offset": seed,
-        "workers": workers,
-        "backend": backend,
-        "ray_address": address,
-        "algo": algo if kind == "sb3" else None,
-        "env_kwargs": env_kwargs,
-        "entries": [e.label for e in suite.terrains],
-        "randomization": [e.randomization for e in suite.terrains],
-        "expert_config": dict(expert_config or {}),
-        "expert_model": sorted({str(r["expert_model"]) for r in records if r.get("expert_model")}) or None,
-        "wall_time_limit": float(wall_time_limit),
-        "resumed_episodes": len(tasks) - len(todo),
-        "machines": distinct_machines(records),
-    }
-    results = _results(suite, str(policy), records, meta)
-    try:
-        write_results(out, results)
-        write_report(results, load_results_for_report(out, records, tasks), meta["entries"], out)
-    except OSError as err:
-        raise OutputError(
-            f"--out {str(out)!r}: cannot write results.json or report.md ({err}); the {len(records)} episode "
-            f"records are kept in {out / 'episodes'} (fix the cause and rerun with --resume to rebuild them)"
-        ) from None
-    return results
+            raise OutputError(
+                f"--out {str(out)!r}: cannot write results.json or report.md ({err}); the {len(records)} episode "
+                f"records are kept in {out / 'episodes'} (fix the cause and rerun with --resume to rebuild them)"
+            ) from None
+        return results
 
 
 class EvaluationInterrupted(KeyboardInterrupt):

@@ -33,6 +33,7 @@ __all__ = [
     "RUN_FILE",
     "RUN_FORMAT",
     "check_resume",
+    "episode_files",
     "load_records",
     "load_results_for_report",
     "open_output_dir",
@@ -185,6 +186,11 @@ def _terrain_path(out: Path, index: int) -> Path:
 
 def _trace_path(out: Path, index: int) -> Path:
     return out / "traces" / f"ep{index:03d}.npz"
+
+
+def episode_files(out: Path, index: int, with_terrain: bool) -> list[Path]:
+    """The files of finished episode ``index`` in ``out``: its trace, its terrain (``with_terrain``), its record."""
+    return [_trace_path(out, index), *([_terrain_path(out, index)] if with_terrain else []), _record_path(out, index)]
 
 
 def write_episode(out: Path, result: EpisodeResult) -> Path:
