@@ -25,7 +25,7 @@ from agents.evaluation.ray_backend import BACKENDS, DEFAULT_LOCAL_CPUS
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import Suite, SuiteError, load_suite, suite_from_dict, suite_names
 from agents.interrupts import sigterm_as_keyboard_interrupt
-from agents.outputs import prepare_output_dir
+from agents.outputs import OutputManifest, prepare_output_dir
 from agents.paper.simulation import DISTRIBUTIONS as PAPER_DISTRIBUTIONS
 from agents.plotting import video_to_gif
 from agents.rl.config import ALGOS, load_train_config, validate
@@ -481,7 +481,8 @@ def run_paper_command(args: argparse.Namespace) -> int:
     prepare_output_dir(args.out, keep=True, field="--out")  # a file or an uncreatable path fails before the run
 
     run = run_paper_sim(config, progress=not args.no_progress)
-    info = write_paper_outputs(run, args.out, fps=args.fps)
+    with OutputManifest(args.out, "paper"):
+        info = write_paper_outputs(run, args.out, fps=args.fps)
     keys = (
         "fell", "min_stability_index_planned_Nm", "min_stability_index_measured_Nm", "time_without_support_s",
         "min_normal_force_stance_N", "max_normal_force_swing_N", "cog_tracking_error_max_m",
@@ -527,7 +528,8 @@ def run_plan_paper_command(args: argparse.Namespace) -> int:
     from agents.paper.planned import write_planned_outputs
 
     prepare_output_dir(args.out, keep=True, field="--out")
-    info = write_planned_outputs(args.out)
+    with OutputManifest(args.out, "plan-paper"):
+        info = write_planned_outputs(args.out)
     print(json.dumps({k: info[k] for k in ("min_stability_index_Nm", "junction_jump_max", "swing_min_clearance_m")}))
     return 0
 

@@ -22,7 +22,7 @@ import numpy as np
 from agents.evaluation.machine import machines_differ
 from agents.evaluation.metrics import json_safe
 from agents.evaluation.results_io import load_results
-from agents.outputs import OutputError, prepare_output_dir, write_json_atomic
+from agents.outputs import OutputError, OutputManifest, prepare_output_dir, write_json_atomic
 
 FAILURE_KINDS = ("fall", "diverged", "stall", "error")
 """How an episode that missed the goal ended: a fall (or leaving the terrain), a divergence, a stall (time or
@@ -419,9 +419,11 @@ def write_comparison(comp: Mapping[str, Any], out: str | Path) -> dict[str, Path
     out = prepare_output_dir(out, keep=True, field="--out")
     paths = {"md": out / "comparison.md", "json": out / "comparison.json", "png": out / "comparison.png"}
     try:
-        paths["md"].write_text(comparison_markdown(comp))
-        write_json_atomic(paths["json"], json_safe(comp))
-        plot_comparison(comp, paths["png"])
+        with OutputManifest(out, "compare") as manifest:
+            paths["md"].write_text(comparison_markdown(comp))
+            write_json_atomic(paths["json"], json_safe(comp))
+            plot_comparison(comp, paths["png"])
+            manifest.add(paths.values())
     except OSError as err:
         raise OutputError(f"--out {str(out)!r}: cannot write the comparison ({err})") from None
     return paths
