@@ -199,8 +199,8 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="DIR may hold an earlier evaluation: delete its outputs first (other files are kept); without it, "
-        "or --resume, a non-empty DIR is refused",
+        help="DIR may hold an earlier evaluation: delete the files its manifest (DIR/.quad-uneven-manifest.json) "
+        "lists first, other files are kept; without it, or --resume, a non-empty DIR is refused",
     )
     p.add_argument(
         "--episode-wall-limit",
@@ -377,8 +377,8 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="DIR may hold an earlier run: delete its outputs first (other files are kept); without it a "
-        "non-empty DIR is refused",
+        help="DIR may hold an earlier run: delete the files its manifest (DIR/.quad-uneven-manifest.json) lists "
+        "first, other files are kept; without it a non-empty DIR is refused",
     )
     p.add_argument(
         "--tensorboard", type=Path, default=None, help="log SB3's scalars and our episode figures here (TensorBoard)"
@@ -632,7 +632,9 @@ def add_compare_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
         required=True,
         help="evaluation folder(s) of the candidate, one per baseline folder, in the same order",
     )
-    p.add_argument("--out", type=Path, required=True, help="output directory DIR (created; its files are replaced)")
+    p.add_argument(
+        "--out", type=Path, required=True, help="output directory DIR (created; the comparison's files are replaced)"
+    )
     p.set_defaults(func=run_compare_command)
     return p
 
@@ -691,7 +693,11 @@ def add_select_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="evaluation folder(s) of other policies on the same episodes (e.g. the expert's), listed and drawn "
         "beside the candidates",
     )
-    p.add_argument("--overwrite", action="store_true", help="delete OUT's earlier evaluations and selection first")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="delete the files OUT's manifest lists (earlier evaluations and selection) first; other files are kept",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress output")
     p.set_defaults(func=run_select_command)
     return p
@@ -796,7 +802,8 @@ def add_sweep_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="DIR may hold an earlier sweep: delete its outputs first (other files are kept)",
+        help="DIR may hold an earlier sweep: delete the files its manifest (DIR/.quad-uneven-manifest.json) lists "
+        "first (other files are kept)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress output")
     p.set_defaults(func=run_sweep_command)

@@ -10,7 +10,7 @@ Each command records the files it writes, as it writes them, in the directory's 
 (:data:`MANIFEST_FILE`, :class:`OutputManifest`, replaced atomically on every update). ``--overwrite`` deletes
 exactly the files the manifest lists (and then the folders the command created, if empty); any other file,
 whatever its name, stays. A directory holding outputs of the command's kind (its top-level names) but no manifest
-(written by an older version) is refused rather than guessed at: the message names it, the user deletes it.
+(written by a release that kept none) is refused rather than guessed at: the message names it, the user deletes it.
 """
 
 from __future__ import annotations
@@ -199,8 +199,8 @@ def delete_recorded_outputs(out: Path, owned: Sequence[str] = (), field: str = "
     """Delete what the manifest of ``out`` lists: its files (and their leftover temporary files), then its
     folders that are empty, then the manifest. Other files stay, whatever their names.
 
-    Without a manifest, nothing is deleted: a directory with an entry matching ``owned`` (outputs of an older
-    version, which wrote no manifest) is refused; one without is left as it is.
+    Without a manifest, nothing is deleted: a directory with an entry matching ``owned`` (outputs of a release
+    that wrote no manifest) is refused; one without is left as it is.
 
     :return: the relative paths deleted.
     :raises OutputError: on outputs without a manifest, a file the command writes (a literal name of
@@ -212,8 +212,8 @@ def delete_recorded_outputs(out: Path, owned: Sequence[str] = (), field: str = "
         if legacy:
             raise OutputError(
                 f"{field} {str(out)!r} holds outputs ({_names(legacy)}) but no {MANIFEST_FILE} listing the files "
-                "quad-uneven wrote (an older version wrote them): nothing was deleted; delete them yourself or "
-                "choose another directory"
+                "quad-uneven wrote (a release that kept no manifest wrote them): nothing was deleted; delete them "
+                "yourself or choose another directory"
             )
         return []
     listed = set(manifest["files"])

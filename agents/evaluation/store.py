@@ -49,7 +49,8 @@ RUN_FORMAT = "quad-uneven-eval/1"
 """Value of ``run.json``'s ``format`` field."""
 
 EVAL_OUTPUTS = (RUN_FILE, "results.json", "report.md", "*.png", "episodes", "traces", "videos", ".*.tmp")
-"""Top-level names an evaluation writes in ``DIR`` (what ``--overwrite`` deletes; nothing else is touched)."""
+"""Top-level names an evaluation writes in ``DIR`` (``--overwrite`` deletes what the manifest lists; with one of
+these names present and no manifest, it refuses: :func:`agents.outputs.delete_recorded_outputs`)."""
 
 IDENTITY_KEYS = (
     "suite",
@@ -113,7 +114,7 @@ def open_output_dir(out: Path, resume: bool, overwrite: bool) -> Path:
     """Check and create ``out`` before any work: a file fails, an earlier run's outputs are refused.
 
     With ``resume``, a directory holding an earlier run is kept (:func:`check_resume` compares it);
-    with ``overwrite``, that run's outputs (``EVAL_OUTPUTS``) are deleted and other files kept.
+    with ``overwrite``, the files its manifest lists are deleted and other files kept (:mod:`agents.outputs`).
 
     :raises OutputError: naming the directory and what is wrong with it.
     """

@@ -49,7 +49,8 @@ __all__ = [
 ]
 
 SELECTION_OUTPUTS = ("evals", "selected", "selection.json", "selection.md", "selection.png")
-"""What ``quad-uneven select`` writes in its output directory (what ``overwrite`` deletes)."""
+"""What ``quad-uneven select`` writes in its output directory (``overwrite`` deletes what the manifest lists;
+with one of these names present and no manifest, it refuses)."""
 
 RUN_FILES = ("train_config.json", "train_summary.json", "learning_curve.png")
 """Files of the training run copied next to the selected model (those present)."""

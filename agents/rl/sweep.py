@@ -59,7 +59,8 @@ __all__ = [
 ]
 
 SWEEP_OUTPUTS = ("sweep.json", "runs", "evals", "tune", "summary.md", "summary.json", "summary.csv", "summary.png")
-"""Top-level names a sweep writes in its ``--out`` (what ``--overwrite`` deletes; nothing else is touched)."""
+"""Top-level names a sweep writes in its ``--out`` (``--overwrite`` deletes what the manifest lists; with one of
+these names present and no manifest, it refuses: :func:`agents.outputs.delete_recorded_outputs`)."""
 
 SWEEP_KEYS = ("name", "config", "base", "grid", "runs", "evaluation", "cpus_per_run")
 """Top-level keys of a sweep file."""

@@ -59,7 +59,8 @@ TRAIN_OUTPUTS = (
     "best",
     "checkpoints",
 )
-"""Top-level names a training run writes in its ``--out`` (what ``--overwrite`` deletes; nothing else is touched)."""
+"""Top-level names a training run writes in its ``--out`` (``--overwrite`` deletes what the manifest lists; with one of
+these names present and no manifest, it refuses: :func:`agents.outputs.delete_recorded_outputs`)."""
 
 
 class ProgressCallback(BaseCallback):
