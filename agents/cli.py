@@ -14,8 +14,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 from agents.evaluation.episode import DEFAULT_WALL_TIME_LIMIT
 from agents.evaluation.policies import SB3_ALGOS
@@ -23,7 +25,7 @@ from agents.evaluation.ray_backend import BACKENDS, DEFAULT_LOCAL_CPUS
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import Suite, SuiteError, load_suite, suite_from_dict, suite_names
 from agents.interrupts import sigterm_as_keyboard_interrupt
-from agents.outputs import prepare_output_dir
+from agents.outputs import OutputManifest, prepare_output_dir
 from agents.paper.simulation import DISTRIBUTIONS as PAPER_DISTRIBUTIONS
 from agents.plotting import video_to_gif
 from agents.rl.config import ALGOS, load_train_config, validate
@@ -33,6 +35,19 @@ EXIT_USAGE = 2
 
 EXIT_INTERRUPTED = 130
 """Exit code after Ctrl-C or SIGTERM (128 + SIGINT), once the finished work has been kept."""
+
+
+class UsageError(ValueError):
+    """A command line that argparse refuses (an unknown option, a value of the wrong type, a missing option)."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose errors are :class:`UsageError` (one ``error: ...`` line from :func:`main`, exit
+    code 2, as every other invalid input) instead of the usage text; ``--help`` prints the help as usual."""
+
+    def error(self, message: str) -> NoReturn:
+        """Raise :class:`UsageError` naming the option, with where to find the allowed forms."""
+        raise UsageError(f"{message} (see {self.prog} --help)")
 
 
 def demo(out: Path, terrain: str, seed: int, distance: float, video: bool) -> dict:
@@ -184,8 +199,8 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="DIR may hold an earlier evaluation: delete its outputs first (other files are kept); without it, "
-        "or --resume, a non-empty DIR is refused",
+        help="DIR may hold an earlier evaluation: delete the files its manifest (DIR/.quad-uneven-manifest.json) "
+        "lists first, other files are kept; without it, or --resume, a non-empty DIR is refused",
     )
     p.add_argument(
         "--episode-wall-limit",
@@ -223,6 +238,16 @@ def _json_object(text: str, option: str) -> dict:
     return value
 
 
+def _model_file_options(args: argparse.Namespace) -> None:
+    """Refuse ``--algo`` and ``--allow-pickle`` for a named policy (they only concern a model .zip)."""
+    if args.policy in ("zero", "expert"):
+        for option, given in (("--algo", args.algo is not None), ("--allow-pickle", args.allow_pickle)):
+            if given:
+                raise ValueError(
+                    f"{option} is for a model .zip (--policy PATH.zip), got --policy {args.policy!r}: drop {option}"
+                )
+
+
 def _suite_option(name: str) -> Suite:
     """The suite of a ``--suite`` option; :raises SuiteError: naming it."""
     try:
@@ -243,6 +268,12 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
     if (args.address is not None or args.ship_code) and args.backend != "ray":
         raise ValueError("--address and --ship-code need --backend ray")
+    if args.workers is not None and args.address is not None:
+        raise ValueError(
+            f"--workers sets the processes here or the CPUs of a local Ray; the cluster given by --address "
+            f"{args.address!r} has its own CPUs: drop --workers {args.workers}"
+        )
+    _model_file_options(args)
     workers = args.workers if args.workers is not None else DEFAULT_LOCAL_CPUS if args.backend == "ray" else 1
     if not args.episode_wall_limit > 0:  # also refuses nan
         raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
@@ -434,8 +465,8 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="DIR may hold an earlier run: delete its outputs first (other files are kept); without it a "
-        "non-empty DIR is refused",
+        help="DIR may hold an earlier run: delete the files its manifest (DIR/.quad-uneven-manifest.json) lists "
+        "first, other files are kept; without it a non-empty DIR is refused",
     )
     p.add_argument(
         "--tensorboard", type=Path, default=None, help="log SB3's scalars and our episode figures here (TensorBoard)"
@@ -462,6 +493,11 @@ def run_train_command(args: argparse.Namespace) -> int:
         "init_from": args.init_from,
     }
     cfg = load_train_config(args.config, overrides)
+    if not cfg.residual and args.residual_scale is not None:
+        raise ValueError(
+            f"--residual-scale is for a residual agent; the config {args.config or 'default'!r} has residual: "
+            f"false (a policy from scratch): drop --residual-scale {args.residual_scale}"
+        )
     if args.randomization is not None:
         randomization = None if args.randomization.lower() == "none" else args.randomization
         cfg = validate(dataclasses.replace(cfg, randomization=randomization))
@@ -537,7 +573,8 @@ def run_paper_command(args: argparse.Namespace) -> int:
     prepare_output_dir(args.out, keep=True, field="--out")  # a file or an uncreatable path fails before the run
 
     run = run_paper_sim(config, progress=not args.no_progress)
-    info = write_paper_outputs(run, args.out, fps=args.fps)
+    with OutputManifest(args.out, "paper"):
+        info = write_paper_outputs(run, args.out, fps=args.fps)
     keys = (
         "fell", "min_stability_index_planned_Nm", "min_stability_index_measured_Nm", "time_without_support_s",
         "min_normal_force_stance_N", "max_normal_force_swing_N", "cog_tracking_error_max_m",
@@ -583,7 +620,8 @@ def run_plan_paper_command(args: argparse.Namespace) -> int:
     from agents.paper.planned import write_planned_outputs
 
     prepare_output_dir(args.out, keep=True, field="--out")
-    info = write_planned_outputs(args.out)
+    with OutputManifest(args.out, "plan-paper"):
+        info = write_planned_outputs(args.out)
     print(json.dumps({k: info[k] for k in ("min_stability_index_Nm", "junction_jump_max", "swing_min_clearance_m")}))
     return 0
 
@@ -613,28 +651,42 @@ def add_robustness_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentP
     return p
 
 
+def _number_list(text: str, option: str) -> list[float]:
+    """``text`` as comma-separated finite numbers; :raises ValueError: naming ``option`` and the allowed form."""
+    values = []
+    for item in (v.strip() for v in text.split(",")):
+        try:
+            value = float(item)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise ValueError(
+                f"{option} must be comma-separated finite numbers (e.g. 0.8,0.6,0.4), got {text!r} ({item!r} is not)"
+            )
+        values.append(value)
+    return values
+
+
 def run_robustness_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven robustness``: 0 on success, 2 on invalid input."""
     from agents.evaluation.robustness import robustness_sweep
 
-    try:
-        values = None if args.values is None else [float(v) for v in args.values.split(",") if v.strip()]
-        if args.workers < 1:
-            raise ValueError(f"--workers must be >= 1, got {args.workers}")
-        summary = robustness_sweep(
-            args.factor,
-            args.out,
-            values=values,
-            seeds=args.seeds,
-            workers=args.workers,
-            policy=args.policy,
-            goal_distance=args.goal,
-            expert_config=None if args.model is None else {"model": args.model},
-            progress=not args.no_progress,
-        )
-    except ValueError as e:  # PolicyError, SuiteError, ... are ValueErrors
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    values = None if args.values is None else _number_list(args.values, "--values")
+    if args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    if args.model is not None and args.policy != "expert":
+        raise ValueError(f"--model is the expert's model, for --policy expert only, got --policy {args.policy!r}")
+    summary = robustness_sweep(
+        args.factor,
+        args.out,
+        values=values,
+        seeds=args.seeds,
+        workers=args.workers,
+        policy=args.policy,
+        goal_distance=args.goal,
+        expert_config=None if args.model is None else {"model": args.model},
+        progress=not args.no_progress,
+    )
     for pt in summary["points"]:
         index = pt["mean_stability_index"]
         print(
@@ -672,7 +724,9 @@ def add_compare_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
         required=True,
         help="evaluation folder(s) of the candidate, one per baseline folder, in the same order",
     )
-    p.add_argument("--out", type=Path, required=True, help="output directory DIR (created; its files are replaced)")
+    p.add_argument(
+        "--out", type=Path, required=True, help="output directory DIR (created; the comparison's files are replaced)"
+    )
     p.set_defaults(func=run_compare_command)
     return p
 
@@ -731,7 +785,11 @@ def add_select_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="evaluation folder(s) of other policies on the same episodes (e.g. the expert's), listed and drawn "
         "beside the candidates",
     )
-    p.add_argument("--overwrite", action="store_true", help="delete OUT's earlier evaluations and selection first")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="delete the files OUT's manifest lists (earlier evaluations and selection) first; other files are kept",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress output")
     p.set_defaults(func=run_select_command)
     return p
@@ -836,7 +894,8 @@ def add_sweep_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="DIR may hold an earlier sweep: delete its outputs first (other files are kept)",
+        help="DIR may hold an earlier sweep: delete the files its manifest (DIR/.quad-uneven-manifest.json) lists "
+        "first (other files are kept)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress output")
     p.set_defaults(func=run_sweep_command)
@@ -871,8 +930,8 @@ def run_sweep_command(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
     """The ``quad-uneven`` parser with every subcommand."""
-    parser = argparse.ArgumentParser(prog="quad-uneven", description="Quadruped locomotion on uneven terrain")
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = ArgumentParser(prog="quad-uneven", description="Quadruped locomotion on uneven terrain")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=ArgumentParser)
     for add in (
         add_demo_parser, add_evaluate_parser, add_collect_parser, add_train_parser, add_export_parser, add_paper_parser,
         add_plan_paper_parser, add_robustness_parser, add_compare_parser, add_select_parser, add_sweep_parser,
@@ -888,8 +947,8 @@ def _one_line(text: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``quad-uneven``: the subcommand's exit code; 2 (one line on stderr) on invalid input."""
-    args = build_parser().parse_args(argv)
     try:
+        args = build_parser().parse_args(argv)
         return args.func(args)
     except ValueError as err:  # every validation error of the library (SuiteError, PolicyError, OutputError, ...)
         print(f"error: {_one_line(err)}", file=sys.stderr)

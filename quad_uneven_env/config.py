@@ -200,14 +200,59 @@ def robot_config_from_dict(raw: Mapping[str, Any]) -> RobotConfig:
     )
 
 
+class DuplicateKeyError(yaml.constructor.ConstructorError):
+    """A mapping of a YAML file that gives one key twice (YAML says keys are unique; PyYAML keeps the last)."""
+
+
+class UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader that refuses a mapping giving one key twice, naming the key and both lines."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        """The mapping of ``node``; :raises DuplicateKeyError: on a key given twice (at its second line)."""
+        if isinstance(node, yaml.MappingNode):
+            seen: dict[Any, int] = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":  # '<<': merged keys may be overridden
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    first = seen.get(key)
+                except TypeError:  # an unhashable key: PyYAML's own error below names it
+                    continue
+                if first is not None:
+                    raise DuplicateKeyError(
+                        "while constructing a mapping",
+                        node.start_mark,
+                        f"duplicate key {key!r} (first given at line {first + 1})",
+                        key_node.start_mark,
+                    )
+                seen[key] = key_node.start_mark.line
+        return super().construct_mapping(node, deep=deep)
+
+
+def load_yaml_text(text: str) -> Any:
+    """Parse YAML ``text`` safely (no Python objects), refusing duplicate keys (:class:`UniqueKeyLoader`).
+
+    :raises yaml.YAMLError: on invalid YAML or a duplicate key (its ``problem_mark`` gives the line).
+    """
+    return yaml.load(text, Loader=UniqueKeyLoader)  # a SafeLoader subclass: no Python objects
+
+
 def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Read one YAML file into a dict (the only YAML reader of the project)."""
+    """Read one YAML file into a dict (the only YAML reader of the project).
+
+    :raises ValueError: naming the file if it is missing, unreadable, not valid YAML, gives a key twice in one
+        mapping (the key and its line are named) or does not hold a mapping at the top level.
+    """
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"config file {str(p)!r} does not exist")
     try:
         with p.open() as f:
-            data = yaml.safe_load(f)
+            data = load_yaml_text(f.read())
+    except DuplicateKeyError as err:
+        line = err.problem_mark.line + 1
+        raise ValueError(f"config file {str(p)!r} gives a key twice at line {line}: {err.problem}") from None
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""

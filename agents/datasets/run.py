@@ -51,7 +51,7 @@ from agents.evaluation.policies import PolicyError
 from agents.evaluation.run import preflight, run_tasks
 from agents.evaluation.store import IDENTITY_KEYS, RUN_FILE, check_resume, open_output_dir, run_identity
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite
-from agents.outputs import OutputError, write_json_atomic
+from agents.outputs import OutputError, OutputManifest, write_json_atomic
 
 __all__ = ["COLLECT_FORMAT", "COLLECT_OUTPUTS", "CollectInterrupted", "CollectedEpisode", "collect", "collect_task"]
 
@@ -285,116 +285,119 @@ def collect(
         )
     tasks = episode_tasks(suite, episodes, seed)
     out = open_output_dir(Path(out), resume=resume, overwrite=overwrite, outputs=COLLECT_OUTPUTS, what="collect")
-    entries = [
-        {"kind": e.kind, "params": e.params, "seeds": list(e.seeds), "randomization": e.randomization,
-         "command": e.command, "waypoints": e.waypoints}
-        for e in suite.terrains
-    ]  # fmt: skip
-    identity = {
-        **run_identity(suite, policy, None, env_kwargs, episodes, seed, len(tasks), expert_config),
-        "format": COLLECT_FORMAT,
-        "entries": json.loads(json.dumps(entries)),
-    }
-    resuming = resume and check_resume(out, identity, COLLECT_FORMAT, COLLECT_IDENTITY_KEYS)
-    cfg = EvalConfig(
-        policy=policy,
-        goal_distance=suite.goal_distance,
-        time_limit=suite.time_limit,
-        env_kwargs=env_kwargs,
-        wall_time_limit=float(wall_time_limit),
-        expert_config=dict(expert_config or {}),
-    )
-    preflight(tasks, cfg)
-    spaces = _check_one_observation_space(tasks, cfg)
-    if not resuming:
-        try:
-            (out / "episodes").mkdir(exist_ok=True)
-            write_json_atomic(out / RUN_FILE, identity)
-        except OSError as err:
-            raise OutputError(f"--out {str(out)!r}: cannot write {RUN_FILE} ({err})") from None
-    dataset_id = dataset_id_for(suite.name, policy)
-    assembled = resuming and (out / SUMMARY_FILE).is_file() and (out / dataset_id / "data" / "metadata.json").is_file()
-    done = _finished(out, tasks, assembled) if resuming else {}
-    if assembled:
-        if len(done) == len(tasks):  # a finished collection: nothing to do
-            return json.loads((out / SUMMARY_FILE).read_text())
-        done = _finished(out, tasks, False)  # records without their arrays do not count
-    todo = [t for t in tasks if t.index not in done]
-    new_steps = 0
-
-    def keep(episode: CollectedEpisode) -> None:
-        nonlocal new_steps
-        index = int(episode.record["index"])
-        try:
-            _write_episode(out, index, episode)
-        except OSError as err:
-            raise OutputError(f"--out {str(out)!r}: cannot write episode {index} ({err})") from None
-        done[index] = {"record": episode.record, "env_kwargs": episode.env_kwargs}
-        new_steps += len(episode.arrays["actions"])
-
-    wall0 = time.perf_counter()
-    try:
-        run_tasks(todo, cfg, min(workers, max(1, len(todo))), progress, keep, runner=collect_task)
-    except KeyboardInterrupt:
-        raise CollectInterrupted(out, len(done), len(tasks)) from None
-    wall = time.perf_counter() - wall0
-
-    u_spec = spaces[0]
-    meta = json_safe(
-        {
-            "algorithm_name": "quad-uneven scripted expert (gait planner + computed-torque control)",
-            "description": (
-                f"The scripted expert of quad-uneven on the suite {suite.name!r}: {len(tasks)} episodes. actions: "
-                "the mean joint torque applied over each control step / motor limit (action_mode='torque'); "
-                "infos/torques: the torques at each physics step. Formats: docs/datasets.md of quad-uneven."
-            ),
-            "requirements": _requirements(),
-            "quad_uneven": {
-                "suite": suite.name,
-                "suite_file": suite.source,
-                "goal_distance": suite.goal_distance,
-                "time_limit": suite.time_limit,
-                "episodes_per_entry": episodes,
-                "seed_offset": seed,
-                "policy": policy,
-                "expert_config": dict(expert_config or {}),
-                "env_kwargs": env_kwargs,
-                "entries": entries,
-                "env_spec_episode": 0,
-                "max_episode_steps": u_spec.max_episode_steps,
-                "info_fields": {k: {"unit": u, "meaning": m} for k, (u, m) in INFO_FIELDS.items()},
-            },
+    with OutputManifest(out, "collect"):  # --overwrite deletes only what a collect wrote
+        entries = [
+            {"kind": e.kind, "params": e.params, "seeds": list(e.seeds), "randomization": e.randomization,
+             "command": e.command, "waypoints": e.waypoints}
+            for e in suite.terrains
+        ]  # fmt: skip
+        identity = {
+            **run_identity(suite, policy, None, env_kwargs, episodes, seed, len(tasks), expert_config),
+            "format": COLLECT_FORMAT,
+            "entries": json.loads(json.dumps(entries)),
         }
-    )
-    try:
-        data_path, skipped = _assemble(out, dataset_id, tasks, done, suite, spaces, meta)
-    except OSError as err:
-        raise OutputError(
-            f"--out {str(out)!r}: cannot write the dataset ({err}); the finished episodes are kept in "
-            f"{out / 'episodes'} (fix the cause and rerun with --resume)"
-        ) from None
-    steps = sum(int(json.loads(_record_path(out, t.index).read_text())["steps"]) for t in tasks)
-    size = sum(p.stat().st_size for p in data_path.iterdir() if p.is_file())
-    records = [done[t.index]["record"] for t in tasks]
-    summary = {
-        "dataset_id": dataset_id,
-        "dataset_path": str(data_path),
-        "episodes": len(tasks) - len(skipped),
-        "episodes_without_steps": skipped,
-        "steps": steps,
-        "successes": sum(bool(r["success"]) for r in records),
-        "end_reasons": {
-            k: [r["end_reason"] for r in records].count(k) for k in sorted({r["end_reason"] for r in records})
-        },
-        "resumed_episodes": len(tasks) - len(todo),
-        "collected_steps": new_steps,
-        "collect_wall_time": wall,
-        "steps_per_second": new_steps / wall if new_steps and wall > 0 else None,
-        "dataset_bytes": size,
-        "bytes_per_1000_steps": 1000.0 * size / steps if steps else None,
-        "workers": workers,
-    }
-    write_json_atomic(out / SUMMARY_FILE, json_safe(summary))
-    for t in tasks:  # their arrays are in the dataset now
-        _npz_path(out, t.index).unlink(missing_ok=True)
-    return summary
+        resuming = resume and check_resume(out, identity, COLLECT_FORMAT, COLLECT_IDENTITY_KEYS)
+        cfg = EvalConfig(
+            policy=policy,
+            goal_distance=suite.goal_distance,
+            time_limit=suite.time_limit,
+            env_kwargs=env_kwargs,
+            wall_time_limit=float(wall_time_limit),
+            expert_config=dict(expert_config or {}),
+        )
+        preflight(tasks, cfg)
+        spaces = _check_one_observation_space(tasks, cfg)
+        if not resuming:
+            try:
+                (out / "episodes").mkdir(exist_ok=True)
+                write_json_atomic(out / RUN_FILE, identity)
+            except OSError as err:
+                raise OutputError(f"--out {str(out)!r}: cannot write {RUN_FILE} ({err})") from None
+        dataset_id = dataset_id_for(suite.name, policy)
+        assembled = (
+            resuming and (out / SUMMARY_FILE).is_file() and (out / dataset_id / "data" / "metadata.json").is_file()
+        )
+        done = _finished(out, tasks, assembled) if resuming else {}
+        if assembled:
+            if len(done) == len(tasks):  # a finished collection: nothing to do
+                return json.loads((out / SUMMARY_FILE).read_text())
+            done = _finished(out, tasks, False)  # records without their arrays do not count
+        todo = [t for t in tasks if t.index not in done]
+        new_steps = 0
+
+        def keep(episode: CollectedEpisode) -> None:
+            nonlocal new_steps
+            index = int(episode.record["index"])
+            try:
+                _write_episode(out, index, episode)
+            except OSError as err:
+                raise OutputError(f"--out {str(out)!r}: cannot write episode {index} ({err})") from None
+            done[index] = {"record": episode.record, "env_kwargs": episode.env_kwargs}
+            new_steps += len(episode.arrays["actions"])
+
+        wall0 = time.perf_counter()
+        try:
+            run_tasks(todo, cfg, min(workers, max(1, len(todo))), progress, keep, runner=collect_task)
+        except KeyboardInterrupt:
+            raise CollectInterrupted(out, len(done), len(tasks)) from None
+        wall = time.perf_counter() - wall0
+
+        u_spec = spaces[0]
+        meta = json_safe(
+            {
+                "algorithm_name": "quad-uneven scripted expert (gait planner + computed-torque control)",
+                "description": (
+                    f"The scripted expert of quad-uneven on the suite {suite.name!r}: {len(tasks)} episodes. actions: "
+                    "the mean joint torque applied over each control step / motor limit (action_mode='torque'); "
+                    "infos/torques: the torques at each physics step. Formats: docs/datasets.md of quad-uneven."
+                ),
+                "requirements": _requirements(),
+                "quad_uneven": {
+                    "suite": suite.name,
+                    "suite_file": suite.source,
+                    "goal_distance": suite.goal_distance,
+                    "time_limit": suite.time_limit,
+                    "episodes_per_entry": episodes,
+                    "seed_offset": seed,
+                    "policy": policy,
+                    "expert_config": dict(expert_config or {}),
+                    "env_kwargs": env_kwargs,
+                    "entries": entries,
+                    "env_spec_episode": 0,
+                    "max_episode_steps": u_spec.max_episode_steps,
+                    "info_fields": {k: {"unit": u, "meaning": m} for k, (u, m) in INFO_FIELDS.items()},
+                },
+            }
+        )
+        try:
+            data_path, skipped = _assemble(out, dataset_id, tasks, done, suite, spaces, meta)
+        except OSError as err:
+            raise OutputError(
+                f"--out {str(out)!r}: cannot write the dataset ({err}); the finished episodes are kept in "
+                f"{out / 'episodes'} (fix the cause and rerun with --resume)"
+            ) from None
+        steps = sum(int(json.loads(_record_path(out, t.index).read_text())["steps"]) for t in tasks)
+        size = sum(p.stat().st_size for p in data_path.iterdir() if p.is_file())
+        records = [done[t.index]["record"] for t in tasks]
+        summary = {
+            "dataset_id": dataset_id,
+            "dataset_path": str(data_path),
+            "episodes": len(tasks) - len(skipped),
+            "episodes_without_steps": skipped,
+            "steps": steps,
+            "successes": sum(bool(r["success"]) for r in records),
+            "end_reasons": {
+                k: [r["end_reason"] for r in records].count(k) for k in sorted({r["end_reason"] for r in records})
+            },
+            "resumed_episodes": len(tasks) - len(todo),
+            "collected_steps": new_steps,
+            "collect_wall_time": wall,
+            "steps_per_second": new_steps / wall if new_steps and wall > 0 else None,
+            "dataset_bytes": size,
+            "bytes_per_1000_steps": 1000.0 * size / steps if steps else None,
+            "workers": workers,
+        }
+        write_json_atomic(out / SUMMARY_FILE, json_safe(summary))
+        for t in tasks:  # their arrays are in the dataset now
+            _npz_path(out, t.index).unlink(missing_ok=True)
+        return summary

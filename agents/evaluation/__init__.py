@@ -8,6 +8,7 @@ Typical use::
 
 from agents.evaluation.episode import EnvArgumentError, EpisodeResult, EvalConfig, run_task
 from agents.evaluation.policies import PolicyError, make_policy
+from agents.evaluation.results_io import ResultsError, load_results
 from agents.evaluation.run import EvaluationInterrupted, evaluate
 from agents.evaluation.suites import (
     EpisodeTask,
@@ -26,10 +27,12 @@ __all__ = [
     "EvalConfig",
     "EvaluationInterrupted",
     "PolicyError",
+    "ResultsError",
     "Suite",
     "SuiteError",
     "TerrainEntry",
     "evaluate",
+    "load_results",
     "load_suite",
     "make_policy",
     "run_task",

@@ -12,7 +12,6 @@ with different ``--seed`` offsets) pool into one comparison. :func:`write_compar
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -22,6 +21,8 @@ import numpy as np
 
 from agents.evaluation.machine import machines_differ
 from agents.evaluation.metrics import json_safe
+from agents.evaluation.results_io import load_results
+from agents.outputs import OutputError, OutputManifest, prepare_output_dir, write_json_atomic
 
 FAILURE_KINDS = ("fall", "diverged", "stall", "error")
 """How an episode that missed the goal ended: a fall (or leaving the terrain), a divergence, a stall (time or
@@ -73,16 +74,6 @@ def group_figures(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "mean_speed": _mean([r.get("mean_speed") for r in records]),
         "mean_residual_torque": _mean([r.get("mean_residual_torque") for r in records]),
     }
-
-
-def _load(folder: Path) -> dict[str, Any]:
-    path = folder / "results.json"
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ComparisonError(f"{folder}: no results.json (run quad-uneven evaluate --out {folder} first)") from None
-    except (OSError, json.JSONDecodeError) as err:
-        raise ComparisonError(f"{path}: unreadable ({err})") from None
 
 
 def _paired(base: Mapping[str, Any], cand: Mapping[str, Any], names: tuple[str, str]) -> list[tuple[dict, dict]]:
@@ -216,8 +207,10 @@ def compare_runs(
         [...], "changed": [episodes whose outcome differs]}`` (figures: :func:`group_figures`; paired:
         :func:`paired_outcomes`; ``dir`` and ``seed_offset`` are lists when several folders are pooled, and ``policy``
         when the pooled runs name different policies).
-    :raises ComparisonError: on a missing or unreadable results.json, runs of different episodes, an unequal
-        number of folders, folders of other suite entries, or the same episode in two pooled folders.
+    :raises ResultsError: on a missing results.json or one that is not an evaluation's (file and field named:
+        :func:`agents.evaluation.results_io.load_results`).
+    :raises ComparisonError: on runs of different episodes, an unequal number of folders, folders of other suite
+        entries, or the same episode in two pooled folders.
     """
     base_dirs, cand_dirs = _folders(baseline, "baseline"), _folders(candidate, "candidate")
     if len(base_dirs) != len(cand_dirs):
@@ -225,7 +218,7 @@ def compare_runs(
             f"candidate: {len(cand_dirs)} folder(s) for {len(base_dirs)} baseline folder(s); give one candidate "
             "folder per baseline folder, in the same order"
         )
-    bases, cands = [_load(d) for d in base_dirs], [_load(d) for d in cand_dirs]
+    bases, cands = [load_results(d) for d in base_dirs], [load_results(d) for d in cand_dirs]
     pairs: list[tuple[dict, dict]] = []
     where: dict[tuple[int, int], Path] = {}
     for base_dir, cand_dir, base, cand in zip(base_dirs, cand_dirs, bases, cands, strict=True):
@@ -418,13 +411,21 @@ def plot_comparison(comp: Mapping[str, Any], path: Path) -> Path:
 
 
 def write_comparison(comp: Mapping[str, Any], out: str | Path) -> dict[str, Path]:
-    """Write ``comparison.md``, ``comparison.json`` and ``comparison.png`` into ``out`` (created)."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    """Write ``comparison.md``, ``comparison.json`` and ``comparison.png`` into ``out`` (created; these files are
+    replaced, others kept).
+
+    :raises OutputError: if ``out`` is a file, cannot be created or the files cannot be written (named).
+    """
+    out = prepare_output_dir(out, keep=True, field="--out")
     paths = {"md": out / "comparison.md", "json": out / "comparison.json", "png": out / "comparison.png"}
-    paths["md"].write_text(comparison_markdown(comp))
-    paths["json"].write_text(json.dumps(json_safe(comp), indent=2, allow_nan=False))
-    plot_comparison(comp, paths["png"])
+    try:
+        with OutputManifest(out, "compare") as manifest:
+            paths["md"].write_text(comparison_markdown(comp))
+            write_json_atomic(paths["json"], json_safe(comp))
+            plot_comparison(comp, paths["png"])
+            manifest.add(paths.values())
+    except OSError as err:
+        raise OutputError(f"--out {str(out)!r}: cannot write the comparison ({err})") from None
     return paths
 
 

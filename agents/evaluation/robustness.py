@@ -17,7 +17,6 @@ Factors, values and units: :data:`FACTORS`; docs/robustness.md shows the expert'
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -26,7 +25,8 @@ import numpy as np
 
 from agents.evaluation.metrics import json_safe
 from agents.evaluation.run import evaluate
-from agents.evaluation.suites import suite_from_dict
+from agents.evaluation.suites import Suite, suite_from_dict
+from agents.outputs import OutputManifest, prepare_output_dir, write_json_atomic
 from agents.plotting import pyplot, save
 
 
@@ -126,6 +126,28 @@ def robustness_sweep(
         },
         source=f"robustness {factor}",
     )
+    out = prepare_output_dir(out, keep=True, field="--out")
+    with OutputManifest(out, "robustness"):
+        return _sweep(factor, out, suite, values, randomizations, seeds, workers, policy, terrain, goal_distance,
+                      expert_config, progress)  # fmt: skip
+
+
+def _sweep(
+    factor: str,
+    out: Path,
+    suite: Suite,
+    values: Sequence[float],
+    randomizations: Sequence[Mapping[str, Any]],
+    seeds: int,
+    workers: int,
+    policy: str,
+    terrain: Mapping[str, Any],
+    goal_distance: float,
+    expert_config: Mapping[str, Any] | None,
+    progress: bool,
+) -> dict[str, Any]:
+    """The evaluation and the files of :func:`robustness_sweep` (its arguments checked, ``out`` prepared)."""
+    f = FACTORS[factor]
     # One evaluation, one entry per value: the workers start (and compile the controller) once.
     results = evaluate(suite, policy, out / factor, workers=workers, expert_config=expert_config, progress=progress)
     points = []
@@ -159,8 +181,7 @@ def robustness_sweep(
             "points": points,
         }
     )
-    out.mkdir(parents=True, exist_ok=True)
-    (out / f"robustness_{factor}.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
+    write_json_atomic(out / f"robustness_{factor}.json", summary)
     plot_robustness(summary, out / f"robustness_{factor}.png")
     return summary
 

@@ -34,7 +34,9 @@ from agents.evaluation.policies import SB3_ALGOS, PolicyError, make_policy, mode
 from agents.evaluation.ray_backend import BACKENDS, import_ray, run_on_ray
 from agents.evaluation.report import write_report
 from agents.evaluation.store import (
+    RUN_FILE,
     check_resume,
+    episode_files,
     load_records,
     load_results_for_report,
     open_output_dir,
@@ -44,7 +46,7 @@ from agents.evaluation.store import (
 )
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite
 from agents.evaluation.targets import check_command_targets, check_targets
-from agents.outputs import OutputError, write_json_atomic
+from agents.outputs import OutputError, OutputManifest, write_json_atomic
 
 __all__ = ["EvaluationInterrupted", "evaluate", "make_policy", "preflight", "run_tasks", "write_results"]
 
@@ -63,17 +65,18 @@ def run_tasks(
     backend: str = "pool",
     address: str | None = None,
     ship_code: bool = False,
-    runner: Callable[[EpisodeTask, EvalConfig], Any] = run_task,
+    runner: Callable[[EpisodeTask, EvalConfig], Any] | None = None,
 ) -> None:
     """Run every task, in ``workers`` spawned processes if > 1 (``backend="ray"``: as Ray tasks, see
     :func:`agents.evaluation.ray_backend.run_on_ray`), handing each result to ``on_result`` as it ends.
 
-    :param runner: the episode function, ``runner(task, cfg)`` (a module-level function: the processes import it;
-        the Ray backend runs :func:`run_task` only).
+    :param runner: the episode function, ``runner(task, cfg)`` (default :func:`run_task`; a module-level function:
+        the processes import it; the Ray backend runs :func:`run_task` only).
 
     An interrupt (Ctrl-C, or SIGTERM under :func:`agents.interrupts.sigterm_as_keyboard_interrupt`)
     stops the workers at once; the results already handed on are kept by the caller.
     """
+    runner = runner or run_task
     bar = tqdm(total=len(tasks), desc="episodes", unit="ep", disable=not progress)
     try:
         if backend == "ray":
@@ -234,55 +237,61 @@ def evaluate(
         expert_config=dict(expert_config or {}),
     )
     preflight(tasks, cfg)
-    if not resuming:
-        start_run(out, identity)
-    done = load_records(out, tasks) if resuming else {}
-    todo = [t for t in tasks if t.index not in done]
+    with OutputManifest(out, "evaluate") as manifest:
+        if not resuming:
+            start_run(out, identity)
+        done = load_records(out, tasks) if resuming else {}
+        kept = [p for t in tasks if t.index in done for p in episode_files(out, t.index, t.first_of_entry)]
+        manifest.add([out / RUN_FILE, *kept])  # a resumed run's (one an older version started has no manifest yet)
+        todo = [t for t in tasks if t.index not in done]
 
-    def keep(result: EpisodeResult) -> None:
-        record = json_safe(result.record)
+        def keep(result: EpisodeResult) -> None:
+            record = json_safe(result.record)
+            try:
+                write_episode(out, EpisodeResult(record, result.trace, result.terrain))
+            except OSError as err:
+                raise OutputError(f"--out {str(out)!r}: cannot write episode {record['index']} ({err})") from None
+            index = int(record["index"])
+            video = [out / "videos" / record["video"]] if record.get("video") else []
+            manifest.add([*episode_files(out, index, result.terrain is not None), *video])
+            done[int(record["index"])] = record
+
         try:
-            write_episode(out, EpisodeResult(record, result.trace, result.terrain))
+            n = workers if backend == "ray" else min(workers, max(1, len(todo)))
+            run_tasks(todo, cfg, n, progress, keep, backend, address, ship_code)
+        except KeyboardInterrupt:
+            raise EvaluationInterrupted(out, len(done), len(tasks)) from None
+
+        records = [done[t.index] for t in tasks]
+        meta = {
+            "suite_file": suite.source,
+            "goal_distance": suite.goal_distance,
+            "time_limit": suite.time_limit,
+            "episodes_per_entry": episodes,
+            "seed_offset": seed,
+            "workers": workers,
+            "backend": backend,
+            "ray_address": address,
+            "algo": algo if kind == "sb3" else None,
+            "env_kwargs": env_kwargs,
+            "entries": [e.label for e in suite.terrains],
+            "randomization": [e.randomization for e in suite.terrains],
+            "expert_config": dict(expert_config or {}),
+            "expert_model": sorted({str(r["expert_model"]) for r in records if r.get("expert_model")}) or None,
+            "wall_time_limit": float(wall_time_limit),
+            "resumed_episodes": len(tasks) - len(todo),
+            "machines": distinct_machines(records),
+        }
+        results = _results(suite, str(policy), records, meta)
+        try:
+            manifest.add([write_results(out, results)])
+            write_report(results, load_results_for_report(out, records, tasks), meta["entries"], out)
         except OSError as err:
-            raise OutputError(f"--out {str(out)!r}: cannot write episode {record['index']} ({err})") from None
-        done[int(record["index"])] = record
-
-    try:
-        n = workers if backend == "ray" else min(workers, max(1, len(todo)))
-        run_tasks(todo, cfg, n, progress, keep, backend, address, ship_code)
-    except KeyboardInterrupt:
-        raise EvaluationInterrupted(out, len(done), len(tasks)) from None
-
-    records = [done[t.index] for t in tasks]
-    meta = {
-        "suite_file": suite.source,
-        "goal_distance": suite.goal_distance,
-        "time_limit": suite.time_limit,
-        "episodes_per_entry": episodes,
-        "seed_offset": seed,
-        "workers": workers,
-        "backend": backend,
-        "ray_address": address,
-        "algo": algo if kind == "sb3" else None,
-        "env_kwargs": env_kwargs,
-        "entries": [e.label for e in suite.terrains],
-        "randomization": [e.randomization for e in suite.terrains],
-        "expert_config": dict(expert_config or {}),
-        "expert_model": sorted({str(r["expert_model"]) for r in records if r.get("expert_model")}) or None,
-        "wall_time_limit": float(wall_time_limit),
-        "resumed_episodes": len(tasks) - len(todo),
-        "machines": distinct_machines(records),
-    }
-    results = _results(suite, str(policy), records, meta)
-    try:
-        write_results(out, results)
-        write_report(results, load_results_for_report(out, records, tasks), meta["entries"], out)
-    except OSError as err:
-        raise OutputError(
-            f"--out {str(out)!r}: cannot write results.json or report.md ({err}); the {len(records)} episode "
-            f"records are kept in {out / 'episodes'} (fix the cause and rerun with --resume to rebuild them)"
-        ) from None
-    return results
+            raise OutputError(
+                f"--out {str(out)!r}: cannot write results.json or report.md ({err}); the {len(records)} episode "
+                f"records are kept in {out / 'episodes'} (fix the cause and rerun with --resume to rebuild them)"
+            ) from None
+        return results
 
 
 class EvaluationInterrupted(KeyboardInterrupt):

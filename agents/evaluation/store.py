@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from agents.evaluation.episode import EpisodeResult
+from agents.evaluation.results_io import ResultsError, load_record, read_json
 from agents.evaluation.suites import EpisodeTask, Suite
 from agents.outputs import OutputError, prepare_output_dir, write_json_atomic
 
@@ -31,6 +33,7 @@ __all__ = [
     "RUN_FILE",
     "RUN_FORMAT",
     "check_resume",
+    "episode_files",
     "load_records",
     "load_results_for_report",
     "open_output_dir",
@@ -46,7 +49,8 @@ RUN_FORMAT = "quad-uneven-eval/1"
 """Value of ``run.json``'s ``format`` field."""
 
 EVAL_OUTPUTS = (RUN_FILE, "results.json", "report.md", "*.png", "episodes", "traces", "videos", ".*.tmp")
-"""Top-level names an evaluation writes in ``DIR`` (what ``--overwrite`` deletes; nothing else is touched)."""
+"""Top-level names an evaluation writes in ``DIR`` (``--overwrite`` deletes what the manifest lists; with one of
+these names present and no manifest, it refuses: :func:`agents.outputs.delete_recorded_outputs`)."""
 
 IDENTITY_KEYS = (
     "suite",
@@ -112,7 +116,7 @@ def open_output_dir(
     """Check and create ``out`` before any work: a file fails, an earlier run's outputs are refused.
 
     With ``resume``, a directory holding an earlier run is kept (:func:`check_resume` compares it);
-    with ``overwrite``, that run's outputs (``outputs``, default ``EVAL_OUTPUTS``) are deleted and other files kept.
+    with ``overwrite``, the files its manifest lists are deleted and other files kept (:mod:`agents.outputs`).
 
     :param what: the command's kind of directory, for the messages (``"evaluation"``, ``"collect"``).
     :raises OutputError: naming the directory and what is wrong with it.
@@ -145,9 +149,9 @@ def check_resume(
     if not path.is_file():
         return False
     try:
-        recorded = json.loads(path.read_text())
-    except (OSError, ValueError) as err:
-        raise OutputError(f"--resume: {path} is unreadable ({err}); pass --overwrite to start over") from None
+        recorded = read_json(path)
+    except ResultsError as err:
+        raise OutputError(f"--resume: {err}; pass --overwrite to start over") from None
     if not isinstance(recorded, dict) or recorded.get("format") != run_format:
         raise OutputError(f"--resume: {path} is not a {run_format} run file; pass --overwrite to start over")
     for key in keys:
@@ -192,6 +196,11 @@ def _trace_path(out: Path, index: int) -> Path:
     return out / "traces" / f"ep{index:03d}.npz"
 
 
+def episode_files(out: Path, index: int, with_terrain: bool) -> list[Path]:
+    """The files of finished episode ``index`` in ``out``: its trace, its terrain (``with_terrain``), its record."""
+    return [_trace_path(out, index), *([_terrain_path(out, index)] if with_terrain else []), _record_path(out, index)]
+
+
 def write_episode(out: Path, result: EpisodeResult) -> Path:
     """Write one finished episode: its trace, its terrain (first of an entry), then its record (the commit).
 
@@ -209,11 +218,18 @@ def write_episode(out: Path, result: EpisodeResult) -> Path:
     return write_json_atomic(_record_path(out, index), result.record)
 
 
-def load_records(out: Path, tasks: Sequence[EpisodeTask]) -> dict[int, dict[str, Any]]:
-    """The records of the finished episodes of ``tasks`` in ``out`` (index -> record).
+RESUME_HINT = "delete it to run that episode again, or pass --overwrite to start the run over"
+"""What a refused episode file of a run to resume suggests."""
 
-    An episode counts as finished if its record parses, matches its task (entry, terrain, seed) and its
-    trace exists; anything else (a missing, partial or foreign file) is run again.
+
+def load_records(out: Path, tasks: Sequence[EpisodeTask]) -> dict[int, dict[str, Any]]:
+    """The records of the finished episodes of ``tasks`` in ``out`` (index -> record), checked.
+
+    An episode counts as finished if its record exists and its trace (and, for an entry's first episode, its
+    terrain) too; one whose trace is missing is run again. A record that is not one this run wrote (not strict
+    JSON, a field of the wrong type or missing, another task's entry, terrain or seed) is refused.
+
+    :raises ResultsError: naming the record file and the field (:func:`agents.evaluation.results_io.load_record`).
     """
     done: dict[int, dict[str, Any]] = {}
     for t in tasks:
@@ -223,31 +239,56 @@ def load_records(out: Path, tasks: Sequence[EpisodeTask]) -> dict[int, dict[str,
         if t.first_of_entry and not _terrain_path(out, t.index).is_file():
             continue
         try:
-            record = json.loads(path.read_text())
-        except (OSError, ValueError):
-            continue
-        if not isinstance(record, dict):
-            continue
-        if (record.get("index"), record.get("entry"), record.get("terrain"), record.get("seed")) != (
-            t.index,
-            t.entry,
-            t.kind,
-            t.seed,
-        ):
-            continue
+            record = load_record(path)
+        except ResultsError as err:
+            raise ResultsError(f"--resume: {err}; {RESUME_HINT}") from None
+        for field, expected in (("index", t.index), ("entry", t.entry), ("terrain", t.kind), ("seed", t.seed)):
+            if record[field] != expected:
+                raise ResultsError(
+                    f"--resume: {path}: {field} must be {expected!r} (episode {t.index} of the run), got "
+                    f"{record[field]!r}; {RESUME_HINT}"
+                )
         done[t.index] = record
     return done
 
 
+TRACE_ARRAYS = ("time", "cog", "feet", "index", "contact", "yaw")
+"""Arrays every trace file holds (the report's plots read them)."""
+
+TERRAIN_ARRAYS = ("heights", "origin", "cell_size")
+"""Arrays every terrain file holds."""
+
+
+def _read_npz(path: Path, required: Sequence[str]) -> dict[str, np.ndarray]:
+    """The arrays of ``path`` (no pickled objects).
+
+    :raises ResultsError: if it is unreadable or lacks one of ``required``.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise ResultsError(f"{path}: not an array file quad-uneven wrote ({err}); {RESUME_HINT}") from None
+    missing = [k for k in required if k not in arrays]
+    if missing:
+        raise ResultsError(f"{path}: array {missing[0]!r} is missing (needed: {list(required)}); {RESUME_HINT}")
+    return arrays
+
+
 def load_results_for_report(out: Path, records: Sequence[Mapping[str, Any]], tasks: Sequence[EpisodeTask]) -> list:
-    """:class:`EpisodeResult` of every entry's first episode (record, trace, terrain), read back for the plots."""
+    """:class:`EpisodeResult` of every entry's first episode (record, trace, terrain), read back for the plots.
+
+    :raises ResultsError: naming a trace or terrain file that is unreadable or lacks an array.
+    """
     firsts = []
     for t in tasks:
         if not t.first_of_entry:
             continue
-        with np.load(_trace_path(out, t.index)) as z:
-            trace = {k: z[k] for k in z.files}
-        with np.load(_terrain_path(out, t.index)) as z:
+        trace = _read_npz(_trace_path(out, t.index), TRACE_ARRAYS)
+        z = _read_npz(_terrain_path(out, t.index), TERRAIN_ARRAYS)
+        try:
             terrain = {"heights": z["heights"], "origin": tuple(z["origin"]), "cell_size": float(z["cell_size"])}
+        except (TypeError, ValueError) as err:
+            raise ResultsError(f"{_terrain_path(out, t.index)}: origin or cell_size is malformed ({err})") from None
         firsts.append(EpisodeResult(dict(records[t.index]), trace, terrain))
     return firsts

@@ -29,10 +29,11 @@ from pathlib import Path
 from typing import Any
 
 from agents.evaluation.metrics import json_safe
+from agents.evaluation.results_io import ResultsError, load_results
 from agents.evaluation.run import evaluate
 from agents.evaluation.store import RUN_FILE
 from agents.evaluation.suites import Suite, load_suite
-from agents.outputs import prepare_output_dir, write_json_atomic
+from agents.outputs import OutputManifest, prepare_output_dir, write_json_atomic
 from agents.plotting import pyplot, save
 from agents.rl.model_io import META_FILE
 from agents.rl.normalization import norm_path
@@ -48,7 +49,8 @@ __all__ = [
 ]
 
 SELECTION_OUTPUTS = ("evals", "selected", "selection.json", "selection.md", "selection.png")
-"""What ``quad-uneven select`` writes in its output directory (what ``overwrite`` deletes)."""
+"""What ``quad-uneven select`` writes in its output directory (``overwrite`` deletes what the manifest lists;
+with one of these names present and no manifest, it refuses)."""
 
 RUN_FILES = ("train_config.json", "train_summary.json", "learning_curve.png")
 """Files of the training run copied next to the selected model (those present)."""
@@ -122,10 +124,10 @@ def load_reference(folder: str | Path, suite: Suite, seed: int, episodes: int | 
     """
     folder = Path(folder)
     try:
-        res = json.loads((folder / "results.json").read_text())
-    except (OSError, ValueError) as err:
-        raise SelectionError(f"reference {str(folder)!r}: no readable results.json ({err})") from None
-    meta = res.get("meta", {})
+        res = load_results(folder, summary=True)
+    except ResultsError as err:
+        raise SelectionError(f"reference {str(folder)!r}: {err}") from None
+    meta = res["meta"]
     found = (res.get("suite"), meta.get("seed_offset"), meta.get("episodes_per_entry"))
     if found != (suite.name, seed, episodes):
         raise SelectionError(
@@ -177,36 +179,37 @@ def select_checkpoint(
     refs = [load_reference(f, suite, seed, episodes) for f in references]
     out = run / "selection" if out is None else out
     out = prepare_output_dir(out, SELECTION_OUTPUTS, overwrite, keep=not overwrite, field="out")
-    for c in candidates:
-        folder = out / "evals" / c["name"]
-        started = (folder / RUN_FILE).is_file()
-        if progress:
-            print(f"{c['name']}: {'resuming' if started else 'evaluating'} {c['path']}", flush=True)
-        res = evaluate(suite, str(c["path"]), folder, episodes=episodes, seed=seed, workers=workers,
-                       progress=progress, resume=started)  # fmt: skip
-        g = res["summary"]["overall"]
-        c.update(successes=g["successes"], episodes=g["episodes"], falls=g["falls"],
-                 mean_stability_index=g["mean_stability_index"], evaluation=str(folder))  # fmt: skip
-    order = sorted(range(len(candidates)), key=lambda i: (rank_key(candidates[i]), -i))  # a full tie: the later
-    for rank, i in enumerate(order, start=1):
-        candidates[i]["rank"] = rank
-    best = candidates[order[0]]
-    selected = _copy_selected(run, best, out / "selected")
-    result = {
-        "run": str(run),
-        "suite": suite.name,
-        "seed": seed,
-        "episodes_per_entry": episodes,
-        "rule": "most successes, then fewest falls (falls and divergences), then most training steps",
-        "candidates": [{**c, "path": str(c["path"])} for c in candidates],
-        "selected": best["name"],
-        "selected_model": str(selected),
-        "references": refs,
-    }
-    write_json_atomic(out / "selection.json", json_safe(result))
-    write_json_atomic(out / "selected" / "selection.json", json_safe(result))
-    (out / "selection.md").write_text(selection_markdown(result))
-    plot_selection(result, out / "selection.png")
+    with OutputManifest(out, "select"):
+        for c in candidates:
+            folder = out / "evals" / c["name"]
+            started = (folder / RUN_FILE).is_file()
+            if progress:
+                print(f"{c['name']}: {'resuming' if started else 'evaluating'} {c['path']}", flush=True)
+            res = evaluate(suite, str(c["path"]), folder, episodes=episodes, seed=seed, workers=workers,
+                           progress=progress, resume=started)  # fmt: skip
+            g = res["summary"]["overall"]
+            c.update(successes=g["successes"], episodes=g["episodes"], falls=g["falls"],
+                     mean_stability_index=g["mean_stability_index"], evaluation=str(folder))  # fmt: skip
+        order = sorted(range(len(candidates)), key=lambda i: (rank_key(candidates[i]), -i))  # a full tie: the later
+        for rank, i in enumerate(order, start=1):
+            candidates[i]["rank"] = rank
+        best = candidates[order[0]]
+        selected = _copy_selected(run, best, out / "selected")
+        result = {
+            "run": str(run),
+            "suite": suite.name,
+            "seed": seed,
+            "episodes_per_entry": episodes,
+            "rule": "most successes, then fewest falls (falls and divergences), then most training steps",
+            "candidates": [{**c, "path": str(c["path"])} for c in candidates],
+            "selected": best["name"],
+            "selected_model": str(selected),
+            "references": refs,
+        }
+        write_json_atomic(out / "selection.json", json_safe(result))
+        write_json_atomic(out / "selected" / "selection.json", json_safe(result))
+        (out / "selection.md").write_text(selection_markdown(result))
+        plot_selection(result, out / "selection.png")
     return result
 
 

@@ -40,7 +40,7 @@ from agents.evaluation.metrics import json_safe
 from agents.evaluation.ray_backend import import_tune, ray_session
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import SuiteError, load_suite
-from agents.outputs import prepare_output_dir, write_json_atomic
+from agents.outputs import OutputManifest, prepare_output_dir, write_json_atomic
 from agents.plotting import pyplot, save
 from agents.rl.config import TrainConfig, TrainConfigError, load_train_config, terrain_list, validate
 from quad_uneven_env.config import read_yaml
@@ -59,7 +59,8 @@ __all__ = [
 ]
 
 SWEEP_OUTPUTS = ("sweep.json", "runs", "evals", "tune", "summary.md", "summary.json", "summary.csv", "summary.png")
-"""Top-level names a sweep writes in its ``--out`` (what ``--overwrite`` deletes; nothing else is touched)."""
+"""Top-level names a sweep writes in its ``--out`` (``--overwrite`` deletes what the manifest lists; with one of
+these names present and no manifest, it refuses: :func:`agents.outputs.delete_recorded_outputs`)."""
 
 SWEEP_KEYS = ("name", "config", "base", "grid", "runs", "evaluation", "cpus_per_run")
 """Top-level keys of a sweep file."""
@@ -329,38 +330,40 @@ def run_sweep(
     """
     import_tune("sweep")  # without the extra, fail before anything is written
     out = prepare_output_dir(Path(out), SWEEP_OUTPUTS, overwrite=overwrite, field="--out").resolve()
-    write_json_atomic(
-        out / "sweep.json",
-        json_safe({"name": sweep.name, "source": sweep.source, "swept": list(sweep.swept),
-                   "evaluation": dataclasses.asdict(sweep.evaluation), "cpus_per_run": sweep.cpus_per_run,
-                   "runs": [{"name": r.name, "params": r.params, "config": r.config.to_dict()} for r in sweep.runs]}),
-    )  # fmt: skip
-    suite = load_suite(sweep.evaluation.suite)
-    rows = []
-    with ray_session(address, num_cpus, what="sweep", ship_code=ship_code) as ray:
-        errors = _train_all(sweep, out, _cpus(sweep, ray.cluster_resources().get("CPU", 1.0)), progress)
-        for run in sweep.runs:
-            results, error = None, errors[run.name]
-            model = out / "runs" / run.name / "model.zip"
-            if error is None:
-                try:
-                    results = evaluate(
-                        suite,
-                        str(model),
-                        out / "evals" / run.name,
-                        episodes=sweep.evaluation.episodes,
-                        seed=sweep.evaluation.seed,
-                        algo=run.config.algo,
-                        progress=progress,
-                        backend="ray",
-                    )
-                except ValueError as err:  # an unusable model: the other runs still get their row
-                    error = f"evaluation: {' '.join(str(err).split())}"
-            rows.append(_row(run, out, error, results))
-    summary = json_safe({"sweep": sweep.name, "suite": suite.name, "swept": list(sweep.swept), "runs": rows})
-    write_json_atomic(out / "summary.json", summary)
-    write_summary_table(summary, out)
-    plot_sweep(summary, out / "summary.png")
+    with OutputManifest(out, "sweep"):
+        write_json_atomic(
+            out / "sweep.json",
+            json_safe({"name": sweep.name, "source": sweep.source, "swept": list(sweep.swept),
+                       "evaluation": dataclasses.asdict(sweep.evaluation), "cpus_per_run": sweep.cpus_per_run,
+                       "runs": [{"name": r.name, "params": r.params, "config": r.config.to_dict()}
+                                for r in sweep.runs]}),
+        )  # fmt: skip
+        suite = load_suite(sweep.evaluation.suite)
+        rows = []
+        with ray_session(address, num_cpus, what="sweep", ship_code=ship_code) as ray:
+            errors = _train_all(sweep, out, _cpus(sweep, ray.cluster_resources().get("CPU", 1.0)), progress)
+            for run in sweep.runs:
+                results, error = None, errors[run.name]
+                model = out / "runs" / run.name / "model.zip"
+                if error is None:
+                    try:
+                        results = evaluate(
+                            suite,
+                            str(model),
+                            out / "evals" / run.name,
+                            episodes=sweep.evaluation.episodes,
+                            seed=sweep.evaluation.seed,
+                            algo=run.config.algo,
+                            progress=progress,
+                            backend="ray",
+                        )
+                    except ValueError as err:  # an unusable model: the other runs still get their row
+                        error = f"evaluation: {' '.join(str(err).split())}"
+                rows.append(_row(run, out, error, results))
+        summary = json_safe({"sweep": sweep.name, "suite": suite.name, "swept": list(sweep.swept), "runs": rows})
+        write_json_atomic(out / "summary.json", summary)
+        write_summary_table(summary, out)
+        plot_sweep(summary, out / "summary.png")
     return summary
 
 

@@ -26,7 +26,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList, Check
 from tqdm.auto import tqdm
 
 from agents.interrupts import sigterm_as_keyboard_interrupt
-from agents.outputs import prepare_output_dir
+from agents.outputs import OutputManifest, prepare_output_dir
 from agents.rl.config import TrainConfig, TrainConfigError, terrain_label, terrain_list
 from agents.rl.learning_curve import plot_learning_curve
 from agents.rl.model_io import write_metadata
@@ -59,7 +59,8 @@ TRAIN_OUTPUTS = (
     "best",
     "checkpoints",
 )
-"""Top-level names a training run writes in its ``--out`` (what ``--overwrite`` deletes; nothing else is touched)."""
+"""Top-level names a training run writes in its ``--out`` (``--overwrite`` deletes what the manifest lists; with one of
+these names present and no manifest, it refuses: :func:`agents.outputs.delete_recorded_outputs`)."""
 
 
 class ProgressCallback(BaseCallback):
@@ -325,54 +326,55 @@ def train(
         if init[0].resolve().is_relative_to(Path(out).resolve()):
             raise TrainConfigError(f"init_from: {init[0]} lies in --out {str(out)!r}, whose outputs this run replaces")
     out = prepare_output_dir(out, TRAIN_OUTPUTS, overwrite=overwrite, field="--out")
-    torch.set_num_threads(1)  # small networks: threads only contend with the env processes on 2 cores
-    (out / "train_config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
-    for folder in (out, out / "checkpoints", out / "best"):
-        write_metadata(folder, meta)
+    with OutputManifest(out, "train"):
+        torch.set_num_threads(1)  # small networks: threads only contend with the env processes on 2 cores
+        (out / "train_config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
+        for folder in (out, out / "checkpoints", out / "best"):
+            write_metadata(folder, meta)
 
-    venv = normalize(build_vec_env(cfg, cfg.n_envs, cfg.seed, out / "monitor"), cfg, training=True)
-    eval_env = None
-    try:
-        model = _make_model(cfg, venv, None if tensorboard is None else Path(tensorboard))
-        if init is not None:
-            warm_start(model, *init)
-        callbacks, eval_env = _callbacks(cfg, out, progress)
-        wall0, interrupted = time.perf_counter(), False
-        with sigterm_as_keyboard_interrupt():
-            try:
-                model.learn(
-                    total_timesteps=cfg.timesteps,
-                    callback=CallbackList(callbacks),
-                    tb_log_name=f"{cfg.algo}_{out.name}",
-                )
-            except KeyboardInterrupt:
-                interrupted = True
-                print("\ninterrupted: saving the model trained so far", file=sys.stderr)
-            wall = time.perf_counter() - wall0
-            _save_model(model, out)
-    finally:
-        venv.close()
-        if eval_env is not None:
-            eval_env.close()
+        venv = normalize(build_vec_env(cfg, cfg.n_envs, cfg.seed, out / "monitor"), cfg, training=True)
+        eval_env = None
+        try:
+            model = _make_model(cfg, venv, None if tensorboard is None else Path(tensorboard))
+            if init is not None:
+                warm_start(model, *init)
+            callbacks, eval_env = _callbacks(cfg, out, progress)
+            wall0, interrupted = time.perf_counter(), False
+            with sigterm_as_keyboard_interrupt():
+                try:
+                    model.learn(
+                        total_timesteps=cfg.timesteps,
+                        callback=CallbackList(callbacks),
+                        tb_log_name=f"{cfg.algo}_{out.name}",
+                    )
+                except KeyboardInterrupt:
+                    interrupted = True
+                    print("\ninterrupted: saving the model trained so far", file=sys.stderr)
+                wall = time.perf_counter() - wall0
+                _save_model(model, out)
+        finally:
+            venv.close()
+            if eval_env is not None:
+                eval_env.close()
 
-    curve = plot_learning_curve(
-        out / "monitor",
-        out / "eval" / "evaluations.npz",
-        out / "learning_curve.png",
-        title=(f"residual {cfg.algo.upper()}" if cfg.residual else f"{cfg.algo.upper()} from scratch (joint_pd)")
-        + f" on {_terrain_label(cfg.terrain)}"
-        + ("" if cfg.randomization is None else f", randomization {cfg.randomization}")
-        + (f" (scale {cfg.residual_scale})" if cfg.residual else ""),
-    )
-    summary = {
-        "timesteps": int(model.num_timesteps),
-        "wall_time": wall,
-        "steps_per_s": model.num_timesteps / wall if wall > 0 else None,
-        **{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in curve.items()},
-        "interrupted": interrupted,
-        "time_limit_reached": any(getattr(c, "reached", False) for c in callbacks),
-        "init_timesteps": 0 if init is None else init[1],
-        "model": str(out / "model.zip"),
-    }
-    (out / "train_summary.json").write_text(json.dumps(summary, indent=2))
-    return summary
+        curve = plot_learning_curve(
+            out / "monitor",
+            out / "eval" / "evaluations.npz",
+            out / "learning_curve.png",
+            title=(f"residual {cfg.algo.upper()}" if cfg.residual else f"{cfg.algo.upper()} from scratch (joint_pd)")
+            + f" on {_terrain_label(cfg.terrain)}"
+            + ("" if cfg.randomization is None else f", randomization {cfg.randomization}")
+            + (f" (scale {cfg.residual_scale})" if cfg.residual else ""),
+        )
+        summary = {
+            "timesteps": int(model.num_timesteps),
+            "wall_time": wall,
+            "steps_per_s": model.num_timesteps / wall if wall > 0 else None,
+            **{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in curve.items()},
+            "interrupted": interrupted,
+            "time_limit_reached": any(getattr(c, "reached", False) for c in callbacks),
+            "init_timesteps": 0 if init is None else init[1],
+            "model": str(out / "model.zip"),
+        }
+        (out / "train_summary.json").write_text(json.dumps(summary, indent=2))
+        return summary

@@ -65,10 +65,9 @@ def test_bad_train_options_exit_2_naming_the_field(tmp_path, capsys, argv, field
 
 def test_argparse_rejects_unknown_algo_and_non_integer_timesteps(tmp_path, capsys):
     for argv, name in ((["--algo", "dqn"], "--algo"), (["--timesteps", "many"], "--timesteps")):
-        with pytest.raises(SystemExit) as exc:
-            main(["train", "--out", str(tmp_path), *argv])
-        assert exc.value.code == 2
-        assert name in capsys.readouterr().err
+        assert main(["train", "--out", str(tmp_path), *argv]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"error: argument {name}") and err.count("\n") == 1
 
 
 @pytest.mark.parametrize(
@@ -310,13 +309,30 @@ def test_sigterm_stops_training_and_still_saves(tmp_path, monkeypatch):
 
 def test_a_non_empty_out_is_refused_and_overwrite_removes_the_old_run(tmp_path, capsys):
     run = tmp_path / "run"
-    (run / "checkpoints").mkdir(parents=True)
-    (run / "checkpoints" / "model_999_steps.zip").write_text("an older run's checkpoint")
+
+    def argv(steps):
+        config = write_config(tmp_path / f"c{steps}.yaml", timesteps=steps, eval_freq=0)
+        return ["train", "--config", str(config), "--out", str(run), "--no-progress"]
+
+    assert main(argv(64)) == 0
+    old = sorted(p.name for p in (run / "checkpoints").glob("*.zip"))
+    assert "model_64_steps.zip" in old
     (run / "notes.txt").write_text("mine")
-    argv = ["train", "--config", str(write_config(tmp_path / "c.yaml", timesteps=32, eval_freq=0)), "--out", str(run)]
-    assert main([*argv, "--no-progress"]) == 2
+    (run / "checkpoints" / "mine.zip").write_text("a user's file among the checkpoints")
+    assert main(argv(32)) == 2
     err = capsys.readouterr().err
     assert "--out" in err and "checkpoints/" in err and "--overwrite" in err
-    assert main([*argv, "--no-progress", "--overwrite"]) == 0
-    assert sorted(p.name for p in (run / "checkpoints").glob("*.zip")) == ["model_32_steps.zip"]
+    assert main([*argv(32), "--overwrite"]) == 0
+    assert sorted(p.name for p in (run / "checkpoints").glob("*.zip")) == ["mine.zip", "model_32_steps.zip"]
     assert (run / "notes.txt").read_text() == "mine"
+
+
+def test_overwrite_refuses_an_older_run_without_a_manifest(tmp_path, capsys):
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "checkpoints" / "model_999_steps.zip").write_text("an older version's checkpoint")
+    argv = ["train", "--config", str(write_config(tmp_path / "c.yaml", timesteps=32, eval_freq=0)), "--out", str(run)]
+    assert main([*argv, "--no-progress", "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: --out {str(run)!r} holds outputs (checkpoints/)") and "manifest" in err
+    assert (run / "checkpoints" / "model_999_steps.zip").is_file()
