@@ -87,6 +87,7 @@ class MujocoDynamics:
         model = robot
         if model.nv != C.NV:
             raise ValueError(f"model must have nv={C.NV}, got {model.nv}")
+        self._idx, self._par = _kernel_indices(model)
         self.model = model
         self._data = mujoco.MjData(model)
         self.trunk = model.body(C.TRUNK_BODY).id
@@ -96,7 +97,6 @@ class MujocoDynamics:
         self.gravity_W = model.opt.gravity.copy()
         self._jac = np.zeros((3, C.NV))
         self._jdot = np.zeros((3, C.NV))
-        self._idx, self._par = _kernel_indices(model)
         csr = (model.M_rowadr, model.M_rownnz, model.M_colind)
         self._csr = tuple(np.ascontiguousarray(a, dtype=np.int64) for a in csr)
         self._bound: mujoco.MjData | None = None
