@@ -144,7 +144,7 @@ def test_model_source_reads_randomized_masses():
 
 
 def test_other_structures_are_refused():
-    with pytest.raises(ValueError, match="robot must be a RobotDescription or a mujoco.MjModel, got str"):
+    with pytest.raises(ValueError, match=r"robot must be a RobotDescription or a mujoco\.MjModel, got str"):
         make_dynamics("explicit", "go1")
     model = simulated_model("go1")
     model.jnt_pos[model.joint("RF_HFE").id] = [0.0, 0.01, 0.0]
