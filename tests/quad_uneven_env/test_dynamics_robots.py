@@ -159,3 +159,37 @@ def test_other_structures_are_refused():
     xml = description_robot_mjcf(load_robot("go1")).replace('name="RH_foot"', 'name="RH_toe"')
     with pytest.raises(ValueError, match="RH_foot"):
         make_dynamics("mujoco", mujoco.MjModel.from_xml_string(xml))
+
+
+def test_paper_robot_reduces_to_appendix_a():
+    """On the paper's robot the chains give Appendix A's closed form: the foot at ``hip + R_x(q1) [u, 0, s]`` with
+    ``u = -l1 sin q2 - l2 sin(q2 + q3)``, ``s = -l1 cos q2 - l2 cos(q2 + q3)``, so its leg Jacobian columns are
+    ``e_x x R_x [u, 0, s]``, ``R_x [s, 0, -u]`` and ``R_x [-l2 cos(q2 + q3), 0, l2 sin(q2 + q3)]`` (trunk frame)."""
+    desc = load_robot("paper")
+    l1, l2 = desc.config.thigh.length, desc.config.shank.length
+    model = simulated_model("paper")
+    qpos, qvel = random_states(model, np.random.default_rng(4), 20)
+    t = make_dynamics("explicit", desc).terms(qpos, qvel)
+    R = np.array([_quat_matrix(q) for q in qpos[:, 3:7]])
+    for i in range(C.N_LEGS):
+        q1, q2, q3 = qpos[:, 7 + 3 * i], qpos[:, 8 + 3 * i], qpos[:, 9 + 3 * i]
+        c1, s1 = np.cos(q1), np.sin(q1)
+        Rx = np.zeros((len(q1), 3, 3))
+        Rx[:, 0, 0], Rx[:, 1, 1], Rx[:, 1, 2], Rx[:, 2, 1], Rx[:, 2, 2] = 1.0, c1, -s1, s1, c1
+        u = -l1 * np.sin(q2) - l2 * np.sin(q2 + q3)
+        s = -l1 * np.cos(q2) - l2 * np.cos(q2 + q3)
+        zero = np.zeros_like(u)
+        p = (Rx @ np.stack([u, zero, s], -1)[..., None])[..., 0]
+        cols = [
+            np.cross([1.0, 0.0, 0.0], p),
+            (Rx @ np.stack([s, zero, -u], -1)[..., None])[..., 0],
+            (Rx @ np.stack([-l2 * np.cos(q2 + q3), zero, l2 * np.sin(q2 + q3)], -1)[..., None])[..., 0],
+        ]
+        expected = R @ np.stack(cols, -1)  # world frame
+        np.testing.assert_allclose(t.J_feet[:, i, :, 6 + 3 * i : 9 + 3 * i], expected, rtol=0, atol=1e-12)
+
+
+def _quat_matrix(q: np.ndarray) -> np.ndarray:
+    R = np.empty(9)
+    mujoco.mju_quat2Mat(R, q)
+    return R.reshape(3, 3)

@@ -21,7 +21,7 @@ import numpy as np
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot.description import AXIS_TOLERANCE, RobotDescription
 
-STANDARD_GRAVITY = np.array([0.0, 0.0, -9.81])
+STANDARD_GRAVITY = (0.0, 0.0, -9.81)
 """m/s^2, world-frame gravity of a description (MuJoCo's default ``opt.gravity``)."""
 
 _NOMINAL_AXES = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1.0, 0.0]])  # HAA: trunk x; HFE, KFE: trunk y
@@ -64,9 +64,11 @@ class LegChains:
         return self.trunk_mass + float(self.link_mass.sum())
 
     @classmethod
-    def from_description(cls, desc: RobotDescription, gravity_W: np.ndarray = STANDARD_GRAVITY) -> LegChains:
+    def from_description(
+        cls, desc: RobotDescription, gravity_W: tuple[float, float, float] | np.ndarray = STANDARD_GRAVITY
+    ) -> LegChains:
         """The description's numbers (its nominal robot) under ``gravity_W`` (m/s^2, default standard gravity)."""
-        joints = [[j for j in leg.joints] for leg in desc.legs]
+        joints = [leg.joints for leg in desc.legs]
 
         def arr(get) -> np.ndarray:
             return np.array([[get(j) for j in leg] for leg in joints], dtype=float)
@@ -99,8 +101,8 @@ class LegChains:
             chained trunk -> HAA -> HFE -> KFE (HAA about trunk x, HFE and KFE about trunk y at zero angles),
             with its foot site on the KFE body and no other body in the robot.
         """
-        if model.nv < C.NV or model.nq < C.NQ:
-            raise ValueError(f"model must have nq >= {C.NQ}, nv >= {C.NV}, got nq={model.nq}, nv={model.nv}")
+        if model.nv != C.NV or model.nq != C.NQ:
+            raise ValueError(f"model must have nq={C.NQ}, nv={C.NV} (the robot only), got nq={model.nq}, nv={model.nv}")
         try:
             trunk = model.body(C.TRUNK_BODY).id
         except KeyError:
