@@ -1,7 +1,8 @@
 """Microseconds per call (median of many) of the dynamics backends, the inverse dynamics and mj_step.
 
-Run: ``.venv/bin/python benchmarks/dynamics.py [--repeats N]``. Prints one table; no assertion.
-The state is the standing robot on the env's rough terrain (4 cm), after settling for 0.2 s.
+Run: ``.venv/bin/python benchmarks/dynamics.py [--repeats N] [--robot NAME]``. Prints one table; no assertion.
+The state is the standing robot (``--robot``: any of ``quad_uneven_env.robots()``, default the paper's) on the
+env's rough terrain (4 cm), after settling for 0.2 s.
 """
 
 from __future__ import annotations
@@ -48,11 +49,12 @@ def main() -> None:
     parser.add_argument(
         "--acceptance", action="store_true", help="also print the controller's acceptance figures (about 2 min)"
     )
+    parser.add_argument("--robot", default="paper", help="robot name or YAML path (default: the paper's robot)")
     args = parser.parse_args()
     if args.acceptance:
         acceptance_figures()
 
-    env = gym.make("QuadUneven-v0", terrain={"kind": "rough", "amplitude": 0.04, "spawn_radius": 0.0})
+    env = gym.make("QuadUneven-v0", robot=args.robot, terrain={"kind": "rough", "amplitude": 0.04, "spawn_radius": 0.0})
     env.reset(seed=0)
     u = env.unwrapped
     m, d = u.model, u.data
@@ -66,7 +68,7 @@ def main() -> None:
     bdd = np.zeros(6)
 
     rows: list[tuple[str, float]] = []
-    dyns = {b: make_dynamics(b, m, u.robot_cfg) for b in BACKENDS}
+    dyns = {b: make_dynamics(b, m) for b in BACKENDS}
     for b, dyn in dyns.items():
         rows.append((f"terms() backend={b}", median_us(lambda dyn=dyn: dyn.terms(qpos, qvel), args.repeats)))
     mj_dyn = dyns["mujoco"]
@@ -108,7 +110,7 @@ def main() -> None:
     t_batch = median_us(lambda: dyns["explicit"].terms(qpos_b, qvel_b), max(5, args.repeats // 20), inner=1)
     rows.append((f"terms() backend=explicit, batch of {n_batch}, per state", t_batch / n_batch))
 
-    pm = build_pinocchio_model(u.robot_cfg)
+    pm = build_pinocchio_model(u.robot)
     pd = pm.createData()
     q, v = qpos_mj_to_pin(qpos), qvel_mj_to_pin(qpos, qvel)
     a = np.zeros(pm.nv)
@@ -136,7 +138,10 @@ def main() -> None:
     rows.append(("closed loop (standing): mj_step1 + mj_step2", phys_us))
 
     width = max(len(r[0]) for r in rows)
-    print(f"# {platform.processor() or platform.machine()}, numpy {np.__version__}, mujoco {mujoco.__version__}")
+    print(
+        f"# robot {u.robot.name}, {platform.processor() or platform.machine()}, numpy {np.__version__}, "
+        f"mujoco {mujoco.__version__}"
+    )
     print(f"{'what':<{width}}  us/call")
     for name, t in rows:
         print(f"{name:<{width}}  {t:8.1f}")

@@ -107,7 +107,7 @@ def test_bad_stance_is_refused(dyn, robot_cfg):
 # ----------------------------------------------------------------------------- inverse dynamics
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_pinv_is_the_papers_formula_and_satisfies_mujoco(backend, mj_model, robot_cfg, rng):
-    ID = InverseDynamics(make_dynamics(backend, mj_model, robot_cfg), "pinv")
+    ID = InverseDynamics(make_dynamics(backend, mj_model), "pinv")
     for _ in range(3):
         qpos, qvel = perturbed_stand(robot_cfg, rng)
         for stance in ALL_STANCES:
@@ -149,7 +149,7 @@ def _cone_feasible(dyn, qpos, qvel, res, stance, mu, fmin) -> bool:
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_qp_keeps_forces_in_cone_and_satisfies_mujoco(backend, mj_model, robot_cfg, rng):
-    ID = InverseDynamics(make_dynamics(backend, mj_model, robot_cfg), "qp", min_normal_force=10.0)
+    ID = InverseDynamics(make_dynamics(backend, mj_model), "qp", min_normal_force=10.0)
     pinv = InverseDynamics(ID.dynamics, "pinv")
     n_pinv_outside = 0
     for _ in range(4):

@@ -21,8 +21,8 @@ def mj_model(robot_cfg) -> mujoco.MjModel:
 
 
 @pytest.fixture(scope="module")
-def backends(mj_model, robot_cfg) -> dict:
-    return {b: make_dynamics(b, mj_model, robot_cfg) for b in BACKENDS}
+def backends(mj_model) -> dict:
+    return {b: make_dynamics(b, mj_model) for b in BACKENDS}
 
 
 def random_states(model: mujoco.MjModel, rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -1,8 +1,8 @@
 """Whole-body dynamics terms of the 18-DOF robot behind one interface, three backends.
 
-``make_dynamics(backend, model)`` returns an object whose ``terms(qpos, qvel)`` gives, in the
-canonical coordinates (MuJoCo's ``qpos``/``qvel``: world-frame base linear velocity,
-base-frame angular velocity), the terms of ``M(q) qacc + h(q, qvel) = B tau + J^T F``:
+``make_dynamics(backend, robot)`` (a robot description or an MjModel, any robot) returns an object whose
+``terms(qpos, qvel)`` gives, in the canonical coordinates (MuJoCo's ``qpos``/``qvel``: world-frame base
+linear velocity, base-frame angular velocity), the terms of ``M(q) qacc + h(q, qvel) = B tau + J^T F``:
 
 - ``M`` (18 x 18, kg / kg m / kg m^2), ``h = V + G`` (18, N / N m), ``G`` (18);
 - ``J_feet`` (4 x 3 x 18): world-frame translational Jacobians of the foot sites (leg order);
@@ -23,7 +23,7 @@ from typing import Protocol
 import mujoco
 import numpy as np
 
-from quad_uneven_env.config import RobotConfig
+from quad_uneven_env.robot.description import RobotDescription
 
 BACKENDS: tuple[str, ...] = ("explicit", "pinocchio", "mujoco")
 """Allowed values of ``make_dynamics(backend=...)``."""
@@ -63,25 +63,28 @@ class Dynamics(Protocol):
         ...
 
 
-def make_dynamics(backend: str, model: mujoco.MjModel, cfg: RobotConfig | None = None) -> Dynamics:
-    """Dynamics backend for the robot of ``model`` (a scene or robot-only MjModel).
+def make_dynamics(backend: str, robot: RobotDescription | mujoco.MjModel) -> Dynamics:
+    """Dynamics backend of any HAA-HFE-KFE quadruped (the paper's robot, a URDF robot, a user's YAML).
 
     :param backend: one of ``"explicit"``, ``"pinocchio"``, ``"mujoco"``.
-    :param model: the environment's MjModel (``env.unwrapped.model``); its robot parameters are used.
-    :param cfg: robot config the Pinocchio model is generated from (default: the paper's);
-        it is checked against ``model`` (nv and body masses).
-    :raises ValueError: unknown backend, or a model that does not match the expected robot.
+    :param robot: the robot's description (``env.unwrapped.robot``: its nominal masses and inertias, standard
+        gravity; the mujoco backend compiles its robot-only MJCF) or an MjModel of it (``env.unwrapped.model``,
+        a scene or robot-only model: its masses, after any randomization, and its gravity; the mujoco
+        backend's :meth:`~quad_uneven_env.robot.dynamics.mujoco_backend.MujocoDynamics.terms_from_data` reads
+        that model's MjData).
+    :raises ValueError: unknown backend, or a model that is not the project's robot structure (naming the
+        body, joint or site).
     """
     if backend == "explicit":
         from quad_uneven_env.robot.dynamics.explicit_backend import ExplicitDynamics
 
-        return ExplicitDynamics(model)
+        return ExplicitDynamics(robot)
     if backend == "pinocchio":
         from quad_uneven_env.robot.dynamics.pinocchio_backend import PinocchioDynamics
 
-        return PinocchioDynamics(model, cfg)
+        return PinocchioDynamics(robot)
     if backend == "mujoco":
         from quad_uneven_env.robot.dynamics.mujoco_backend import MujocoDynamics
 
-        return MujocoDynamics(model)
+        return MujocoDynamics(robot)
     raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")

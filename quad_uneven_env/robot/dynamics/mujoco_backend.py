@@ -16,8 +16,18 @@ import mujoco
 import numpy as np
 
 from quad_uneven_env import constants as C
+from quad_uneven_env.robot.description import RobotDescription
+from quad_uneven_env.robot.description_model import description_robot_mjcf
 from quad_uneven_env.robot.dynamics import mujoco_kernels as K
 from quad_uneven_env.robot.dynamics.base import DynamicsTerms
+
+
+def _named_id(model: mujoco.MjModel, kind: str, name: str) -> int:
+    """The id of the ``kind`` (``"body"``, ``"joint"``, ``"site"``) ``name``; a ValueError naming it if absent."""
+    try:
+        return int(getattr(model, kind)(name).id)
+    except KeyError:
+        raise ValueError(f"model has no {kind} {name!r} (the names of quad_uneven_env.constants)") from None
 
 
 def _kernel_indices(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
@@ -25,7 +35,7 @@ def _kernel_indices(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
 
     :raises ValueError: the model is not a free trunk with four 3-hinge legs ending in the foot sites.
     """
-    trunk = model.body(C.TRUNK_BODY).id
+    trunk = _named_id(model, "body", C.TRUNK_BODY)
     free = int(model.body_jntadr[trunk])
     if model.body_jntnum[trunk] != 1 or model.jnt_type[free] != mujoco.mjtJoint.mjJNT_FREE:
         raise ValueError(f"body {C.TRUNK_BODY!r} must have exactly one free joint")
@@ -33,7 +43,7 @@ def _kernel_indices(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError("the trunk's free joint must use dofs 0-5 and sit at the body origin")
     sites, jnts, dofs, bodies, msub = [], [], [], [], []
     for i, leg in enumerate(C.LEG_NAMES):
-        site = model.site(C.foot_site(leg)).id
+        site = _named_id(model, "site", C.foot_site(leg))
         chain = []  # dofs moving the foot body, root first
         dof = int(model.body_dofadr[model.site_bodyid[site]]) + int(model.body_dofnum[model.site_bodyid[site]]) - 1
         while dof >= 0:
@@ -44,7 +54,7 @@ def _kernel_indices(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
         if chain != want:
             raise ValueError(f"leg {leg}: the foot site must be moved by dofs {want}, got {chain}")
         for k in range(3):
-            j = model.joint(C.joint_name(leg, C.JOINT_KINDS[k])).id
+            j = _named_id(model, "joint", C.joint_name(leg, C.JOINT_KINDS[k]))
             if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE or model.jnt_dofadr[j] != 6 + 3 * i + k:
                 raise ValueError(f"joint {C.joint_name(leg, C.JOINT_KINDS[k])} must be a hinge on dof {6 + 3 * i + k}")
             jnts.append(j)
@@ -59,13 +69,25 @@ def _kernel_indices(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
 
 
 class MujocoDynamics:
-    """MuJoCo's M (``data.M``), h (qfrc_bias), G and foot Jacobians, via one compiled kernel."""
+    """MuJoCo's M (``data.M``), h (qfrc_bias), G and foot Jacobians, via one compiled kernel.
+
+    :param robot: an MjModel of the project's robot structure (the env's scene: :meth:`terms_from_data` reads
+        its MjData), or a :class:`~quad_uneven_env.robot.description.RobotDescription`, whose robot-only MJCF
+        (:func:`~quad_uneven_env.robot.description_model.description_robot_mjcf`) is compiled here.
+    :raises ValueError: for a model of another structure, naming the body, joint or site.
+    """
 
     backend = "mujoco"
 
-    def __init__(self, model: mujoco.MjModel) -> None:
+    def __init__(self, robot: mujoco.MjModel | RobotDescription) -> None:
+        if isinstance(robot, RobotDescription):
+            robot = mujoco.MjModel.from_xml_string(description_robot_mjcf(robot))
+        if not isinstance(robot, mujoco.MjModel):
+            raise ValueError(f"robot must be a RobotDescription or a mujoco.MjModel, got {type(robot).__name__}")
+        model = robot
         if model.nv != C.NV:
             raise ValueError(f"model must have nv={C.NV}, got {model.nv}")
+        self._idx, self._par = _kernel_indices(model)
         self.model = model
         self._data = mujoco.MjData(model)
         self.trunk = model.body(C.TRUNK_BODY).id
@@ -75,7 +97,6 @@ class MujocoDynamics:
         self.gravity_W = model.opt.gravity.copy()
         self._jac = np.zeros((3, C.NV))
         self._jdot = np.zeros((3, C.NV))
-        self._idx, self._par = _kernel_indices(model)
         csr = (model.M_rowadr, model.M_rownnz, model.M_colind)
         self._csr = tuple(np.ascontiguousarray(a, dtype=np.int64) for a in csr)
         self._bound: mujoco.MjData | None = None
