@@ -48,7 +48,7 @@ from agents.evaluation.episode import (
 )
 from agents.evaluation.metrics import json_safe
 from agents.evaluation.policies import PolicyError
-from agents.evaluation.run import preflight, run_tasks
+from agents.evaluation.run import EvaluationInterrupted, preflight, run_tasks
 from agents.evaluation.store import IDENTITY_KEYS, RUN_FILE, check_resume, open_output_dir, run_identity
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite
 from agents.outputs import OutputError, OutputManifest, write_json_atomic
@@ -90,15 +90,11 @@ def collect_task(task: EpisodeTask, cfg: EvalConfig) -> CollectedEpisode:
     return CollectedEpisode(json_safe(result.record), recorder.arrays(), json_safe(recorder.env_kwargs))
 
 
-class CollectInterrupted(KeyboardInterrupt):
+class CollectInterrupted(EvaluationInterrupted):
     """A collection stopped by Ctrl-C or SIGTERM; its finished episodes are on disk (``--resume`` continues)."""
 
     def __init__(self, out: Path, finished: int, total: int) -> None:
-        super().__init__(
-            f"interrupted: {finished} of {total} episodes finished and kept in {out / 'episodes'} (no dataset "
-            "written); rerun the same command with --resume to continue"
-        )
-        self.out, self.finished, self.total = out, finished, total
+        super().__init__(out, finished, total, unwritten="no dataset written")
 
 
 def _npz_path(out: Path, index: int) -> Path:

@@ -297,9 +297,11 @@ def evaluate(
 class EvaluationInterrupted(KeyboardInterrupt):
     """An evaluation stopped by Ctrl-C or SIGTERM; its finished episodes are on disk (``--resume`` continues)."""
 
-    def __init__(self, out: Path, finished: int, total: int) -> None:
+    def __init__(self, out: Path, finished: int, total: int, unwritten: str = "") -> None:
+        """:param unwritten: what the run did not write because it was interrupted, e.g. ``"no dataset written"``."""
+        note = f" ({unwritten})" if unwritten else ""
         super().__init__(
-            f"interrupted: {finished} of {total} episodes finished and kept in {out / 'episodes'}; "
+            f"interrupted: {finished} of {total} episodes finished and kept in {out / 'episodes'}{note}; "
             "rerun the same command with --resume to continue"
         )
         self.out, self.finished, self.total = out, finished, total
