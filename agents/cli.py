@@ -517,6 +517,83 @@ def run_train_command(args: argparse.Namespace) -> int:
     return EXIT_INTERRUPTED if summary["interrupted"] else 0
 
 
+# ------------------------------------------------------------------------------------------- distill
+def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``distill`` subcommand on ``sub`` (its handler is in ``func``)."""
+    p = sub.add_parser(
+        "distill",
+        help="distil the scripted expert into a network policy (joint_pd, gait clock): behaviour cloning, then DAgger",
+        description="Roll out the expert over a suite's episodes (the suite's seeds + --seed-offset: its own seeds "
+        "stay held out), fit a PPO policy network to the expert's labels (the plan's joint angles plus the expert's "
+        "torque / pd_kp, as joint_pd actions), then run DAgger rounds in which the student acts and the expert labels "
+        "the states it visits. Writes DIR/model.zip, model_obs_norm.npz, rl_meta.json (read by evaluate, export and "
+        "train --init-from), distill_summary.json and distill_curve.png (docs/rl.md). Exit code 2 on an invalid "
+        "option, suite or DIR.",
+    )
+    p.add_argument("--suite", required=True, help=f"shipped suite name {suite_names()} or the path of a suite .yaml")
+    p.add_argument("--out", type=Path, required=True, help="output directory DIR")
+    p.add_argument(
+        "--budget-min", type=float, default=60.0, help="minutes of wall-clock time after which no round starts (60)"
+    )
+    p.add_argument("--dagger-rounds", type=int, default=3, help="DAgger rounds after behaviour cloning (default 3)")
+    p.add_argument(
+        "--beta-decay",
+        type=float,
+        default=0.5,
+        help="the expert acts at a step of round k with probability BETA_DECAY**k (default 0.5)",
+    )
+    p.add_argument("--episodes", type=int, default=2, help="episodes per suite entry per round (default 2)")
+    p.add_argument("--epochs", type=int, default=20, help="passes over the aggregated data after each round (20)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the network, minibatches and draws (default 0)")
+    p.add_argument(
+        "--seed-offset", type=int, default=1000, help="added to the suite's seeds in the rollouts (default 1000)"
+    )
+    p.add_argument("--workers", type=int, default=1, help="rollout processes (default 1; the same result)")
+    p.add_argument(
+        "--expert-config",
+        default='{"recovery": false}',
+        help="JSON object of agents.expert.ExpertConfig fields of the teacher (default '{\"recovery\": false}')",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="DIR may hold an earlier distillation: delete the files its manifest lists first",
+    )
+    p.set_defaults(func=run_distill_command)
+    return p
+
+
+def run_distill_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven distill``: 0 on success, 2 on an invalid option, suite or DIR."""
+    for name, value, low in (("--dagger-rounds", args.dagger_rounds, 0), ("--episodes", args.episodes, 1),
+                             ("--epochs", args.epochs, 1), ("--workers", args.workers, 1),
+                             ("--seed", args.seed, 0), ("--seed-offset", args.seed_offset, 0)):  # fmt: skip
+        if value < low:
+            raise ValueError(f"{name} must be an integer >= {low}, got {value}")
+    if not args.budget_min > 0:  # also refuses nan
+        raise ValueError(f"--budget-min must be a number > 0 (min), got {args.budget_min}")
+    if not 0.0 <= args.beta_decay <= 1.0:
+        raise ValueError(f"--beta-decay must be in [0, 1], got {args.beta_decay}")
+    expert = _json_object(args.expert_config, "--expert-config")
+    suite = _suite_option(args.suite)
+    from agents.rl.distill import DistillConfig, distill  # deferred: SB3 and torch
+
+    cfg = DistillConfig(
+        dagger_rounds=args.dagger_rounds, beta_decay=args.beta_decay, episodes=args.episodes, epochs=args.epochs,
+        seed=args.seed, seed_offset=args.seed_offset, workers=args.workers, budget_min=args.budget_min, expert=expert,
+    )  # fmt: skip
+    try:
+        cfg.expert_config()
+    except TypeError as err:  # an unknown field
+        raise ValueError(f"--expert-config: {err}") from None
+    with sigterm_as_keyboard_interrupt():
+        summary = distill(suite, args.out, cfg, overwrite=args.overwrite)
+    print(f"model: {(Path(args.out) / 'model.zip').resolve()}")
+    print(f"curve: {(Path(args.out) / 'distill_curve.png').resolve()}")
+    print(f"wall time: {summary['wall_time_s']:.0f} s")
+    return 0
+
+
 # -------------------------------------------------------------------------------------------- export
 def add_export_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register the ``export`` subcommand on ``sub``."""
@@ -935,7 +1012,7 @@ def build_parser() -> argparse.ArgumentParser:
     for add in (
         add_demo_parser, add_evaluate_parser, add_collect_parser, add_train_parser, add_export_parser, add_paper_parser,
         add_plan_paper_parser, add_robustness_parser, add_compare_parser, add_select_parser, add_sweep_parser,
-        add_fit_strength_parser,
+        add_fit_strength_parser, add_distill_parser,
     ):  # fmt: skip
         add(sub)
     return parser

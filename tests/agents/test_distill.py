@@ -1,0 +1,257 @@
+"""``quad-uneven distill``: the labels, the teacher controller, the student's files, determinism, CLI errors; and the
+observation's gait clock the student reads."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+from agents.cli import main
+from agents.evaluation.suites import episode_tasks, suite_from_dict
+
+pytest.importorskip("stable_baselines3")
+
+TINY = {
+    "name": "tiny",
+    "goal_distance": 5.0,
+    "time_limit": 1.0,
+    "terrains": [{"kind": "flat", "seeds": [0]}, {"kind": "rough", "params": {"amplitude": 0.04}, "seeds": [1]}],
+}
+"""Two episodes of 50 control steps each: 100 steps a round."""
+
+
+def tiny_config(**changes):
+    from agents.rl.distill import DistillConfig
+
+    base = dict(dagger_rounds=1, episodes=1, epochs=2, net_arch=(16,), seed=3, budget_min=30.0)
+    return DistillConfig(**{**base, **changes})
+
+
+# --------------------------------------------------------------------------------------------- gait clock
+def test_gait_clock_period_is_an_env_option_with_hand_computed_values():
+    """``gait_period`` sets the clock's period; after 7 control steps (0.14 s) with the 3.1 s expert cycle the
+    field holds sin and cos of 2 pi 0.14 / 3.1 = 0.28376 rad: x - x^3/6 = 0.27996 and 1 - x^2/2 + x^4/24 = 0.96001;
+    the space and shape stay those of the default."""
+    env = gym.make("QuadUneven-v0", terrain="flat", gait_period=3.1, action_mode="joint_pd")
+    default = gym.make("QuadUneven-v0", terrain="flat", action_mode="joint_pd")
+    assert env.observation_space == default.observation_space and env.observation_space.shape == (134,)
+    sl = env.unwrapped.observation_structure["gait_clock"]
+    assert (sl.start, sl.stop) == (43, 45)
+    obs, _ = env.reset(seed=0)
+    np.testing.assert_allclose(obs[sl], [0.0, 1.0], atol=1e-7)
+    for _ in range(7):
+        obs, *_ = env.step(np.zeros(12))
+    np.testing.assert_allclose(obs[sl], [0.27996, 0.96001], atol=2e-5)
+    assert obs[sl] == pytest.approx([math.sin(2 * math.pi * 0.14 / 3.1), math.cos(2 * math.pi * 0.14 / 3.1)])
+
+
+def test_default_gait_clock_is_unchanged():
+    """The default observation is the one with gait_period=6.1 (the paper's cycle), bit for bit."""
+    a = gym.make("QuadUneven-v0", terrain="rough")
+    b = gym.make("QuadUneven-v0", terrain="rough", gait_period=6.1)
+    oa, _ = a.reset(seed=4)
+    ob, _ = b.reset(seed=4)
+    for _ in range(5):
+        oa, *_ = a.step(np.full(12, 0.1))
+        ob, *_ = b.step(np.full(12, 0.1))
+    assert oa.tobytes() == ob.tobytes()
+    sl = a.unwrapped.observation_structure["gait_clock"]
+    assert oa[sl] == pytest.approx([math.sin(2 * math.pi * 0.1 / 6.1), math.cos(2 * math.pi * 0.1 / 6.1)])
+
+
+# ----------------------------------------------------------------------------------------------- labels
+def test_expert_label_hand_case():
+    """(q_ref + tau / kp - q_home) / scale, clipped: 0.3 + 20/100 - 0.1 = 0.4 rad -> 0.8 at 0.5 rad per unit;
+    0.9 + 60/100 = 1.5 rad -> clipped to 1."""
+    from agents.rl.distill import expert_label
+
+    q_ref, tau, home = np.zeros(12), np.zeros(12), np.zeros(12)
+    q_ref[0], tau[0], home[0] = 0.3, 20.0, 0.1
+    q_ref[1], tau[1] = 0.9, 60.0
+    label = expert_label(q_ref, tau, home, kp=100.0, scale=0.5)
+    assert label.dtype == np.float32 and label[0] == pytest.approx(0.8) and label[1] == 1.0
+    assert np.all(label[2:] == 0.0)
+
+
+def test_labels_are_the_expert_references_and_torques_in_the_action_scale():
+    """With the expert acting, the rollout's observations are those of the expert attached alone, and each label
+    is (plan's joint angles + the torque the expert applied at the step's first physics step / kp - standing
+    pose) / scale, computed here from the dataset recorder's torques and the plan the expert reports."""
+    from agents.datasets.recorder import TorqueRecorder
+    from agents.expert import ExpertConfig, ExpertPolicy
+    from agents.rl.distill import RolloutJob, rollout
+
+    cfg = tiny_config(pd_kp=150.0, pd_action_scale=0.8)
+    suite = suite_from_dict(TINY, source="test")
+    task = episode_tasks(suite, 1, 1000)[1]
+    res = rollout(RolloutJob(task, suite.goal_distance, 0.4, cfg, 1.0, None, (0,)))
+    assert res["steps"] == 20 and not res["student_acted"].any()
+
+    env = gym.make("QuadUneven-v0", terrain=task.params | {"kind": task.kind}, gait_period=3.1)
+    expert = ExpertPolicy(env, ExpertConfig(recovery=False))
+    rec = TorqueRecorder(expert, env.unwrapped.frame_skip)
+    env.unwrapped.set_controller(rec)
+    obs, _ = env.reset(seed=task.seed)
+    u = env.unwrapped
+    home = obs[u.observation_structure["joint_pos"]].astype(float)
+    prev = u.observation_structure["prev_action"]
+    keep = np.ones(obs.shape, bool)
+    keep[prev] = False
+    for n in range(20):
+        np.testing.assert_array_equal(res["obs"][n][keep], obs[keep])
+        ref, _ = expert.planned_now(float(u.data.time))
+        obs, *_ = env.step(np.zeros(12))
+        tau0 = rec.end_step(u.data)[0]
+        want = np.clip((ref.q_joints + tau0 / 150.0 - home) / 0.8, -1, 1)
+        np.testing.assert_allclose(res["labels"][n], want, atol=2e-5)
+        if n > 0:  # what the student's env shows: the executed (here the expert's) previous action
+            np.testing.assert_array_equal(res["obs"][n][prev], res["labels"][n - 1])
+    assert np.abs(res["labels"]).max() > 0.05  # not a trivial zero label
+
+
+def test_teacher_applies_the_joint_pd_servo_when_the_student_acts():
+    """A student holding a constant action under the teacher moves the joints as the env's own joint_pd servo does
+    (MuJoCo integrates the servo's damping implicitly, the teacher explicitly: within 2 mrad over 0.2 s)."""
+    from agents.expert import ExpertConfig
+    from agents.rl.distill import DaggerTeacher
+
+    a = np.full(12, 0.05)
+    kwargs = dict(terrain="flat", pd_kp=100.0, pd_kd=3.0, pd_action_scale=1.0)
+    pd = gym.make("QuadUneven-v0", action_mode="joint_pd", **kwargs)
+    tq = gym.make("QuadUneven-v0", **kwargs)
+    teacher = DaggerTeacher(tq, ExpertConfig(recovery=False), 100.0, 3.0, 1.0)
+    tq.unwrapped.set_controller(teacher)
+    pd.reset(seed=2)
+    tq.reset(seed=2)
+    np.testing.assert_array_equal(pd.unwrapped.data.qpos, tq.unwrapped.data.qpos)
+    start = pd.unwrapped.data.qpos[7:].copy()
+    for _ in range(10):
+        teacher.begin_step(True)
+        pd.step(a)
+        tq.step(a)
+    np.testing.assert_allclose(tq.unwrapped.data.qpos[7:], pd.unwrapped.data.qpos[7:], atol=2e-3)
+    assert np.abs(pd.unwrapped.data.qpos[7:] - start).max() > 0.02  # the joints did move
+    assert np.abs(teacher.first_tau).max() > 1.0  # the expert kept computing its torques meanwhile
+
+
+# ------------------------------------------------------------------------------------------ the run itself
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    from agents.rl.distill import distill
+
+    out = tmp_path_factory.mktemp("distill") / "run"
+    summary = distill(suite_from_dict(TINY, source="test"), out, tiny_config(), log=lambda _: None)
+    return out, summary
+
+
+def test_a_tiny_run_writes_a_train_folder_that_evaluate_and_export_read(tiny_run, tmp_path, capsys):
+    from agents.evaluation.run import evaluate
+    from agents.rl.model_io import load_sb3_policy, read_metadata
+
+    out, summary = tiny_run
+    for name in ("model.zip", "model_obs_norm.npz", "rl_meta.json", "distill_summary.json", "distill_curve.png"):
+        assert (out / name).is_file(), name
+    assert [r["round"] for r in summary["rounds"]] == [0, 1]
+    r0, r1 = summary["rounds"]
+    assert r0["steps"] == 100 and r0["student_steps"] == 0 and r1["beta"] == 0.5
+    assert 0 < r1["student_steps"] < r1["steps"] and r1["dataset"] == 100 + r1["steps"]
+    assert math.isfinite(r1["label_rmse_on_policy"])
+    meta = read_metadata(out / "model.zip")
+    assert meta["residual"] is False and meta["algo"] == "ppo" and meta["env_id"] == "QuadUneven-v0"
+    assert meta["env_kwargs"] == {
+        "action_mode": "joint_pd", "pd_kp": 100.0, "pd_kd": 3.0, "pd_action_scale": 1.0, "gait_period": 3.1,
+    }  # fmt: skip
+
+    # the loaded policy acts as the student did in the rollouts (numpy forward == SB3 predict)
+    from agents.rl.distill import mlp_forward, policy_params
+
+    env = gym.make("QuadUneven-v0", terrain="flat", **meta["env_kwargs"])
+    policy = load_sb3_policy(out / "model.zip", env, "ppo")
+    obs, _ = env.reset(seed=0)
+    action, _ = policy.predict(obs, deterministic=True)
+    np.testing.assert_allclose(action, mlp_forward(policy_params(policy.model), policy.obs_normalizer, obs), atol=1e-5)
+
+    suite = suite_from_dict({**TINY, "time_limit": 0.3}, source="test")
+    res = evaluate(suite, str(out / "model.zip"), tmp_path / "eval", progress=False)
+    assert [e["error"] for e in res["episodes"]] == [None, None]
+    assert all(e["planner_calls"] is None for e in res["episodes"])  # no expert in the loop
+
+    pytest.importorskip("onnx")
+    pytest.importorskip("onnxruntime")
+    assert main(["export", "--policy", str(out / "model.zip"), "--out", str(tmp_path / "s.onnx")]) == 0
+    import onnxruntime as ort
+
+    sess = ort.InferenceSession(str(tmp_path / "s.onnx"))
+    got = sess.run(None, {sess.get_inputs()[0].name: obs[None].astype(np.float32)})[0][0]
+    np.testing.assert_allclose(got, action, atol=1e-5)
+
+
+def test_the_same_seed_gives_the_same_student(tiny_run, tmp_path):
+    """Two runs with one seed: the same rollouts, losses and weights (a different seed: other weights)."""
+    from agents.rl.distill import distill
+
+    out, summary = tiny_run
+    again = distill(suite_from_dict(TINY, source="test"), tmp_path / "b", tiny_config(), log=lambda _: None)
+    for r, s in zip(summary["rounds"], again["rounds"], strict=True):
+        for key in ("steps", "student_steps", "loss", "loss_first", "mean_distance", "label_rmse_on_policy"):
+            assert r.get(key) == s.get(key), key
+    a = np.load(out / "model_obs_norm.npz")["mean"]
+    b = np.load(tmp_path / "b" / "model_obs_norm.npz")["mean"]
+    np.testing.assert_array_equal(a, b)
+    wa, wb = policy_weights(out / "model.zip"), policy_weights(tmp_path / "b" / "model.zip")
+    assert wa.keys() == wb.keys() and all(np.array_equal(wa[k], wb[k]) for k in wa)
+    other = distill(
+        suite_from_dict(TINY, source="test"), tmp_path / "c", tiny_config(seed=4, dagger_rounds=0), log=lambda _: None
+    )
+    assert other["rounds"][0]["steps"] == summary["rounds"][0]["steps"]  # the expert's rollouts: no seed in them
+    wc = policy_weights(tmp_path / "c" / "model.zip")
+    assert not np.array_equal(wa["action_net.weight"], wc["action_net.weight"])
+
+
+def policy_weights(path):
+    import io
+    import zipfile
+
+    import torch
+
+    with zipfile.ZipFile(path) as z:
+        state = torch.load(io.BytesIO(z.read("policy.pth")), weights_only=True)
+    return {k: v.numpy() for k, v in state.items()}
+
+
+# ------------------------------------------------------------------------------------------------- CLI
+@pytest.mark.parametrize(
+    ("extra", "field"),
+    [
+        (["--dagger-rounds", "-1"], "--dagger-rounds"),
+        (["--budget-min", "0"], "--budget-min"),
+        (["--budget-min", "nan"], "--budget-min"),
+        (["--beta-decay", "1.5"], "--beta-decay"),
+        (["--episodes", "0"], "--episodes"),
+        (["--workers", "0"], "--workers"),
+        (["--expert-config", "{bad"], "--expert-config"),
+        (["--expert-config", '{"nope": 1}'], "nope"),
+        (["--expert-config", '{"stride": -1}'], "stride"),
+        (["--suite", "no_such_suite"], "no_such_suite"),
+        (["--suite", "command"], "command or waypoints"),
+    ],
+)
+def test_bad_distill_options_exit_2_with_one_line(tmp_path, capsys, extra, field):
+    argv = ["distill", "--suite", "smoke", "--out", str(tmp_path / "o"), *extra]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and field in err and "Traceback" not in err
+
+
+def test_a_non_empty_out_is_refused(tmp_path, capsys):
+    (tmp_path / "o").mkdir()
+    (tmp_path / "o" / "x.txt").write_text("x")
+    assert main(["distill", "--suite", "smoke", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "not empty" in err and err.count("\n") == 1
+    assert json.dumps(sorted(p.name for p in (tmp_path / "o").iterdir())) == '["x.txt"]'
