@@ -37,7 +37,9 @@ def write_config(path: Path, **changes) -> Path:
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
 def test_shipped_configs_are_valid(algo):
     cfg = load_train_config(None, {"algo": algo})
-    assert cfg.algo == algo and 0 < cfg.residual_scale <= 0.2
+    # a small residual: at most 0.2 of the motor limit added, or a gain of 1 +- 0.5 on the expert's torque
+    limit = 0.2 if cfg.residual_basis == "torque_limit" else 0.5
+    assert cfg.algo == algo and 0 < cfg.residual_scale <= limit
     assert load_train_config(default_config_path(algo)).to_dict() == cfg.to_dict()
 
 
