@@ -28,8 +28,8 @@ from planners.cycle import STANCE_REACH
 from planners.pitch import pitch_of_quaternion, yaw_pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
 from planners.types import FootholdError, ReferenceGrid, ReferenceSample
+from planners.robot_geometry import robot_geometry
 from quad_uneven_env import physics
-from quad_uneven_env.robot.kinematics import hip_positions_B
 from quad_uneven_env.spatial import quat_to_matrix, wrap_angle
 
 STRIDE_FALLBACKS: tuple[tuple[float, float], ...] = (
@@ -100,12 +100,13 @@ class CyclePlanner:
     def __init__(self, env: Any, config: ExpertConfig, friction: FrictionAdaptation, log: FailureLog) -> None:
         self.env = env
         self.config = config
-        self.cfg = env.robot_cfg
+        self.cfg = robot_geometry(env.robot)
+        """the planners' view of the env's robot (:mod:`planners.robot_geometry`)."""
         self.friction = friction
         self.log = log
         self.foot_sensor_adr = np.array([int(a) for a in env.idx.foot_sensor_adr])
         """the feet's contact-sensor addresses in the simulator's ``sensordata``."""
-        self._hips_B = hip_positions_B(self.cfg)
+        self._hips_B = self.cfg.shoulders_B
         self.planner_times_ms: list[float] = []
         """wall time of every gait-cycle plan (ms)."""
         self.plans: list[Any] = []
