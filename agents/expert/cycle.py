@@ -270,7 +270,7 @@ class CyclePlanner:
             )
             plan, too_steep = self._try_plan(scenario, t0, stride)
             if plan is None and too_steep and steep_mu is not None:
-                steep = dataclasses.replace(scenario, foothold_limits=foothold_limits_for_friction(steep_mu))
+                steep = dataclasses.replace(scenario, foothold_limits=foothold_limits_for_friction(steep_mu, cfgx.foothold_scale))
                 plan, _ = self._try_plan(steep, t0, stride, f" (assuming friction {steep_mu:.2f})")
                 if plan is not None:
                     cycle_mu = steep_mu
