@@ -170,6 +170,12 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         "--env-kwargs", default="{}", help="JSON object of extra QuadUneven-v0 arguments, e.g. '{\"frame_skip\": 5}'"
     )
     p.add_argument(
+        "--robot",
+        default=None,
+        help="the robot: a shipped name (quad_uneven_env.robots(): paper, go1, anymal_c, hyq, solo12) or a robot YAML "
+        "path; the env kwarg 'robot' (default: the paper's robot); docs/robots.md",
+    )
+    p.add_argument(
         "--expert-config",
         default="{}",
         help="JSON object of agents.expert.ExpertConfig fields for --policy expert, e.g. '{\"friction\": 0.8}' "
@@ -234,6 +240,10 @@ def _suite_option(name: str) -> Suite:
 def run_evaluate_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven evaluate``: 0 on success, 2 on an invalid suite, policy or argument."""
     env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
+    if args.robot is not None:
+        if env_kwargs.get("robot", args.robot) != args.robot:
+            raise ValueError(f"--robot {args.robot!r} and --env-kwargs robot {env_kwargs['robot']!r} differ: give one")
+        env_kwargs["robot"] = args.robot
     expert_config = _json_object(args.expert_config, "--expert-config")
     if expert_config and args.policy != "expert":
         raise ValueError(f"--expert-config is for --policy expert only, got --policy {args.policy!r}")

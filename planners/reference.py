@@ -52,6 +52,8 @@ class Reference:
         self.plan = plan
         self.geometry = robot_geometry(cfg)
         """the planners' view of the robot."""
+        self.cfg = self.geometry.config or self.geometry.description
+        """the robot: its Table-1 config (the paper's robot) or its description."""
         self.wb = WholeBody(self.geometry)
         r = self.geometry.foot_radius
         self.sites_start = foot_site_on(plan.terrain, plan.feet_start, r)

@@ -70,6 +70,8 @@ class LegChainModel:
     """(4, 3) kg m."""
     leg_mass: np.ndarray
     """(4,) kg, the three links of each leg."""
+    trunk_moment: np.ndarray
+    """(3,) kg m, the trunk's mass times its COM (trunk frame)."""
 
     @classmethod
     def from_description(cls, desc: RobotDescription) -> LegChainModel:
@@ -95,7 +97,8 @@ class LegChainModel:
                 rows[key].append(B.T @ v)
             rows["m"].append(mh + mt + ms)
         a = {k: np.array(v, dtype=float) for k, v in rows.items()}
-        return cls(a["B"], a["s"], a["fc"], a["fa"], a["fb"], a["mc"], a["ma"], a["mb"], a["m"])
+        trunk = desc.trunk.mass * np.asarray(desc.trunk.com, dtype=float)
+        return cls(a["B"], a["s"], a["fc"], a["fa"], a["fb"], a["mc"], a["ma"], a["mb"], a["m"], trunk)
 
     def point(self, q: np.ndarray, which: str, qd: np.ndarray | None = None):
         """The foot point (``which="foot"``, m) or the leg's mass moment (``"com"``, kg m) from the HAA origin.
@@ -257,12 +260,12 @@ class RobotGeometry:
         return knee_position_B(self.description.legs[i], q) - self.hips_B[i]
 
     def standing_legs(self, height: float) -> np.ndarray:
-        """Leg angles (4, 3) (rad) with the feet under their standing points, ``height`` (m) below the trunk
-        origin (the paper's robot: :func:`~quad_uneven_env.robot.kinematics.standing_joint_angles`)."""
+        """Leg angles (4, 3) (rad) with the feet under their standing points, ``height`` (m) below the shoulders
+        (the paper's robot: :func:`~quad_uneven_env.robot.kinematics.standing_joint_angles`)."""
         if self.description is None:
             return standing_joint_angles(self.config, height).reshape(4, 3)  # type: ignore[arg-type]
         feet = self.feet_B.copy()
-        feet[:, 2] = -height
+        feet[:, 2] = self.shoulders_B[:, 2] - height
         return self.ik(feet - self.hips_B)
 
 

@@ -111,7 +111,8 @@ class WholeBody:
             # Constant part of M (c - p_base): the leg masses placed at the hips.
             self._hip_moment = self.leg_mass * self.hips.sum(axis=0)
         else:
-            self._hip_moment = (self.chain.leg_mass[:, None] * self.hips).sum(axis=0)
+            # the leg masses at the hips, and the trunk's COM
+            self._hip_moment = (self.chain.leg_mass[:, None] * self.hips).sum(axis=0) + self.chain.trunk_moment
 
     def ik(self, e: np.ndarray) -> np.ndarray:
         """Leg angles (..., 4, 3) (rad) for foot points ``e`` (..., 4, 3) relative to the hips (m)."""
@@ -198,7 +199,8 @@ class WholeBody:
         :return: ``(p, p_d, p_dd, q, qd, qdd)``: base (T, 3); leg joints (T, 12) in rad, rad/s, rad/s^2.
         """
         if self.chain is not None:  # a URDF robot: the numpy path, joints as (T, 12)
-            p, pd, pdd, q, qd, qdd = self.place_base(c, c_d, c_dd, x, x_d, x_dd, None, newton_steps + 1)
+            with np.errstate(divide="ignore", invalid="ignore"):  # a singular leg: non-finite rows, as the kernel's
+                p, pd, pdd, q, qd, qdd = self.place_base(c, c_d, c_dd, x, x_d, x_dd, None, newton_steps + 1)
             return p, pd, pdd, q.reshape(-1, 12), qd.reshape(-1, 12), qdd.reshape(-1, 12)
         T = c.shape[0]
         f = np.ascontiguousarray
