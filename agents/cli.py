@@ -176,6 +176,13 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         "path; the env kwarg 'robot' (default: the paper's robot); docs/robots.md",
     )
     p.add_argument(
+        "--scale-terrain",
+        action="store_true",
+        help="run the suite at the robot's scale: its lengths (terrain parameters, goal distance) times the robot's "
+        "leg length over the paper robot's 0.42 m, its time limit times the square root (the suite's 'scale: "
+        "leg_length')",
+    )
+    p.add_argument(
         "--expert-config",
         default="{}",
         help="JSON object of agents.expert.ExpertConfig fields for --policy expert, e.g. '{\"friction\": 0.8}' "
@@ -257,6 +264,8 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
     if not args.episode_wall_limit > 0:  # also refuses nan
         raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
     suite = _suite_option(args.suite)
+    if args.scale_terrain:
+        suite = dataclasses.replace(suite, scale="leg_length")
     with sigterm_as_keyboard_interrupt():
         results = evaluate(
             suite,

@@ -108,7 +108,10 @@ class LegChainModel:
             ``Jd_qd = (dJ/dt) qd`` (..., 4, 3), the velocity-product acceleration (as
             :func:`planners.wholebody.leg_point`).
         """
-        c0, a, b = (self.foot_c0, self.foot_a, self.foot_b) if which == "foot" else (self.com_c0, self.com_a, self.com_b)
+        if which == "foot":
+            c0, a, b = self.foot_c0, self.foot_a, self.foot_b
+        else:
+            c0, a, b = self.com_c0, self.com_a, self.com_b
         q = np.asarray(q, dtype=float)
         s1, c1 = np.sin(q[..., 0]), np.cos(q[..., 0])
         t2, t23 = q[..., 1], q[..., 1] + self.sigma * q[..., 2]
@@ -146,7 +149,8 @@ def _rot_x(s: np.ndarray, c: np.ndarray, v: np.ndarray) -> np.ndarray:
 def _rot_y(t: np.ndarray, v: np.ndarray) -> np.ndarray:
     """R_y(t) v for (...) angles and (..., 3) v."""
     s, c = np.sin(t), np.cos(t)
-    return np.stack([c * v[..., 0] + s * v[..., 2], np.broadcast_to(v[..., 1], s.shape), -s * v[..., 0] + c * v[..., 2]], axis=-1)
+    y = np.broadcast_to(v[..., 1], s.shape)
+    return np.stack([c * v[..., 0] + s * v[..., 2], y, -s * v[..., 0] + c * v[..., 2]], axis=-1)
 
 
 def _e2_cross(v: np.ndarray) -> np.ndarray:
@@ -270,24 +274,26 @@ class RobotGeometry:
 
 
 def robot_geometry(robot: RobotConfig | RobotDescription | RobotGeometry | None = None) -> RobotGeometry:
-    """The planners' view of ``robot`` (None: the paper's robot); a URDF robot's is built once per description."""
+    """The planners' view of ``robot`` (None: the paper's robot), built once per config or description."""
     if isinstance(robot, RobotGeometry):
         return robot
     if robot is None:
         robot = load_robot_config("paper")
     if isinstance(robot, RobotDescription) and robot.config is not None:
         robot = robot.config
-    if isinstance(robot, RobotConfig):
-        return RobotGeometry.from_config(robot)
-    if isinstance(robot, RobotDescription):
-        hit = _CACHE.get(id(robot))
-        if hit is None or hit[0] is not robot:
-            hit = _CACHE[id(robot)] = (robot, RobotGeometry.from_description(robot))
-        return hit[1]
-    raise ValueError(f"robot must be a RobotConfig, a RobotDescription or a RobotGeometry, got {robot!r}")
+    if not isinstance(robot, RobotConfig | RobotDescription):
+        raise ValueError(f"robot must be a RobotConfig, a RobotDescription or a RobotGeometry, got {robot!r}")
+    hit = _CACHE.get(id(robot))
+    if hit is None or hit[0] is not robot:
+        if len(_CACHE) >= 64:
+            _CACHE.clear()
+        build = RobotGeometry.from_config if isinstance(robot, RobotConfig) else RobotGeometry.from_description
+        hit = _CACHE[id(robot)] = (robot, build(robot))  # type: ignore[arg-type]
+    return hit[1]
 
 
-_CACHE: dict[int, tuple[RobotDescription, RobotGeometry]] = {}
+_CACHE: dict[int, tuple[RobotConfig | RobotDescription, RobotGeometry]] = {}
+"""the geometry of each config or description seen (keyed by identity; both are immutable)."""
 
 
 __all__ = ["LegChainModel", "RobotGeometry", "robot_geometry"]

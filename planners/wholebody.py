@@ -30,8 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from planners.wholebody_kernels import place_base_grid
 from planners.robot_geometry import RobotGeometry, robot_geometry
+from planners.wholebody_kernels import place_base_grid
 from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
 from quad_uneven_env.robot.description import RobotDescription

@@ -83,13 +83,22 @@ ENV_ARGS: tuple[Param, ...] = (
         hi=1.0,
     ),
     Param(
-        "pd_kp", 100.0, "N m/rad", "``joint_pd`` servo stiffness (None: the robot's, docs/robots.md; the default is "
-        "the paper robot's)", lo=0.0, hi=1e5, lo_open=True,
-    ),  # fmt: skip
+        "pd_kp",
+        100.0,
+        "N m/rad",
+        "``joint_pd`` servo stiffness (None: the robot's, docs/robots.md; the default is the paper robot's)",
+        lo=0.0,
+        hi=1e5,
+        lo_open=True,
+    ),
     Param(
-        "pd_kd", 3.0, "N m s/rad", "``joint_pd`` servo damping (None: the robot's; the default is the paper robot's)",
-        lo=0.0, hi=1e4,
-    ),  # fmt: skip
+        "pd_kd",
+        3.0,
+        "N m s/rad",
+        "``joint_pd`` servo damping (None: the robot's; the default is the paper robot's)",
+        lo=0.0,
+        hi=1e4,
+    ),
     Param(
         "pd_action_scale", 0.5, "rad", "``joint_pd`` target offset per unit of action", lo=0.0, hi=math.pi, lo_open=True
     ),

@@ -9,7 +9,6 @@ from typing import Any
 import gymnasium as gym
 
 from agents.policy import Policy, ZeroActionPolicy
-from quad_uneven_env.fields import from_mapping
 
 POLICY_ENV_KWARGS: dict[str, dict[str, Any]] = {
     # The zero action in joint_pd mode holds the standing pose.

@@ -118,9 +118,10 @@ class ExpertConfig:
 
     @classmethod
     def for_robot(cls, robot: RobotDescription, overrides: Mapping[str, Any] | None = None) -> ExpertConfig:
-        """The expert's settings on ``robot``: the defaults scaled from the paper robot's (docs/robots.md#scaling-rules),
-        then the robot YAML's ``gait``, then ``overrides`` (fields of this class; a ``gains`` mapping is merged
-        into the scaled gains). The paper's robot gets the defaults: ``ExpertConfig(**overrides)``.
+        """The expert's settings on ``robot``: the defaults scaled from the paper robot's
+        (docs/robots.md#scaling-rules), then the robot YAML's ``gait``, then ``overrides`` (fields of this class;
+        a ``gains`` mapping is merged into the scaled gains). The paper's robot gets the defaults:
+        ``ExpertConfig(**overrides)``.
 
         :raises ValueError: naming the field, as :func:`~quad_uneven_env.fields.from_mapping`.
         """

@@ -27,8 +27,8 @@ from planners import PlanningError, Scenario, plan_gait_cycle
 from planners.cycle import STANCE_REACH
 from planners.pitch import pitch_of_quaternion, yaw_pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
-from planners.types import FootholdError, ReferenceGrid, ReferenceSample
 from planners.robot_geometry import robot_geometry
+from planners.types import FootholdError, ReferenceGrid, ReferenceSample
 from quad_uneven_env import physics
 from quad_uneven_env.spatial import quat_to_matrix, wrap_angle
 
@@ -270,7 +270,8 @@ class CyclePlanner:
             )
             plan, too_steep = self._try_plan(scenario, t0, stride)
             if plan is None and too_steep and steep_mu is not None:
-                steep = dataclasses.replace(scenario, foothold_limits=foothold_limits_for_friction(steep_mu, cfgx.foothold_scale))
+                limits = foothold_limits_for_friction(steep_mu, cfgx.foothold_scale)
+                steep = dataclasses.replace(scenario, foothold_limits=limits)
                 plan, _ = self._try_plan(steep, t0, stride, f" (assuming friction {steep_mu:.2f})")
                 if plan is not None:
                     cycle_mu = steep_mu

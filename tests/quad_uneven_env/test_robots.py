@@ -238,7 +238,8 @@ def test_env_defaults_follow_the_robot(name):
     assert u.model.actuator_biasprm[0, 2] == pytest.approx(-desc.joint_pd_gains[1])
     env.close()
     # given values win
-    env = gym.make("QuadUneven-v0", robot=name, termination={"min_base_height": 0.05}, pd_kp=7.0, action_mode="joint_pd")
+    given = {"termination": {"min_base_height": 0.05}, "pd_kp": 7.0}
+    env = gym.make("QuadUneven-v0", robot=name, action_mode="joint_pd", **given)
     assert env.unwrapped.termination.min_base_height == 0.05 and env.unwrapped.model.actuator_gainprm[0, 0] == 7.0
     env.close()
 
@@ -333,9 +334,9 @@ def test_a_users_robot_by_yaml_path(tmp_path):
         ),
     ],
     ids=[
-        "radius", "legs", "foot", "torque", "unknown", "gait_stride", "gait_cycle", "gait_unknown", "joints", "mass",
-        "inertia", "axis",
-    ],  # fmt: skip
+        *("radius", "legs", "foot", "torque", "unknown", "gait_stride", "gait_cycle", "gait_unknown"),
+        *("joints", "mass", "inertia", "axis"),
+    ],
 )
 def test_bad_descriptions_are_refused_naming_the_field(tmp_path, edit, yaml_over, message):
     path = _user_robot(tmp_path, edit, **yaml_over)
