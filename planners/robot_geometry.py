@@ -212,9 +212,9 @@ class RobotGeometry:
         """Any description (the paper's: as :meth:`from_config` of its config)."""
         if desc.config is not None:
             return cls.from_config(desc.config)
-        from quad_uneven_env.robot.leg_chain import _chains, feet_positions_B
+        from quad_uneven_env.robot.leg_chain import chain_constants, feet_positions_B
 
-        chains = _chains(desc)
+        chains = chain_constants(desc)
         shoulders = np.array([c.h + c.alpha[0] * c.a1 + c.lat * c.a2 + c.alpha[2] * c.n for c in chains])
         l1 = np.array([abs(c.U1) for c in chains])
         l2 = np.array([abs(c.U2) for c in chains])

@@ -25,8 +25,10 @@ EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
 class ExpertConfig:
     """Gait and control settings of the expert (SI units), and the nominal assumptions it plans and controls with.
 
+    The defaults are the paper robot's; :meth:`for_robot` scales them to another robot (docs/robots.md).
+
     Nominal assumptions (``model="nominal"``): the robot's masses, inertias and centres of mass are those of
-    the robot configuration the env was built from (``env.unwrapped.robot_cfg``; the paper's robot: 50 kg
+    the robot description the env was built from (``env.unwrapped.robot``; the paper's robot: 50 kg
     in all, link COMs as in Table 1), never the simulator's; a payload, scaled links or a
     shifted COM are disturbances to it. Its friction cones assume ``friction`` (0.5, half the nominal
     floor's 1.0; the inscribed pyramid's ``friction / sqrt(2)`` = 0.35 per tangent axis is the margin that
