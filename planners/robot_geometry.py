@@ -15,8 +15,11 @@ Three points per leg, all in the trunk frame (m), coincide for the paper's robot
 hip offsets:
 
 - ``hips_B``: the HAA origin, where the leg's chain starts (the whole-body COM placement, the leg IK);
-- ``shoulders_B``: the centre of the leg's reach: the HFE origin moved along the HFE axis to the plane of the
-  thigh and shank (the leg is a planar two-link arm there at zero HAA);
+- ``shoulders_B``: the centre of the leg's reach: the HAA origin moved by the HFE origin's offsets along the HAA
+  axis and normal to both axes (not the lateral one, along the HFE axis). The reach (``leg_length``) combines the
+  stretched thigh and shank with that lateral offset ``lat``: a foot at planar distance ``d`` from the HFE axis
+  lies ``sqrt(d^2 + lat^2)`` from the shoulder at any HAA angle, exactly where the HFE origin has no offset
+  normal to both axes (Go1, Solo12, ANYmal C; HyQ's 8 cm below its HAA axis makes it approximate);
 - ``feet_B``: the foot point in the standing pose (the nominal foothold lies under it).
 
 :func:`robot_geometry` builds (and caches) the view of a ``RobotConfig``, a ``RobotDescription`` or returns a
@@ -178,7 +181,7 @@ class RobotGeometry:
     feet_B: np.ndarray
     """(4, 3) m, foot points in the standing pose."""
     leg_length: float
-    """m, the longest leg's stretched HFE-to-foot reach in its plane."""
+    """m, the longest leg's stretched reach from its shoulder (the paper's robot: thigh + shank)."""
     shank_length: float
     """m, knee to foot point."""
     foot_radius: float
@@ -215,16 +218,20 @@ class RobotGeometry:
         from quad_uneven_env.robot.leg_chain import chain_constants, feet_positions_B
 
         chains = chain_constants(desc)
-        shoulders = np.array([c.h + c.alpha[0] * c.a1 + c.lat * c.a2 + c.alpha[2] * c.n for c in chains])
+        # The HFE origin's offset along the HAA axis and normal to both axes moves the centre; the lateral offset
+        # (along the HFE axis) is a radius: a foot whose planar distance from the HFE axis is d lies
+        # sqrt(d^2 + lat^2) from the centre, whatever the HAA angle (exact without a normal offset).
+        shoulders = np.array([c.h + c.alpha[0] * c.a1 + c.alpha[2] * c.n for c in chains])
         l1 = np.array([abs(c.U1) for c in chains])
         l2 = np.array([abs(c.U2) for c in chains])
-        leg_length = float(np.max(l1 + l2))
+        lat = np.array([c.lat for c in chains])
+        leg_length = float(np.max(np.hypot(l1 + l2, lat)))
         # the fully bent knee: the smaller of the two KFE limits' distances, with the paper's margin
         bent = []
         for i, c in enumerate(chains):
             lo, hi = desc.joint_ranges[3 * i + 2]
             q3 = float(np.clip(lo if c.branch * c.sigma > 0 else hi, -np.pi, np.pi))
-            bent.append(abs(c.U1 + c.U2 * np.exp(-1j * c.sigma * q3)))
+            bent.append(float(np.hypot(abs(c.U1 + c.U2 * np.exp(-1j * c.sigma * q3)), c.lat)))
         scale = desc.leg_length / PAPER_LEG_LENGTH
         return cls(
             name=desc.name, mass=desc.total_mass, hips_B=desc.hip_positions_B, shoulders_B=shoulders,

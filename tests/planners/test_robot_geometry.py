@@ -82,16 +82,27 @@ def test_whole_body_com_matches_the_generated_model(name):
 
 @pytest.mark.parametrize("name", URDF_ROBOTS)
 def test_urdf_robot_geometry(name):
-    """Shoulders are where the leg plane meets the HFE-KFE reach; feet stand where the standing pose puts them."""
+    """A foot at planar distance d from the HFE axis lies sqrt(d^2 + lat^2) from the shoulder at any HAA angle
+    (exactly without an HFE offset normal to both axes; with HyQ's 8 cm: within 3 cm at HAA angles to 0.6 rad);
+    the standing feet stand where the standing pose puts them."""
+
+    from quad_uneven_env.robot.leg_chain import chain_constants
+
     desc = load_robot(name)
     g = robot_geometry(desc)
     assert g is robot_geometry(desc)  # built once per description
     assert g.scale == pytest.approx(desc.leg_length / 0.42)
-    # a foot stretched straight down from its shoulder is one leg length away (within the legs' differences)
-    assert 0.9 * desc.leg_length < g.leg_length <= desc.leg_length + 1e-12
-    q = g.standing_legs(0.9 * g.leg_length)
+    rng = np.random.default_rng(3)
+    q = desc.standing_joints.reshape(4, 3) + rng.uniform(-0.4, 0.4, (50, 4, 3))
     feet = g.chain.point(q, "foot")[0] + g.hips_B
+    for i, c in enumerate(chain_constants(desc)):
+        d = np.abs(c.U1 + c.U2 * np.exp(-1j * c.sigma * q[:, i, 2]))
+        want = np.hypot(d, c.lat)
+        got = np.linalg.norm(feet[:, i] - g.shoulders_B[i], axis=1)
+        assert np.allclose(got, want, atol=1e-9 if abs(c.alpha[2]) < 1e-9 else 0.03)
+        assert g.leg_length >= np.hypot(abs(c.U1) + abs(c.U2), c.lat) - 1e-12
+    legs = g.standing_legs(0.8 * g.leg_length)
+    feet = g.chain.point(legs, "foot")[0] + g.hips_B
     assert np.allclose(feet[:, :2], g.feet_B[:, :2], atol=1e-9)
-    assert np.allclose(feet[:, 2], g.shoulders_B[:, 2] - 0.9 * g.leg_length, atol=1e-9)
-    assert np.allclose(np.linalg.norm(feet - g.shoulders_B, axis=1), 0.9 * g.leg_length, rtol=0.1)
+    assert np.allclose(feet[:, 2], g.shoulders_B[:, 2] - 0.8 * g.leg_length, atol=1e-9)
     assert 0.0 < g.min_reach < 0.5 * g.leg_length
