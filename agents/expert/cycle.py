@@ -37,7 +37,8 @@ STRIDE_FALLBACKS: tuple[tuple[float, float], ...] = (
 )  # fmt: skip
 """Strides tried in turn when a plan fails, closest to the nominal first: (fraction of the cycle's stride (the
 commanded one, else ``ExpertConfig.stride`` along +x), sideways body shift (m, world y)); the first feasible
-plan is walked. Shorter and longer strides move every nominal foothold (onto the next stone, off a reach
+plan is walked (the shift in the paper robot's lengths: times the robot's leg-length ratio). Shorter and longer
+strides move every nominal foothold (onto the next stone, off a reach
 limit), a sideways shift moves the body over its support; 0 steps in place. If none is feasible the expert
 stands still for one cycle."""
 
@@ -237,7 +238,7 @@ class CyclePlanner:
         pitch_start = previous.end if previous is not None and not measured else measured_pitch()
         if measured:
             measure_yaw()
-        elif cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, env.idx)) > 0.05:
+        elif cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, env.idx)) > 0.05 * self.cfg.scale:
             # First cycle, after a hold, or drifted: start from the measured COG (and pitch) at rest.
             cog_start = {"pos": physics.cog(d, env.idx).copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
             pitch_start = measured_pitch()
@@ -250,7 +251,7 @@ class CyclePlanner:
         for fx, dy in STRIDE_FALLBACKS:
             turn = min(fx, 1.0) * full_turn  # a shorter stride turns less; a longer one no more than commanded
             nominal = cycle_stride(env.command, cfgx.stride, self.durations, physics.base_quat(d), turn)
-            stride, order = fallback_stride(nominal, fx, dy, self.yaw + 0.5 * turn, turning)
+            stride, order = fallback_stride(nominal, fx, dy * self.cfg.scale, self.yaw + 0.5 * turn, turning)
             scenario = Scenario(
                 terrain=self._terrain.heightfield,
                 feet_start=feet,
