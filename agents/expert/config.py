@@ -155,11 +155,12 @@ def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
 
     With the leg-length ratio ``s = leg_length / 0.42 m`` and the mass ratio ``m = mass / 50 kg`` (the paper
     robot's): lengths (stride, swing clearance, touch-down depth, recovery distance, foothold search) scale
-    with ``s``; times (the phases) with ``sqrt(s)`` and speeds (recovery, slip) with ``sqrt(s)`` (equal Froude
-    number); the stability margin with ``m s`` (the same static margin in leg lengths); the computed-torque
-    gains (per unit mass) with ``1 / s`` (stiffness) and ``1 / sqrt(s)`` (damping), the same damping ratio at a
-    natural frequency scaled like the gait's. The COG height is the robot's standing COG height times the
-    paper robot's ratio of its walking to its standing COG height. The robot YAML's ``gait`` overrides them.
+    with ``s``; times (the phases, each rounded to 10 ms) with ``sqrt(s)`` and speeds (recovery, slip) with
+    ``sqrt(s)`` (equal Froude number); the stability margin with ``m s`` (the same static margin in leg
+    lengths); the computed-torque gains (per unit mass) with ``1 / s`` (stiffness) and ``1 / sqrt(s)``
+    (damping), the same damping ratio at a natural frequency scaled like the gait's. The COG height is the
+    robot's standing COG height times the paper robot's ratio of its walking to its standing COG height. The
+    robot YAML's ``gait`` overrides them.
     """
     from planners.robot_geometry import robot_geometry
     from planners.wholebody import WholeBody
@@ -169,9 +170,10 @@ def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
     m = robot.total_mass / PAPER_MASS
     t = math.sqrt(s)
     g = robot.gait
-    durations = tuple(d * t for d in base.durations)
-    if g.cycle_time is not None:
-        durations = tuple(d * g.cycle_time / sum(base.durations) for d in base.durations)
+    ratio = t if g.cycle_time is None else g.cycle_time / sum(base.durations)
+    # whole multiples of 10 ms: every cycle then starts on the controller's time grid (2 ms physics steps), where the
+    # reference is a lookup of its precomputed rows
+    durations = tuple(max(round(d * ratio, 2), 0.01) for d in base.durations)
     k = 1.0 if g.gain_scale is None else g.gain_scale
     gains = Gains(
         kp_pos=base.gains.kp_pos * k / s, kd_pos=base.gains.kd_pos * math.sqrt(k / s),
