@@ -22,7 +22,7 @@ waypoint follower then steers (:mod:`agents.waypoints`).
 
 With ``scale: leg_length`` (or ``quad-uneven evaluate --scale-terrain``) the suite is written for the paper's
 robot and run on the evaluated robot at its own scale (:func:`scale_suite`): every length (terrain parameters in
-m, their defaults included, and the goal distance, capped at what the terrain grid holds) is multiplied by the
+m, their defaults included, and the goal distance, capped where the terrain grid ends) is multiplied by the
 robot's leg length over 0.42 m and the time limit by the square root of it (equal Froude number).
 
 Terrain parameters are validated by :func:`quad_uneven_env.terrain.parse_terrain_spec`. Errors are
@@ -56,8 +56,9 @@ SUITE_FIELDS = ("name", "goal_distance", "time_limit", "terrains")
 SUITE_SCALES = ("none", "leg_length")
 """Values of a suite's optional ``scale`` field: as written, or in units of the robot's leg length."""
 
-GOAL_EXIT_GAP = 0.2
-"""m: a scaled goal distance stops at least this short of where an episode leaves its terrain grid."""
+GOAL_ROOM = 1.0
+"""m in the paper robot's lengths: the room a scaled goal leaves before the end of the terrain grid (the front
+feet and a stride ahead of the COG; the shipped suites' 5 m goals leave 1.5 m)."""
 
 ENTRY_FIELDS = ("kind", "params", "seeds", "randomization", "command", "waypoints")
 """Fields of one ``terrains`` entry (``params`` optional, default ``{}``; ``randomization``, ``command`` and
@@ -311,8 +312,8 @@ def scale_suite(suite: Suite, factor: float) -> Suite:
     """``suite`` with every length times ``factor`` (-) and its time limit times ``sqrt(factor)``.
 
     Lengths: each entry's terrain parameters in m (its kind's defaults filled in where the suite does not give
-    them) and the goal distance, capped at the longest every entry's terrain grid holds (it ends
-    :data:`GOAL_EXIT_GAP` short of where an episode leaves the grid). The result says ``scale: none``; its name
+    them) and the goal distance, capped so that it leaves :data:`GOAL_ROOM` x ``factor`` before the end of every
+    entry's terrain grid (the robot's feet stay on it). The result says ``scale: none``; its name
     records the factor.
 
     :raises SuiteError: if a scaled parameter leaves its allowed range (naming it).
@@ -332,7 +333,7 @@ def scale_suite(suite: Suite, factor: float) -> Suite:
         except ValueError as err:
             raise SuiteError(f"scaled by {factor:.3f}: {_rename_terrain_error(str(err), len(terrains))}") from None
         grid = KINDS[e.kind].grid(spec.params)
-        exits.append(grid.origin[0] + grid.size[0] - EXIT_MARGIN - GOAL_EXIT_GAP)
+        exits.append(grid.origin[0] + grid.size[0] - GOAL_ROOM * factor)
         raw = {"kind": e.kind, "params": params, "seeds": list(e.seeds)}
         for key in ("randomization", "command", "waypoints"):
             if getattr(e, key) is not None:

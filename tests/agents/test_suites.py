@@ -170,7 +170,7 @@ def test_episode_tasks_cap_offset_and_order():
 
 # ---------------------------------------------------------------------- suites at the robot's scale
 def test_a_suite_scales_its_lengths_and_time_to_the_robot():
-    """Terrain lengths (defaults too) and the goal x s, time x sqrt(s); the goal is capped by the 8 m grid."""
+    """Terrain lengths (defaults too) and the goal x s, time x sqrt(s); the goal leaves 1 m x s of the 8 m grid."""
     from agents.evaluation.suites import scale_suite
 
     suite = load_suite("targets")
@@ -182,7 +182,7 @@ def test_a_suite_scales_its_lengths_and_time_to_the_robot():
     assert stairs.params["riser"] == pytest.approx(0.072) and stairs.params["n_steps"] == 5
     assert [e.seeds for e in small.terrains] == [e.seeds for e in suite.terrains]
     big = scale_suite(suite, 1.5)
-    assert big.goal_distance == pytest.approx(6.0)  # 7.5 m does not fit: the grid's exit (6.2 m) less 0.2 m
+    assert big.goal_distance == pytest.approx(5.0)  # 7.5 m does not fit: the grid's end (6.5 m) less 1 m x 1.5
     flat = scale_suite(suite_from_dict({**_suite_raw(), "terrains": [{"kind": "stairs", "seeds": [0]}]}), 2.0)
     assert flat.terrains[0].params["riser"] == pytest.approx(0.16)  # the default 0.08 m, scaled
 
