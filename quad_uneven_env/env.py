@@ -275,8 +275,9 @@ class QuadUnevenEnv(gym.Env):
     default ``"rough"``), ``robot`` (a name of :func:`quad_uneven_env.robots`, or a robot YAML path: a Table-1
     config or a URDF robot's, see docs/robots.md; default ``"paper"``), ``controller``
     (None or a :class:`PhysicsController`), ``reward_weights``, ``termination``, ``height_scan``
-    (mappings of :mod:`quad_uneven_env.config`'s fields; ``termination.min_base_height`` defaults to the
-    robot's fall height, a third of its standing height: 0.12 m for the paper's robot), and the scalars below
+    (mappings of :mod:`quad_uneven_env.config`'s fields; ``termination.min_base_height`` and
+    ``max_base_height`` default to the robot's, a third of its standing height and 2.78 times it: 0.12 and 1 m
+    for the paper's robot), and the scalars below
     (``pd_kp`` and ``pd_kd`` default to the robot's gains, see docs/robots.md), each checked at make
     time by type and range (a bool is not a number; the error names the argument and its allowed
     values):
@@ -347,9 +348,10 @@ class QuadUnevenEnv(gym.Env):
         self.randomization: RandomizationConfig | None = load_randomization(randomization)
         self.terrain = Terrain(parse_terrain_spec(terrain))
         self.reward_weights: RewardWeights = from_mapping(RewardWeights, reward_weights, "reward_weights")
-        if termination is None or (isinstance(termination, Mapping) and "min_base_height" not in termination):
-            # the robot's fall height (the paper robot's: the TerminationLimits default, 0.12 m)
-            termination = {"min_base_height": self.robot.fall_height, **(termination or {})}
+        if termination is None or isinstance(termination, Mapping):
+            # the robot's base-height limits (the paper robot's: the TerminationLimits defaults, 0.12 and 1 m)
+            lo, hi = self.robot.base_height_limits
+            termination = {"min_base_height": lo, "max_base_height": hi, **(termination or {})}
         self.termination: TerminationLimits = from_mapping(TerminationLimits, termination, "termination")
         self.height_scan: HeightScanConfig = from_mapping(HeightScanConfig, height_scan, "height_scan")
         self.command_config: CommandConfig | None = load_command(command)

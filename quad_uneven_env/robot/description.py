@@ -57,8 +57,11 @@ PAPER_LEG_LENGTH = 0.42
 """m: the paper robot's stretched leg (thigh 0.2 + shank 0.22), the unit of the scaling rules."""
 PAPER_MASS = 50.0
 """kg: the paper robot's mass (Table 1), the unit of the scaling rules."""
-PAPER_FALL_HEIGHT = 0.12
-"""m: the paper robot's fall rule: a base height below this ends an episode (a third of its 0.36 m stand)."""
+PAPER_BASE_HEIGHT_LIMITS = (0.12, 1.0)
+"""m: the paper robot's fall rule: a base height below the first or above the second ends an episode (a third of
+its 0.36 m stand, and 2.78 times it)."""
+PAPER_STANDING_HEIGHT = 0.36
+"""m: the paper robot's standing height, the unit of the base-height limits of other robots."""
 PAPER_PD_GAINS = (100.0, 3.0)
 """(N m/rad, N m s/rad): the paper robot's ``joint_pd`` servo gains."""
 
@@ -252,10 +255,14 @@ class RobotDescription:
         return float(-np.min(feet_positions_B(self, self.standing_joints)[:, 2]) + self.foot_radius)
 
     @property
-    def fall_height(self) -> float:
-        """m, the env's default ``termination.min_base_height``: a third of the standing height (the paper
-        robot's :data:`PAPER_FALL_HEIGHT`)."""
-        return PAPER_FALL_HEIGHT if self.config is not None else self.standing_height / 3.0
+    def base_height_limits(self) -> tuple[float, float]:
+        """m, the env's default ``termination.min_base_height`` and ``max_base_height``: the paper robot's
+        :data:`PAPER_BASE_HEIGHT_LIMITS` in units of its standing height (a third of the standing height, and
+        2.78 times it)."""
+        if self.config is not None:
+            return PAPER_BASE_HEIGHT_LIMITS
+        k = self.standing_height / PAPER_STANDING_HEIGHT
+        return PAPER_BASE_HEIGHT_LIMITS[0] * k, PAPER_BASE_HEIGHT_LIMITS[1] * k
 
     @property
     def joint_pd_gains(self) -> tuple[float, float]:

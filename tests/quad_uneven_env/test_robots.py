@@ -222,16 +222,17 @@ def test_env_builds_and_steps_on_each_robot(name):
 
 @pytest.mark.parametrize("name", ("paper", *URDF_ROBOTS))
 def test_env_defaults_follow_the_robot(name):
-    """The fall height is a third of the standing height and the joint_pd gains scale with weight x leg length;
-    the paper robot's are exactly its historical 0.12 m and (100, 3)."""
+    """The base-height limits are a third of the standing height and 2.78 times it, the joint_pd gains scale with
+    weight x leg length; the paper robot's are exactly 0.12 m, 1 m and (100, 3)."""
     desc = load_robot(name)
     env = gym.make("QuadUneven-v0", robot=name, action_mode="joint_pd")
     u = env.unwrapped
     if name == "paper":
-        assert u.termination.min_base_height == 0.12
+        assert (u.termination.min_base_height, u.termination.max_base_height) == (0.12, 1.0)
         assert (desc.joint_pd_gains) == (100.0, 3.0)
     else:
         assert u.termination.min_base_height == pytest.approx(desc.standing_height / 3.0)
+        assert u.termination.max_base_height == pytest.approx(desc.standing_height / 0.36)
         kp = 100.0 * desc.total_mass * desc.leg_length / (50.0 * 0.42)
         assert desc.joint_pd_gains[0] == pytest.approx(kp)
     assert u.model.actuator_gainprm[0, 0] == pytest.approx(desc.joint_pd_gains[0])
