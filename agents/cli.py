@@ -185,6 +185,19 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         "--env-kwargs", default="{}", help="JSON object of extra QuadUneven-v0 arguments, e.g. '{\"frame_skip\": 5}'"
     )
     p.add_argument(
+        "--robot",
+        default=None,
+        help="the robot: a shipped name (quad_uneven_env.robots(): paper, go1, anymal_c, hyq, solo12) or a robot YAML "
+        "path; the env kwarg 'robot' (default: the paper's robot); docs/robots.md",
+    )
+    p.add_argument(
+        "--scale-terrain",
+        action="store_true",
+        help="run the suite at the robot's scale: its lengths (terrain parameters, goal distance) times the robot's "
+        "leg length over the paper robot's 0.42 m, its time limit times the square root (the suite's 'scale: "
+        "leg_length')",
+    )
+    p.add_argument(
         "--expert-config",
         default="{}",
         help="JSON object of agents.expert.ExpertConfig fields for --policy expert, e.g. '{\"friction\": 0.8}' "
@@ -259,6 +272,10 @@ def _suite_option(name: str) -> Suite:
 def run_evaluate_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven evaluate``: 0 on success, 2 on an invalid suite, policy or argument."""
     env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
+    if args.robot is not None:
+        if env_kwargs.get("robot", args.robot) != args.robot:
+            raise ValueError(f"--robot {args.robot!r} and --env-kwargs robot {env_kwargs['robot']!r} differ: give one")
+        env_kwargs["robot"] = args.robot
     expert_config = _json_object(args.expert_config, "--expert-config")
     if expert_config and args.policy != "expert":
         raise ValueError(f"--expert-config is for --policy expert only, got --policy {args.policy!r}")
@@ -278,6 +295,8 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
     if not args.episode_wall_limit > 0:  # also refuses nan
         raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
     suite = _suite_option(args.suite)
+    if args.scale_terrain:
+        suite = dataclasses.replace(suite, scale="leg_length")
     with sigterm_as_keyboard_interrupt():
         results = evaluate(
             suite,

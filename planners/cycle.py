@@ -15,18 +15,15 @@ from planners.gait import Phase, phase_index, walk_cycle
 from planners.geometry import clip_convex, convex_hull_ccw, polygon_centroid
 from planners.pitch import BodyPitch, terrain_pitch
 from planners.polynomial import PiecewisePolynomial
+from planners.robot_geometry import RobotGeometry
 from planners.scenario import Scenario
 from planners.swing import SwingPath, plan_swing
 from planners.terrain_query import foot_site_on
 from planners.types import HeightMap
 from planners.wholebody import WholeBody
-from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import LEG_NAMES
-from quad_uneven_env.robot.kinematics import standing_joint_angles
 from quad_uneven_env.stability import stability_index
 
-MIN_REACH = 0.12
-"""m: hip-to-foot-site distance below which a swing knot is too close to the hip (knee fully bent ~0.114 m)."""
 STANCE_REACH = 0.96
 """fraction of the stretched leg length a stance leg may reach (knee bent >= ~0.55 rad)."""
 REACH_MARGIN = 0.99
@@ -60,7 +57,7 @@ class GaitCyclePlan:
     stats: dict[str, Any]
     """cog_solve_time (s), swing_solve_time (s), total_time (s), iterations, refinements,
     min_stability (N m), min_clearance (m), method."""
-    robot: RobotConfig | None = None
+    robot: RobotGeometry | None = None
     """the robot planned for (the reference's default)."""
     pitch: BodyPitch | None = None
     """the base pitch and yaw over the cycle; None: level and unturned (identity orientation, the paper)."""
@@ -92,7 +89,8 @@ class GaitCyclePlan:
         return out
 
     def reference(self, cfg=None):
-        """The joint reference for the controller (:class:`planners.reference.Reference`); cfg: robot (Table 1)."""
+        """The joint reference for the controller (:class:`planners.reference.Reference`); cfg: the robot (default:
+        the one planned for)."""
         from planners.reference import Reference
 
         return Reference(self, cfg or self.robot)
@@ -129,13 +127,13 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
     :raises PlanningError: naming the phase and support edge (COG) or the leg (swing) when infeasible.
     """
     t_all = time.perf_counter()
-    cfg = scenario.robot_config()
+    cfg = scenario.robot_geometry()
     terrain = scenario.height_map()
-    mass = float(scenario.mass or cfg.total_mass)
+    mass = float(scenario.mass or cfg.mass)
     phases = walk_cycle(scenario.durations, order=scenario.swing_order)
     start = np.asarray(scenario.feet_start, dtype=float)
     wb = WholeBody(cfg)
-    q_nom = standing_joint_angles(cfg, min(scenario.cog_height, 0.95 * cfg.leg_length)).reshape(4, 3)
+    q_nom = cfg.standing_legs(min(scenario.cog_height, 0.95 * cfg.leg_length))
     com_to_base = -wb.com_offset(q_nom)  # base minus whole-body COM (m), nominal pose
     cog0 = scenario.start_boundary()
     follow = scenario.body_pitch == "terrain"
@@ -157,10 +155,10 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
             phases[-1].t_end, yaw0, yaw1,
         )  # fmt: skip
     rotation = None if pitch is None else pitch.rotation
-    hip_offsets = wb.hips + com_to_base  # hips minus whole-body COM (m, base frame), nominal pose
+    hip_offsets = cfg.shoulders_B + com_to_base  # shoulders (reach centres) minus whole-body COM (m, base frame)
 
     def hips_at(t: float) -> np.ndarray:
-        """(4, 3) hips minus COG (m, world) at plan time ``t`` (s)."""
+        """(4, 3) shoulders minus COG (m, world) at plan time ``t`` (s)."""
         return hip_offsets if rotation is None else hip_offsets @ rotation(np.array(t)).T
 
     goal = scenario.goal_boundary()
@@ -213,7 +211,7 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         swings[ph.swing_leg] = plan_swing(
             ph.swing_leg, foot_site_on(terrain, start[i], r), foot_site_on(terrain, target[i], r),
             ph.t_start, ph.t_end, terrain, scenario.clearance, r, hip_path,
-            (MIN_REACH, REACH_MARGIN * cfg.leg_length),
+            (cfg.min_reach, REACH_MARGIN * cfg.leg_length),
         )  # fmt: skip
     t_end = time.perf_counter()
     stats = _stats(cstats, t_end - t_sw, t_end - t_all, swings)

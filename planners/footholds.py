@@ -40,12 +40,13 @@ import numpy as np
 
 from planners.gait import PAPER_DURATIONS, walk_cycle
 from planners.pitch import BodyPitch, planar_rotation, terrain_pitch
+from planners.robot_geometry import RobotGeometry, robot_geometry
 from planners.terrain_query import capsule_clearance, max_height_in_disk
 from planners.types import FootholdError, HeightMap
 from quad_uneven_env.config import RobotConfig
-from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
+from quad_uneven_env.constants import LEG_NAMES
 from quad_uneven_env.fields import check_fields, param
-from quad_uneven_env.robot.kinematics import hip_positions_B, leg_fk_hip, leg_ik_hip
+from quad_uneven_env.robot.description import RobotDescription
 
 SHANK_RADIUS_SCALE = 0.7
 """shank capsule radius / ``RobotConfig.link_radius`` (as built by :mod:`quad_uneven_env.robot.model`)."""
@@ -180,22 +181,29 @@ def _terrain_terms(terrain, x, y, nominal_xy, foot_radius, lim):
 
 
 def shank_clearance(
-    terrain: HeightMap, cfg: RobotConfig, leg: str, site: np.ndarray, hip: np.ndarray, R: np.ndarray
+    terrain: HeightMap,
+    cfg: RobotConfig | RobotDescription | RobotGeometry,
+    leg: str,
+    site: np.ndarray,
+    hip: np.ndarray,
+    R: np.ndarray,
 ) -> np.ndarray:
     """Lower bound (m) of the gap between the shank capsule of ``leg`` and the terrain.
 
+    :param cfg: the robot.
     :param site: (N, 3) foot-site positions (m, world).
-    :param hip: (3,) or (N, 3) hip position (m, world).
+    :param hip: (3,) or (N, 3) hip (HAA origin) position (m, world).
     :param R: (3, 3) base orientation R_WB.
     :return: (N,) gap (m); the knee comes from the leg's IK (its knee branch) for that hip and site.
     """
     site = np.asarray(site, dtype=float).reshape(-1, 3)
     hip = np.asarray(hip, dtype=float)
-    l1, l2 = cfg.thigh.length, cfg.shank.length
-    q = leg_ik_hip((site - hip) @ R, l1, l2, KNEE_SIGN[leg])
-    knee = hip + leg_fk_hip(q, l1, 0.0) @ R.T
-    low_end = site + (knee - site) * (cfg.foot_radius / l2)  # the capsule stops short of the foot sphere
-    return capsule_clearance(terrain, low_end, knee, SHANK_RADIUS_SCALE * cfg.link_radius)
+    geom = robot_geometry(cfg)
+    i = LEG_NAMES.index(leg)
+    q = geom.leg_ik(i, (site - hip) @ R)
+    knee = hip + geom.knee(i, q) @ R.T
+    low_end = site + (knee - site) * (geom.foot_radius / geom.shank_length)  # it stops short of the foot sphere
+    return capsule_clearance(terrain, low_end, knee, SHANK_RADIUS_SCALE * geom.link_radius)
 
 
 @functools.lru_cache(maxsize=8)
@@ -244,7 +252,7 @@ class _LegSearch:
         cost, tests = _terrain_terms(self.terrain, x, y, self.nominal, cfg.foot_radius, lim)
         h = self.terrain.height(x, y)
         site = np.column_stack([x, y, h + cfg.foot_radius])
-        frac = np.max([np.linalg.norm(site - hip, axis=1) for hip, _ in self.poses], axis=0) / cfg.leg_length
+        frac = np.max([np.linalg.norm(site - sh, axis=1) for sh, _, _ in self.poses], axis=0) / cfg.leg_length
         tests["reach"] = frac <= lim.reach
         cost = cost + lim.w_reach * np.maximum(frac - lim.reach_comfort, 0.0) ** 2
         self.evaluated += len(x)
@@ -269,7 +277,7 @@ class _LegSearch:
             if len(idx) == 0:
                 continue
             gap = np.full(len(idx), np.inf)
-            for hip, R in self.poses:  # the next pose only where the previous ones clear
+            for _, hip, R in self.poses:  # the next pose only where the previous ones clear
                 live = gap >= lim.shank_clearance
                 if np.any(live):
                     more = shank_clearance(self.terrain, cfg, self.leg, site[idx[live]], hip, R)
@@ -297,7 +305,7 @@ class _LegSearch:
 
 def choose_footholds(
     terrain: HeightMap,
-    cfg: RobotConfig,
+    cfg: RobotConfig | RobotDescription | RobotGeometry,
     feet_start: np.ndarray,
     cog_start: np.ndarray,
     goal_xy: np.ndarray,
@@ -309,6 +317,9 @@ def choose_footholds(
     yaw_end: float = 0.0,
 ) -> np.ndarray:
     """Target footholds (4, 3) on the terrain surface for one walk cycle (m, world, leg order).
+
+    Each leg's nominal foothold lies under its standing foot point (the paper's robot: its hip) with the body
+    at the goal; the reach test measures from the leg's shoulder (:mod:`planners.robot_geometry`).
 
     :param feet_start: (4, 3) current footholds (m).
     :param cog_start: (3,) COG at the cycle start (m).
@@ -323,10 +334,11 @@ def choose_footholds(
     :raises FootholdError: (a PlanningError) naming the leg and the first test no candidate within reach passes.
     """
     lim = limits or FootholdLimits()
-    hips = hip_positions_B(cfg)
+    cfg = robot_geometry(cfg)
+    hips, shoulders, feet_B = cfg.hips_B, cfg.shoulders_B, cfg.feet_B
     cog_start = np.asarray(cog_start, dtype=float)
     goal_xy = np.asarray(goal_xy, dtype=float)
-    nominal = goal_xy + (hips[:, :2] if yaw_end == 0.0 else hips[:, :2] @ planar_rotation(yaw_end).T)
+    nominal = goal_xy + (feet_B[:, :2] if yaw_end == 0.0 else feet_B[:, :2] @ planar_rotation(yaw_end).T)
     h_nom = terrain.height(nominal[:, 0], nominal[:, 1])
     # A nominal point in a hole (a pit between stepping stones) says nothing about where the feet will
     # stand: take the terrain around it instead, for the body height and pitch.
@@ -353,7 +365,7 @@ def choose_footholds(
             z_body = min(cog_start[2] + frac * (z_goal - cog_start[2]), z_goal)
             body = np.append(cog_start[:2] + frac * (goal_xy - cog_start[:2]), z_body)
             R = np.eye(3) if pitch is None else pitch.rotation(np.array(frac * total))
-            poses.append((body + R @ hips[i], R))
+            poses.append((body + R @ shoulders[i], body + R @ hips[i], R))
         search = _LegSearch(terrain, cfg, leg, nominal[i], poses, lim)
         for d_min, offsets in shells:
             if search.best_cost <= d_min**2:

@@ -18,12 +18,13 @@ import numpy as np
 
 from planners.gait import phase_index
 from planners.pitch import LEVEL
+from planners.robot_geometry import RobotGeometry, robot_geometry
 from planners.terrain_query import foot_site_on
 from planners.types import ReferenceGrid, ReferenceSample
 from planners.wholebody import WholeBody
-from quad_uneven_env.config import RobotConfig, load_robot_config
-from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
-from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
+from quad_uneven_env.config import RobotConfig
+from quad_uneven_env.constants import LEG_NAMES
+from quad_uneven_env.robot.description import RobotDescription
 from quad_uneven_env.spatial import quat_to_matrix
 
 _IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
@@ -38,17 +39,23 @@ class Reference:
     """Whole-robot reference of a planned gait cycle; ``sample(t)`` for the controller.
 
     :param plan: the gait-cycle plan.
-    :param cfg: robot parameters (default Table 1); must be the robot the plan was made for.
+    :param cfg: the robot (a ``RobotConfig``, ``RobotDescription`` or :class:`~planners.robot_geometry.RobotGeometry`;
+        default: the paper's Table 1); must be the robot the plan was made for.
     :param grid_dt: spacing (s) of the exact samples precomputed (vectorised) at construction;
         ``sample(t)`` at a grid time (the controller's 2 ms ticks from the cycle start) is a
         lookup, other times are computed exactly on the spot (Newton warm-started from the grid).
     """
 
-    def __init__(self, plan, cfg: RobotConfig | None = None, grid_dt: float = 0.002) -> None:
+    def __init__(
+        self, plan, cfg: RobotConfig | RobotDescription | RobotGeometry | None = None, grid_dt: float = 0.002
+    ) -> None:
         self.plan = plan
-        self.cfg = cfg or load_robot_config("paper")
-        self.wb = WholeBody(self.cfg)
-        r = self.cfg.foot_radius
+        self.geometry = robot_geometry(cfg)
+        """the planners' view of the robot."""
+        self.cfg = self.geometry.config or self.geometry.description
+        """the robot: its Table-1 config (the paper's robot) or its description."""
+        self.wb = WholeBody(self.geometry)
+        r = self.geometry.foot_radius
         self.sites_start = foot_site_on(plan.terrain, plan.feet_start, r)
         self.sites_target = foot_site_on(plan.terrain, plan.footholds, r)
         self.t_end = plan.duration
@@ -208,7 +215,12 @@ class PackedRows(Sequence):
 
 
 def aim_feet_below_footholds(
-    sample: ReferenceSample, plan, t: float, legs: np.ndarray, depth: float, cfg: RobotConfig
+    sample: ReferenceSample,
+    plan,
+    t: float,
+    legs: np.ndarray,
+    depth: float,
+    cfg: RobotConfig | RobotDescription | RobotGeometry,
 ) -> ReferenceSample:
     """``sample`` with the joints of ``legs`` (4 bools) aimed ``depth`` (m) below their current footholds.
 
@@ -222,14 +234,14 @@ def aim_feet_below_footholds(
     """
     q, qd, qdd = sample.q_joints.copy(), sample.qd_joints.copy(), sample.qdd_joints.copy()
     R = quat_to_matrix(sample.quat_WB)
-    hips_B = hip_positions_B(cfg)
+    geom = robot_geometry(cfg)
     for i in np.flatnonzero(legs):
         leg = LEG_NAMES[i]
         sw = plan.swing.get(leg)
         foothold = plan.footholds[i] if sw is not None and t >= sw.t_end - 1e-9 else plan.feet_start[i]
-        target_W = foothold + np.array([0.0, 0.0, cfg.foot_radius - depth])
-        hip_W = sample.p_base_W + R @ hips_B[i]
-        q[3 * i : 3 * i + 3] = leg_ik_hip(R.T @ (target_W - hip_W), cfg.thigh.length, cfg.shank.length, KNEE_SIGN[leg])
+        target_W = foothold + np.array([0.0, 0.0, geom.foot_radius - depth])
+        hip_W = sample.p_base_W + R @ geom.hips_B[i]
+        q[3 * i : 3 * i + 3] = geom.leg_ik(i, R.T @ (target_W - hip_W))
         qd[3 * i : 3 * i + 3] = 0.0
         qdd[3 * i : 3 * i + 3] = 0.0
     return dataclasses.replace(sample, q_joints=q, qd_joints=qd, qdd_joints=qdd)

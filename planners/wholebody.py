@@ -30,10 +30,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from planners.robot_geometry import RobotGeometry, robot_geometry
 from planners.wholebody_kernels import place_base_grid
 from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
-from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
+from quad_uneven_env.robot.description import RobotDescription
+from quad_uneven_env.robot.kinematics import leg_ik_hip
 from quad_uneven_env.spatial import cross, inv3
 
 
@@ -83,27 +85,56 @@ def _solve3(A: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 class WholeBody:
-    """Mass distribution of the Table-1 robot for COM placement (identity or a given base orientation)."""
+    """Mass distribution of a robot for COM placement (identity or a given base orientation).
 
-    def __init__(self, cfg: RobotConfig) -> None:
-        self.cfg = cfg
-        self.mass = cfg.total_mass
-        self.hips = hip_positions_B(cfg)  # (4, 3)
-        t, s = cfg.thigh, cfg.shank
-        self.l1, self.l2 = t.length, s.length
-        self.moment_ab = (t.mass * t.com + s.mass * t.length, s.mass * s.com)
-        self.leg_mass = t.mass + s.mass
-        self.knee_sign = np.array([KNEE_SIGN[leg] for leg in LEG_NAMES])
-        # Constant part of M (c - p_base): the leg masses placed at the hips.
-        self._hip_moment = self.leg_mass * self.hips.sum(axis=0)
+    :param robot: the robot (a ``RobotConfig``, a ``RobotDescription`` or a
+        :class:`~planners.robot_geometry.RobotGeometry`): the paper's two-link legs (Table 1) are computed by
+        :func:`leg_point` and the compiled kernel; a URDF robot's legs by their chain model
+        (:class:`~planners.robot_geometry.LegChainModel`, numpy only).
+    """
+
+    def __init__(self, robot: RobotConfig | RobotDescription | RobotGeometry) -> None:
+        geom = robot_geometry(robot)
+        self.geometry = geom
+        """the planners' view of the robot."""
+        self.mass = geom.mass
+        self.hips = geom.hips_B  # (4, 3)
+        self.chain = geom.chain
+        if self.chain is None:
+            cfg = geom.config
+            self.cfg = cfg
+            t, s = cfg.thigh, cfg.shank
+            self.l1, self.l2 = t.length, s.length
+            self.moment_ab = (t.mass * t.com + s.mass * t.length, s.mass * s.com)
+            self.leg_mass = t.mass + s.mass
+            self.knee_sign = np.array([KNEE_SIGN[leg] for leg in LEG_NAMES])
+            # Constant part of M (c - p_base): the leg masses placed at the hips.
+            self._hip_moment = self.leg_mass * self.hips.sum(axis=0)
+        else:
+            # the leg masses at the hips, and the trunk's COM
+            self._hip_moment = (self.chain.leg_mass[:, None] * self.hips).sum(axis=0) + self.chain.trunk_moment
 
     def ik(self, e: np.ndarray) -> np.ndarray:
         """Leg angles (..., 4, 3) (rad) for foot points ``e`` (..., 4, 3) relative to the hips (m)."""
+        if self.chain is not None:
+            return self.geometry.ik(e)
         return leg_ik_hip(e, self.l1, self.l2, self.knee_sign)
+
+    def _moment(self, q: np.ndarray, qd: np.ndarray | None = None):
+        """The legs' mass moments about their hips (kg m) and derivatives, as :func:`leg_point`."""
+        if self.chain is not None:
+            return self.chain.point(q, "com", qd)
+        return leg_point(q, *self.moment_ab) if qd is None else leg_point(q, *self.moment_ab, qd)
+
+    def _foot(self, q: np.ndarray, qd: np.ndarray | None = None):
+        """The foot points from the hips (m) and derivatives, as :func:`leg_point`."""
+        if self.chain is not None:
+            return self.chain.point(q, "foot", qd)
+        return leg_point(q, self.l1, self.l2) if qd is None else leg_point(q, self.l1, self.l2, qd)
 
     def com_offset(self, q_legs: np.ndarray) -> np.ndarray:
         """Whole-body COM minus base position (..., 3) (m, base-frame axes) for leg angles (..., 4, 3)."""
-        f, _ = leg_point(q_legs, *self.moment_ab)
+        f, _ = self._moment(q_legs)
         return (self._hip_moment + f.sum(axis=-2)) / self.mass
 
     def place_base(
@@ -129,23 +160,23 @@ class WholeBody:
         eye = np.eye(3)
         for _ in range(newton_steps):
             q = self.ik(x - p[..., None, :] - self.hips)
-            f, F = leg_point(q, *self.moment_ab)
-            _, J = leg_point(q, self.l1, self.l2)
+            f, F = self._moment(q)
+            _, J = self._foot(q)
             A = F @ inv3(J)
             res = p + (self._hip_moment + f.sum(axis=-2)) / M - c
             K = eye - A.sum(axis=-3) / M
             p = p - _solve3(K, res)
         q = self.ik(x - p[..., None, :] - self.hips)
-        _, J = leg_point(q, self.l1, self.l2)
-        _, F = leg_point(q, *self.moment_ab)
+        _, J = self._foot(q)
+        _, F = self._moment(q)
         Jinv = inv3(J)
         A = F @ Jinv
         Kinv = inv3(eye - A.sum(axis=-3) / M)
         rhs = c_d - np.einsum("...lij,...lj->...i", A, x_d) / M
         p_d = (Kinv @ rhs[..., None])[..., 0]
         qd = np.einsum("...lij,...lj->...li", Jinv, x_d - p_d[..., None, :])
-        _, _, jd = leg_point(q, self.l1, self.l2, qd)
-        _, _, fd = leg_point(q, *self.moment_ab, qd)
+        _, _, jd = self._foot(q, qd)
+        _, _, fd = self._moment(q, qd)
         inner = np.einsum("...lij,...lj->...li", A, x_dd - jd) + fd
         p_dd = (Kinv @ (c_dd - inner.sum(axis=-2) / M)[..., None])[..., 0]
         qdd = np.einsum("...lij,...lj->...li", Jinv, x_dd - p_dd[..., None, :] - jd)
@@ -167,6 +198,10 @@ class WholeBody:
         :param x, x_d, x_dd: (T, 4, 3) foot-site positions, velocities, accelerations (world).
         :return: ``(p, p_d, p_dd, q, qd, qdd)``: base (T, 3); leg joints (T, 12) in rad, rad/s, rad/s^2.
         """
+        if self.chain is not None:  # a URDF robot: the numpy path, joints as (T, 12)
+            with np.errstate(divide="ignore", invalid="ignore"):  # a singular leg: non-finite rows, as the kernel's
+                p, pd, pdd, q, qd, qdd = self.place_base(c, c_d, c_dd, x, x_d, x_dd, None, newton_steps + 1)
+            return p, pd, pdd, q.reshape(-1, 12), qd.reshape(-1, 12), qdd.reshape(-1, 12)
         T = c.shape[0]
         f = np.ascontiguousarray
         p, pd, pdd = np.empty((T, 3)), np.empty((T, 3)), np.empty((T, 3))

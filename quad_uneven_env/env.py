@@ -82,8 +82,23 @@ ENV_ARGS: tuple[Param, ...] = (
         lo=0.0,
         hi=1.0,
     ),
-    Param("pd_kp", 100.0, "N m/rad", "``joint_pd`` servo stiffness", lo=0.0, hi=1e5, lo_open=True),
-    Param("pd_kd", 3.0, "N m s/rad", "``joint_pd`` servo damping", lo=0.0, hi=1e4),
+    Param(
+        "pd_kp",
+        100.0,
+        "N m/rad",
+        "``joint_pd`` servo stiffness (None: the robot's, docs/robots.md; the default is the paper robot's)",
+        lo=0.0,
+        hi=1e5,
+        lo_open=True,
+    ),
+    Param(
+        "pd_kd",
+        3.0,
+        "N m s/rad",
+        "``joint_pd`` servo damping (None: the robot's; the default is the paper robot's)",
+        lo=0.0,
+        hi=1e4,
+    ),
     Param(
         "pd_action_scale", 0.5, "rad", "``joint_pd`` target offset per unit of action", lo=0.0, hi=math.pi, lo_open=True
     ),
@@ -260,7 +275,10 @@ class QuadUnevenEnv(gym.Env):
     default ``"rough"``), ``robot`` (a name of :func:`quad_uneven_env.robots`, or a robot YAML path: a Table-1
     config or a URDF robot's, see docs/robots.md; default ``"paper"``), ``controller``
     (None or a :class:`PhysicsController`), ``reward_weights``, ``termination``, ``height_scan``
-    (mappings of :mod:`quad_uneven_env.config`'s fields), and the scalars below, each checked at make
+    (mappings of :mod:`quad_uneven_env.config`'s fields; ``termination.min_base_height`` and
+    ``max_base_height`` default to the robot's, a third of its standing height and 2.78 times it: 0.12 and 1 m
+    for the paper's robot), and the scalars below
+    (``pd_kp`` and ``pd_kd`` default to the robot's gains, see docs/robots.md), each checked at make
     time by type and range (a bool is not a number; the error names the argument and its allowed
     values):
 
@@ -296,8 +314,8 @@ class QuadUnevenEnv(gym.Env):
         height_scan: Mapping[str, float] | HeightScanConfig | None = None,
         gait_period: float = 6.1,
         reset_noise_scale: float = 0.02,
-        pd_kp: float = 100.0,
-        pd_kd: float = 3.0,
+        pd_kp: float | None = None,
+        pd_kd: float | None = None,
         pd_action_scale: float = 0.5,
         render_mode: str | None = None,
         width: int = 640,
@@ -306,6 +324,17 @@ class QuadUnevenEnv(gym.Env):
         randomization: str | Mapping[str, Any] | RandomizationConfig | None = None,
         command: Mapping[str, Any] | CommandConfig | None = None,
     ) -> None:
+        if not isinstance(robot, str | os.PathLike):
+            raise ValueError(
+                f"robot must be a config name or a .yaml path, got {robot!r} of type {type(robot).__name__}"
+            )
+        self.robot: RobotDescription = load_robot(robot)
+        """the robot's description (any robot: the paper's, a shipped URDF robot's or a user's YAML)."""
+        self.robot_cfg: RobotConfig | None = self.robot.config
+        """the paper robot's Table-1 config (None for a URDF robot)."""
+        kp0, kd0 = self.robot.joint_pd_gains
+        pd_kp = kp0 if pd_kp is None else pd_kp
+        pd_kd = kd0 if pd_kd is None else pd_kd
         given = dict(
             frame_skip=frame_skip, timestep=timestep, action_mode=action_mode, gait_period=gait_period,
             reset_noise_scale=reset_noise_scale, pd_kp=pd_kp, pd_kd=pd_kd, pd_action_scale=pd_action_scale,
@@ -313,20 +342,16 @@ class QuadUnevenEnv(gym.Env):
         )  # fmt: skip
         args = {q.name: q.check(given[q.name], "") for q in ENV_ARGS}
         frame_skip, timestep, action_mode = args["frame_skip"], args["timestep"], args["action_mode"]
-        if not isinstance(robot, str | os.PathLike):
-            raise ValueError(
-                f"robot must be a config name or a .yaml path, got {robot!r} of type {type(robot).__name__}"
-            )
         self.action_mode = action_mode
         self._check_controller(controller)
 
         self.randomization: RandomizationConfig | None = load_randomization(randomization)
-        self.robot: RobotDescription = load_robot(robot)
-        """the robot's description (any robot: the paper's, a shipped URDF robot's or a user's YAML)."""
-        self.robot_cfg: RobotConfig | None = self.robot.config
-        """the paper robot's Table-1 config (None for a URDF robot)."""
         self.terrain = Terrain(parse_terrain_spec(terrain))
         self.reward_weights: RewardWeights = from_mapping(RewardWeights, reward_weights, "reward_weights")
+        if termination is None or isinstance(termination, Mapping):
+            # the robot's base-height limits (the paper robot's: the TerminationLimits defaults, 0.12 and 1 m)
+            lo, hi = self.robot.base_height_limits
+            termination = {"min_base_height": lo, "max_base_height": hi, **(termination or {})}
         self.termination: TerminationLimits = from_mapping(TerminationLimits, termination, "termination")
         self.height_scan: HeightScanConfig = from_mapping(HeightScanConfig, height_scan, "height_scan")
         self.command_config: CommandConfig | None = load_command(command)

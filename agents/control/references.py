@@ -15,10 +15,11 @@ import numpy as np
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.control.controller import ComputedTorqueController
+from planners.robot_geometry import robot_geometry
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env.config import RobotConfig
-from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
+from quad_uneven_env.robot.description import RobotDescription
 
 
 def _rx(a: float) -> np.ndarray:
@@ -41,18 +42,19 @@ class BaseWaveReference:
         self,
         p0: np.ndarray,
         feet_W: np.ndarray,
-        cfg: RobotConfig,
+        cfg: RobotConfig | RobotDescription,
         dz: float = 0.03,
         fz: float = 0.5,
         ang: float = 0.0872664626,
         fa: float = 0.3,
     ) -> None:
         """:param p0: (3,) base position at rest (m, world); :param feet_W: (4, 3) fixed foot sites (m, world);
-        :param cfg: RobotConfig; :param dz: z amplitude (m) at ``fz`` (Hz); :param ang: roll and pitch
-        amplitude (rad) at ``fa`` (Hz). Zero amplitudes give a standing reference."""
+        :param cfg: the robot (a RobotConfig or any description); :param dz: z amplitude (m) at ``fz`` (Hz);
+        :param ang: roll and pitch amplitude (rad) at ``fa`` (Hz). Zero amplitudes give a standing reference."""
         self.p0, self.feet, self.cfg = np.asarray(p0), np.asarray(feet_W), cfg
         self.dz, self.wz, self.ang, self.wa = dz, 2 * np.pi * fz, ang, 2 * np.pi * fa
-        self.hips = hip_positions_B(cfg)
+        self.geometry = robot_geometry(cfg)
+        self.hips = self.geometry.hips_B
 
     def _base(self, t):
         s, c = np.sin(self.wz * t), np.cos(self.wz * t)
@@ -73,12 +75,7 @@ class BaseWaveReference:
         """(12,) joint angles (rad) keeping the feet at ``feet_W`` while the base is at its pose at ``t``."""
         p, R, *_ = self._base(t)
         p_H = (self.feet - p) @ R - self.hips
-        return np.concatenate(
-            [
-                leg_ik_hip(p_H[i], self.cfg.thigh.length, self.cfg.shank.length, C.KNEE_SIGN[leg])
-                for i, leg in enumerate(C.LEG_NAMES)
-            ]
-        )
+        return np.concatenate([self.geometry.leg_ik(i, p_H[i]) for i in range(C.N_LEGS)])
 
     def __call__(self, t: float) -> ReferenceSample:
         """The reference at ``t`` (s); four-foot stance."""
@@ -116,7 +113,7 @@ def track_in_env(
     sites = [m.site(s).id for s in C.FOOT_SITES]
     feet0 = d.site_xpos[sites].copy()
     ground = u.terrain.height(feet0[:, 0], feet0[:, 1])
-    ref = BaseWaveReference(d.qpos[:3].copy(), feet0, u.robot_cfg, dz=0.03 * wave, ang=np.deg2rad(5.0) * wave)
+    ref = BaseWaveReference(d.qpos[:3].copy(), feet0, u.robot, dz=0.03 * wave, ang=np.deg2rad(5.0) * wave)
     ctrl = ComputedTorqueController(ref, backend=backend, distribution=distribution)
     ctrl.reset(m, d, u.terrain)
     u.set_controller(ctrl)
@@ -125,7 +122,7 @@ def track_in_env(
     slip = np.zeros(4)
     min_fn, cone_excess, fallbacks, no_contact, reason = np.inf, -np.inf, 0, 0, None
     e = np.empty(3)
-    mu = u.robot_cfg.friction
+    mu = u.robot.friction
     for _ in range(n):
         _, _, term, _, info = env.step(np.zeros(C.N_JOINTS))
         if term:

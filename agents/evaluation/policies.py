@@ -9,7 +9,6 @@ from typing import Any
 import gymnasium as gym
 
 from agents.policy import Policy, ZeroActionPolicy
-from quad_uneven_env.fields import from_mapping
 
 POLICY_ENV_KWARGS: dict[str, dict[str, Any]] = {
     # The zero action in joint_pd mode holds the standing pose.
@@ -62,7 +61,8 @@ def policy_env_kwargs(name: str) -> dict[str, Any]:
 def _expert(env: gym.Env, expert_config: Mapping[str, Any] | None) -> Policy:
     from agents.expert import ExpertConfig, attach_expert  # deferred: compiling the kernels takes seconds
 
-    config = from_mapping(ExpertConfig, expert_config, "expert_config") if expert_config else None
+    # the env's robot's settings (the paper's robot: the defaults), then the given fields
+    config = ExpertConfig.for_robot(env.unwrapped.robot, expert_config) if expert_config else None
     return attach_expert(env, config)
 
 

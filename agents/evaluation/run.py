@@ -10,6 +10,7 @@ Python API: :func:`evaluate` (returns the results dict) and :func:`make_policy` 
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import multiprocessing
 import signal
@@ -44,7 +45,7 @@ from agents.evaluation.store import (
     start_run,
     write_episode,
 )
-from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite
+from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite, scale_suite
 from agents.evaluation.targets import check_command_targets, check_targets
 from agents.outputs import OutputError, OutputManifest, write_json_atomic
 
@@ -174,7 +175,8 @@ def evaluate(
     finishes (``out/episodes/``), and results.json and the report are rebuilt from them at the end
     (docs/evaluation.md, "The output directory"). An interrupt keeps the finished episodes.
 
-    :param suite: a :class:`Suite`, a shipped suite name or a suite YAML path.
+    :param suite: a :class:`Suite`, a shipped suite name or a suite YAML path; one with ``scale: leg_length`` is
+        scaled to the robot of ``env_kwargs`` (:func:`~agents.evaluation.suites.scale_suite`).
     :param policy: ``"zero"``, ``"expert"`` or the path of an SB3 model ``.zip`` (loaded with ``algo``; None: the
         algorithm its ``rl_meta.json`` records, else ``"ppo"``).
     :param episodes: at most this many seeds per terrain entry (None: all).
@@ -219,6 +221,9 @@ def evaluate(
     if backend == "ray":
         import_ray()  # without the extra, fail before anything is written
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
+    if suite.scale == "leg_length":
+        factor = robot_scale(env_kwargs.get("robot", "paper"))
+        suite = dataclasses.replace(suite, scale="none") if factor == 1.0 else scale_suite(suite, factor)
     tasks = episode_tasks(suite, episodes, seed)
     out = open_output_dir(Path(out), resume=resume, overwrite=overwrite)
     identity = run_identity(
@@ -310,3 +315,17 @@ class EvaluationInterrupted(KeyboardInterrupt):
 def write_results(out: Path, results: Mapping[str, Any]) -> Path:
     """Write ``out/results.json`` (strict JSON, atomically: a reader never sees half a file)."""
     return write_json_atomic(out / "results.json", dict(results))
+
+
+def robot_scale(robot: Any) -> float:
+    """-: the leg length of ``robot`` (a name or a YAML path) over the paper robot's 0.42 m (1 for the paper's).
+
+    :raises EnvArgumentError: naming ``env_kwargs.robot`` if it cannot be loaded.
+    """
+    from quad_uneven_env.robot.description import PAPER_LEG_LENGTH, load_robot
+
+    try:
+        desc = load_robot(robot)
+    except (ValueError, TypeError) as err:
+        raise EnvArgumentError(f"env_kwargs.robot: {err}") from None
+    return 1.0 if desc.config is not None else desc.leg_length / PAPER_LEG_LENGTH

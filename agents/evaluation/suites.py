@@ -1,9 +1,10 @@
 """Terrain suites: named lists of terrains x seeds with a goal distance and a time limit (configs/suites/).
 
-File format (every field required except ``params``, ``randomization``, ``command`` and ``waypoints``; no
-other fields)::
+File format (every field required except ``scale``, ``params``, ``randomization``, ``command`` and
+``waypoints``; no other fields)::
 
     name: rough-mild
+    scale: leg_length       # optional: lengths in units of the robot's leg length / the paper robot's 0.42 m
     goal_distance: 5.0      # m along +x from the spawn point
     time_limit: 120.0       # s of simulated time per episode
     terrains:
@@ -18,6 +19,11 @@ An entry with a ``command`` (and no waypoints) walks for the whole time limit: s
 (nor leaving the terrain), and the goal distance is not used. An entry with ``waypoints`` succeeds once every
 waypoint is reached (in order); its env gets the command ``{}`` (all zero) unless it gives one, which the
 waypoint follower then steers (:mod:`agents.waypoints`).
+
+With ``scale: leg_length`` (or ``quad-uneven evaluate --scale-terrain``) the suite is written for the paper's
+robot and run on the evaluated robot at its own scale (:func:`scale_suite`): every length (terrain parameters in
+m, their defaults included, and the goal distance, capped where the terrain grid ends) is multiplied by the
+robot's leg length over 0.42 m and the time limit by the square root of it (equal Froude number).
 
 Terrain parameters are validated by :func:`quad_uneven_env.terrain.parse_terrain_spec`. Errors are
 ``SuiteError`` (a ``ValueError``) whose message starts with the offending field, e.g.
@@ -46,6 +52,13 @@ SUITE_DIR = CONFIG_DIR / "suites"
 
 SUITE_FIELDS = ("name", "goal_distance", "time_limit", "terrains")
 """Top-level fields of a suite file (all required)."""
+
+SUITE_SCALES = ("none", "leg_length")
+"""Values of a suite's optional ``scale`` field: as written, or in units of the robot's leg length."""
+
+GOAL_ROOM = 1.0
+"""m in the paper robot's lengths: the room a scaled goal leaves before the end of the terrain grid (the front
+feet and a stride ahead of the COG; the shipped suites' 5 m goals leave 1.5 m)."""
 
 ENTRY_FIELDS = ("kind", "params", "seeds", "randomization", "command", "waypoints")
 """Fields of one ``terrains`` entry (``params`` optional, default ``{}``; ``randomization``, ``command`` and
@@ -110,6 +123,8 @@ class Suite:
     """the terrain entries, in file order."""
     source: str = ""
     """file the suite was read from ("" if built from a mapping)."""
+    scale: str = "none"
+    """"none" (lengths as written) or "leg_length" (to be scaled to the robot's leg length, :func:`scale_suite`)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -272,9 +287,12 @@ def suite_from_dict(raw: Mapping[str, Any], source: str = "") -> Suite:
     """
     if not isinstance(raw, Mapping):
         raise SuiteError(f"a suite must be a mapping with fields {list(SUITE_FIELDS)}, got {type(raw).__name__}")
-    unknown = sorted(set(raw) - set(SUITE_FIELDS))
+    unknown = sorted(set(raw) - set(SUITE_FIELDS) - {"scale"})
     if unknown:
-        raise SuiteError(f"unknown field(s) {unknown}; allowed: {list(SUITE_FIELDS)}")
+        raise SuiteError(f"unknown field(s) {unknown}; allowed: {[*SUITE_FIELDS, 'scale']}")
+    scale = raw.get("scale", "none")
+    if scale not in SUITE_SCALES:
+        raise SuiteError(f"scale must be one of {list(SUITE_SCALES)}, got {scale!r}")
     missing = [k for k in SUITE_FIELDS if k not in raw]
     if missing:
         raise SuiteError(f"missing field(s) {missing}; a suite needs {list(SUITE_FIELDS)}")
@@ -287,7 +305,48 @@ def suite_from_dict(raw: Mapping[str, Any], source: str = "") -> Suite:
     if not isinstance(terrains, list) or not terrains:
         raise SuiteError(f"terrains must be a non-empty list of {{kind, params, seeds}} entries, got {terrains!r}")
     entries = tuple(_entry(t, i, goal) for i, t in enumerate(terrains))
-    return Suite(name, goal, limit, entries, source)
+    return Suite(name, goal, limit, entries, source, scale)
+
+
+def scale_suite(suite: Suite, factor: float) -> Suite:
+    """``suite`` with every length times ``factor`` (-) and its time limit times ``sqrt(factor)``.
+
+    Lengths: each entry's terrain parameters in m (its kind's defaults filled in where the suite does not give
+    them) and the goal distance, capped so that it leaves :data:`GOAL_ROOM` x ``factor`` before the end of every
+    entry's terrain grid (the robot's feet stay on it). The result says ``scale: none``; its name
+    records the factor.
+
+    :raises SuiteError: if a scaled parameter leaves its allowed range (naming it).
+    """
+    if not (factor > 0 and factor < 100):
+        raise SuiteError(f"scale factor must be a number in (0, 100), got {factor!r}")
+    terrains = []
+    exits = []
+    for e in suite.terrains:
+        params = dict(e.params)
+        for p in KINDS[e.kind].params:
+            value = params.get(p.name, p.default)
+            if p.unit == "m" and p.kind == "float" and isinstance(value, int | float) and not isinstance(value, bool):
+                params[p.name] = round(float(value) * factor, 6)
+        try:
+            spec = parse_terrain_spec({"kind": e.kind, **params})
+        except ValueError as err:
+            raise SuiteError(f"scaled by {factor:.3f}: {_rename_terrain_error(str(err), len(terrains))}") from None
+        grid = KINDS[e.kind].grid(spec.params)
+        exits.append(grid.origin[0] + grid.size[0] - GOAL_ROOM * factor)
+        raw = {"kind": e.kind, "params": params, "seeds": list(e.seeds)}
+        for key in ("randomization", "command", "waypoints"):
+            if getattr(e, key) is not None:
+                raw[key] = getattr(e, key)
+        terrains.append(raw)
+    goal = round(min(suite.goal_distance * factor, min(exits)), 6)
+    raw_suite = {
+        "name": f"{suite.name} (lengths x{factor:.3f})",
+        "goal_distance": goal,
+        "time_limit": round(suite.time_limit * factor**0.5, 6),
+        "terrains": terrains,
+    }
+    return suite_from_dict(raw_suite, suite.source)
 
 
 def episode_tasks(suite: Suite, episodes: int | None = None, seed_offset: int = 0) -> list[EpisodeTask]:

@@ -4,13 +4,17 @@ with)."""
 from __future__ import annotations
 
 import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any
 
 from agents.control.adaptation import ADAPTATIONS
 from agents.control.controller import Gains
 from agents.control.inverse_dynamics import DISTRIBUTIONS
 from planners.gait import validate_durations
 from planners.scenario import BODY_PITCH_MODES
-from quad_uneven_env.fields import check_fields, param
+from quad_uneven_env.fields import check_fields, from_mapping, param
+from quad_uneven_env.robot.description import PAPER_MASS, RobotDescription
 from quad_uneven_env.robot.dynamics import BACKENDS
 
 EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
@@ -21,8 +25,10 @@ EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
 class ExpertConfig:
     """Gait and control settings of the expert (SI units), and the nominal assumptions it plans and controls with.
 
+    The defaults are the paper robot's; :meth:`for_robot` scales them to another robot (docs/robots.md).
+
     Nominal assumptions (``model="nominal"``): the robot's masses, inertias and centres of mass are those of
-    the robot configuration the env was built from (``env.unwrapped.robot_cfg``; the paper's robot: 50 kg
+    the robot description the env was built from (``env.unwrapped.robot``; the paper's robot: 50 kg
     in all, link COMs as in Table 1), never the simulator's; a payload, scaled links or a
     shifted COM are disturbances to it. Its friction cones assume ``friction`` (0.5, half the nominal
     floor's 1.0; the inscribed pyramid's ``friction / sqrt(2)`` = 0.35 per tangent axis is the margin that
@@ -36,8 +42,8 @@ class ExpertConfig:
     stride: float = param(0.33, "m", lo=0.0, hi=1.0, lo_open=True)
     """m, in (0, 1]: body advance per cycle along +x (0.33 m / 3.1 s = 0.106 m/s nominal); unused in an env with a
     ``command``, whose (vx, vy) times the cycle's duration is the advance instead."""
-    cog_height: float = param(0.33, "m", lo=0.1, hi=0.5)
-    """m, in [0.1, 0.5]: COG height above the mean foothold height."""
+    cog_height: float = param(0.33, "m", lo=0.05, hi=1.0)
+    """m, in [0.05, 1]: COG height above the mean foothold height."""
     epsilon: float = param(20.0, "N m", lo=0.0, hi=1000.0)
     """N m, in [0, 1000]: stability margin of the planned COG path (20 N m = 4 cm of static margin for
     50 kg): much more than the paper's 0.1 N m, because the measured index must stay positive under
@@ -108,6 +114,28 @@ class ExpertConfig:
     the correlation of their tracking error with their load) or "learned" (all twelve, driven by the learned
     strength estimator). They undo weak or strong motors and a heavier body than the model's."""
 
+    foothold_scale: float = param(1.0, "-", lo=0.1, hi=5.0)
+    """-, in [0.1, 5]: the foothold search's squares (``FootholdLimits.window``, ``reach_window``, ``ring``) in
+    units of the paper robot's (1): a longer leg searches a wider workspace."""
+
+    @classmethod
+    def for_robot(cls, robot: RobotDescription, overrides: Mapping[str, Any] | None = None) -> ExpertConfig:
+        """The expert's settings on ``robot``: the defaults scaled from the paper robot's
+        (docs/robots.md#scaling-rules), then the robot YAML's ``gait``, then ``overrides`` (fields of this class;
+        a ``gains`` mapping is merged into the scaled gains). The paper's robot gets the defaults:
+        ``ExpertConfig(**overrides)``.
+
+        :raises ValueError: naming the field, as :func:`~quad_uneven_env.fields.from_mapping`.
+        """
+        given = dict(overrides or {})
+        if robot.config is not None:
+            return from_mapping(cls, given, "expert_config")
+        scaled = scaled_settings(robot)
+        gains = scaled.pop("gains")
+        if "gains" in given and isinstance(given["gains"], Mapping):
+            gains = from_mapping(Gains, {**dataclasses.asdict(gains), **given.pop("gains")}, "expert_config.gains")
+        return from_mapping(cls, {**scaled, "gains": gains, **given}, "expert_config")
+
     def __post_init__(self) -> None:
         check_fields(self)
         validate_durations(self.durations)
@@ -120,3 +148,68 @@ class ExpertConfig:
             raise ValueError(
                 f"ExpertConfig.share_nominal_world must be True or False, got {self.share_nominal_world!r}"
             )
+
+
+def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
+    """The fields of :class:`ExpertConfig` that depend on the robot, for a URDF robot (docs/robots.md#scaling-rules).
+
+    With the leg-length ratio ``s = leg_length / 0.42 m`` and the mass ratio ``m = mass / 50 kg`` (the paper
+    robot's): lengths (stride, swing clearance, touch-down depth, recovery distance, foothold search) scale
+    with ``s``; times (the phases, each rounded to 10 ms) with ``sqrt(s)`` and speeds (recovery, slip) with
+    ``sqrt(s)`` (equal Froude number); the stability margin with ``m s`` (the same static margin in leg
+    lengths); the computed-torque gains (per unit mass) with ``1 / s`` (stiffness) and ``1 / sqrt(s)``
+    (damping), the same damping ratio at a natural frequency scaled like the gait's. The COG height is the
+    robot's standing COG height times the paper robot's ratio of its walking to its standing COG height. The
+    robot YAML's ``gait`` overrides them.
+    """
+    from planners.robot_geometry import robot_geometry
+    from planners.wholebody import WholeBody
+
+    base = ExpertConfig()
+    s = robot_geometry(robot).scale
+    m = robot.total_mass / PAPER_MASS
+    t = math.sqrt(s)
+    g = robot.gait
+    ratio = t if g.cycle_time is None else g.cycle_time / sum(base.durations)
+    # whole multiples of 10 ms: every cycle then starts on the controller's time grid (2 ms physics steps), where the
+    # reference is a lookup of its precomputed rows
+    durations = tuple(max(round(d * ratio, 2), 0.01) for d in base.durations)
+    k = 1.0 if g.gain_scale is None else g.gain_scale
+    gains = Gains(
+        kp_pos=base.gains.kp_pos * k / s, kd_pos=base.gains.kd_pos * math.sqrt(k / s),
+        kp_rot=base.gains.kp_rot * k / s, kd_rot=base.gains.kd_rot * math.sqrt(k / s),
+        kp_joint=base.gains.kp_joint * k / s, kd_joint=base.gains.kd_joint * math.sqrt(k / s),
+    )  # fmt: skip
+    if g.body_height is not None:
+        cog_height = g.body_height
+    else:
+        paper = robot_geometry(None)
+        cog_height = base.cog_height * standing_cog_height(robot) / _standing_cog_height(WholeBody(paper), 0.36)
+    return {
+        "durations": durations,
+        "stride": base.stride * s if g.stride is None else g.stride,
+        "cog_height": round(cog_height, 4),
+        "epsilon": base.epsilon * m * s,
+        "clearance": base.clearance * s if g.swing_height is None else g.swing_height,
+        "touchdown_depth": base.touchdown_depth * s,
+        "recovery_velocity": base.recovery_velocity * t,
+        "recovery_position": base.recovery_position * s,
+        "slip_speed": base.slip_speed * t,
+        "foothold_scale": s,
+        "gains": gains,
+    }
+
+
+def standing_cog_height(robot: RobotDescription) -> float:
+    """m, the whole-robot COG above flat ground in the robot's standing pose."""
+    from planners.robot_geometry import robot_geometry
+    from planners.wholebody import WholeBody
+
+    return _standing_cog_height(WholeBody(robot_geometry(robot)), robot.standing_height, robot)
+
+
+def _standing_cog_height(wb: Any, standing_height: float, robot: RobotDescription | None = None) -> float:
+    q = wb.geometry.standing_legs(standing_height - wb.geometry.foot_radius)
+    if robot is not None and robot.config is None:
+        q = robot.standing_joints.reshape(4, 3)
+    return float(standing_height + wb.com_offset(q)[2])

@@ -27,9 +27,9 @@ from planners import PlanningError, Scenario, plan_gait_cycle
 from planners.cycle import STANCE_REACH
 from planners.pitch import pitch_of_quaternion, yaw_pitch_of_quaternion
 from planners.reference import aim_feet_below_footholds
+from planners.robot_geometry import robot_geometry
 from planners.types import FootholdError, ReferenceGrid, ReferenceSample
 from quad_uneven_env import physics
-from quad_uneven_env.robot.kinematics import hip_positions_B
 from quad_uneven_env.spatial import quat_to_matrix, wrap_angle
 
 STRIDE_FALLBACKS: tuple[tuple[float, float], ...] = (
@@ -37,7 +37,8 @@ STRIDE_FALLBACKS: tuple[tuple[float, float], ...] = (
 )  # fmt: skip
 """Strides tried in turn when a plan fails, closest to the nominal first: (fraction of the cycle's stride (the
 commanded one, else ``ExpertConfig.stride`` along +x), sideways body shift (m, world y)); the first feasible
-plan is walked. Shorter and longer strides move every nominal foothold (onto the next stone, off a reach
+plan is walked (the shift in the paper robot's lengths: times the robot's leg-length ratio). Shorter and longer
+strides move every nominal foothold (onto the next stone, off a reach
 limit), a sideways shift moves the body over its support; 0 steps in place. If none is feasible the expert
 stands still for one cycle."""
 
@@ -100,12 +101,13 @@ class CyclePlanner:
     def __init__(self, env: Any, config: ExpertConfig, friction: FrictionAdaptation, log: FailureLog) -> None:
         self.env = env
         self.config = config
-        self.cfg = env.robot_cfg
+        self.cfg = robot_geometry(env.robot)
+        """the planners' view of the env's robot (:mod:`planners.robot_geometry`)."""
         self.friction = friction
         self.log = log
         self.foot_sensor_adr = np.array([int(a) for a in env.idx.foot_sensor_adr])
         """the feet's contact-sensor addresses in the simulator's ``sensordata``."""
-        self._hips_B = hip_positions_B(self.cfg)
+        self._hips_B = self.cfg.shoulders_B
         self.planner_times_ms: list[float] = []
         """wall time of every gait-cycle plan (ms)."""
         self.plans: list[Any] = []
@@ -236,7 +238,7 @@ class CyclePlanner:
         pitch_start = previous.end if previous is not None and not measured else measured_pitch()
         if measured:
             measure_yaw()
-        elif cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, env.idx)) > 0.05:
+        elif cog_start is None or np.linalg.norm(cog_start["pos"] - physics.cog(d, env.idx)) > 0.05 * self.cfg.scale:
             # First cycle, after a hold, or drifted: start from the measured COG (and pitch) at rest.
             cog_start = {"pos": physics.cog(d, env.idx).copy(), "vel": np.zeros(3), "acc": np.zeros(3)}
             pitch_start = measured_pitch()
@@ -249,7 +251,7 @@ class CyclePlanner:
         for fx, dy in STRIDE_FALLBACKS:
             turn = min(fx, 1.0) * full_turn  # a shorter stride turns less; a longer one no more than commanded
             nominal = cycle_stride(env.command, cfgx.stride, self.durations, physics.base_quat(d), turn)
-            stride, order = fallback_stride(nominal, fx, dy, self.yaw + 0.5 * turn, turning)
+            stride, order = fallback_stride(nominal, fx, dy * self.cfg.scale, self.yaw + 0.5 * turn, turning)
             scenario = Scenario(
                 terrain=self._terrain.heightfield,
                 feet_start=feet,
@@ -269,7 +271,8 @@ class CyclePlanner:
             )
             plan, too_steep = self._try_plan(scenario, t0, stride)
             if plan is None and too_steep and steep_mu is not None:
-                steep = dataclasses.replace(scenario, foothold_limits=foothold_limits_for_friction(steep_mu))
+                limits = foothold_limits_for_friction(steep_mu, cfgx.foothold_scale)
+                steep = dataclasses.replace(scenario, foothold_limits=limits)
                 plan, _ = self._try_plan(steep, t0, stride, f" (assuming friction {steep_mu:.2f})")
                 if plan is not None:
                     cycle_mu = steep_mu

@@ -36,7 +36,7 @@ SLIP_COOLDOWN = 0.1
 """s: at most one decrease of the assumed friction in this time (a slip is seen at several checks)."""
 
 
-def foothold_limits_for_friction(mu: float) -> FootholdLimits:
+def foothold_limits_for_friction(mu: float, scale: float = 1.0) -> FootholdLimits:
     """Foothold limits whose slope limit keeps a foot inside the friction pyramid the controller assumes.
 
     The cones are 4-sided pyramids of ``mu / sqrt(2)`` per tangent axis: a foot on a plane steeper than
@@ -45,8 +45,14 @@ def foothold_limits_for_friction(mu: float) -> FootholdLimits:
     Such a foothold is refused (the failure log says ``failed test: slope``) rather than walked on.
 
     :param mu: friction coefficient of the controller's cones (-).
+    :param scale: the search squares (``window``, ``reach_window``, ``ring``) in units of the defaults
+        (``ExpertConfig.foothold_scale``: the robot's leg length in the paper robot's).
     """
     default = FootholdLimits()
+    if scale != 1.0:
+        default = dataclasses.replace(
+            default, window=default.window * scale, reach_window=default.reach_window * scale, ring=default.ring * scale
+        )
     return dataclasses.replace(default, max_slope=min(default.max_slope, float(np.arctan(mu / np.sqrt(2.0)))))
 
 
@@ -98,7 +104,7 @@ class FrictionAdaptation:
         base friction and foothold limits from the controller's cones."""
         self.slip.reset(model)
         self.base_mu = float(self.controller.mu)  # type: ignore[union-attr]
-        self.foothold_limits = foothold_limits_for_friction(self.base_mu)
+        self.foothold_limits = foothold_limits_for_friction(self.base_mu, self.config.foothold_scale)
 
     def steep_mu(self) -> float | None:
         """-: the friction a stride refused for steep footholds may be planned again with, or None."""
@@ -146,7 +152,7 @@ class FrictionAdaptation:
             return
         self.base_mu = mu
         controller.set_friction(mu)  # type: ignore[union-attr]  # a steep cycle's cones too: the floor is more slippery
-        self.foothold_limits = foothold_limits_for_friction(mu)
+        self.foothold_limits = foothold_limits_for_friction(mu, self.config.foothold_scale)
         self._cooldown = t + SLIP_COOLDOWN
         self.slip.slip_time[:] = 0.0
         self.log.add(

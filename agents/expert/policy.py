@@ -36,27 +36,22 @@ class ExpertPolicy:
     one :class:`~agents.control.controller.ComputedTorqueController` (:attr:`controller`), with the adaptive gains
     of ``ExpertConfig.adaptation`` on its torques (:attr:`adaptation`).
 
-    :param env: the environment (wrapped or not).
-    :param config: gait and control settings.
+    :param env: the environment (wrapped or not), on any robot.
+    :param config: gait and control settings (None: :meth:`ExpertConfig.for_robot` of the env's robot, the
+        defaults on the paper's robot).
     """
 
     def __init__(self, env: gym.Env, config: ExpertConfig | None = None) -> None:
-        robot = env.unwrapped.robot
-        if robot.config is None:
-            raise ValueError(
-                f"attach_expert: the expert plans and controls the paper's robot only (robot='paper' or a Table-1 "
-                f"config), got the URDF robot {robot.name!r}; drive it with a zero, PD or learned policy"
-            )
-        self.config = config or ExpertConfig()
         self.env = env.unwrapped
+        self.config = config or ExpertConfig.for_robot(self.env.robot)
         u, cfgx = self.env, self.config
         self.nominal: NominalModel | None = None
         """the expert's own model (None with ``model="oracle"``)."""
         if cfgx.model == "nominal":
-            self.nominal = NominalModel(u.robot_cfg, u.terrain, u.physics_dt)
+            self.nominal = NominalModel(u.robot, u.terrain, u.physics_dt)
         self.log = FailureLog()
         self.friction = FrictionAdaptation(
-            cfgx, self.nominal is not None, u.robot_cfg.foot_radius, u.physics_dt, u.idx, self.log
+            cfgx, self.nominal is not None, u.robot.foot_radius, u.physics_dt, u.idx, self.log
         )
         self.planner = CyclePlanner(u, cfgx, self.friction, self.log)
         self.recovery = DisturbanceRecovery(cfgx, self.planner, self.log)

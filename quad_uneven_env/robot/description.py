@@ -36,6 +36,7 @@ from quad_uneven_env.config import (
     read_yaml,
     resolve_config_path,
 )
+from quad_uneven_env.fields import check_fields, from_mapping, param
 
 if TYPE_CHECKING:
     import pinocchio as pin
@@ -50,6 +51,41 @@ DATA_PACKAGE = "example-robot-data"
 """The distribution whose robot models a YAML can name with ``{package: example-robot-data, path: ...}``."""
 
 _ROBOT_DATA_ROOT = "cmeel.prefix/share/example-robot-data/robots"
+
+
+PAPER_LEG_LENGTH = 0.42
+"""m: the paper robot's stretched leg (thigh 0.2 + shank 0.22), the unit of the scaling rules."""
+PAPER_MASS = 50.0
+"""kg: the paper robot's mass (Table 1), the unit of the scaling rules."""
+PAPER_BASE_HEIGHT_LIMITS = (0.12, 1.0)
+"""m: the paper robot's fall rule: a base height below the first or above the second ends an episode (a third of
+its 0.36 m stand, and 2.78 times it)."""
+PAPER_STANDING_HEIGHT = 0.36
+"""m: the paper robot's standing height, the unit of the base-height limits of other robots."""
+PAPER_PD_GAINS = (100.0, 3.0)
+"""(N m/rad, N m s/rad): the paper robot's ``joint_pd`` servo gains."""
+
+
+@dataclasses.dataclass(frozen=True)
+class GaitSettings:
+    """The expert's gait on one robot, where it is not scaled from the paper robot's (a robot YAML's ``gait``).
+
+    Every field is optional (null: the scaled value, see docs/robots.md#scaling-rules).
+    """
+
+    cycle_time: float | None = param(None, "s", lo=0.2, hi=20.0, none_ok=True)
+    """s, in [0.2, 20]: the seven phases of a walk cycle together (their proportions stay the paper's)."""
+    stride: float | None = param(None, "m", lo=0.0, hi=1.0, lo_open=True, none_ok=True)
+    """m, in (0, 1]: body advance per cycle."""
+    swing_height: float | None = param(None, "m", lo=0.0, hi=0.3, none_ok=True)
+    """m, in [0, 0.3]: swing clearance of the foot sphere above the terrain."""
+    body_height: float | None = param(None, "m", lo=0.05, hi=1.0, none_ok=True)
+    """m, in [0.05, 1]: COG height above the mean foothold height."""
+    gain_scale: float | None = param(None, "-", lo=0.0, hi=10.0, lo_open=True, none_ok=True)
+    """-, in (0, 10]: factor on the scaled computed-torque gains."""
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -137,6 +173,8 @@ class RobotDescription:
     """(centre (3,), half sizes (3,)) m of the trunk's collision box in the trunk frame; None: from the hips."""
     config: RobotConfig | None = None
     """the Table-1 config this description was built from (None for a URDF robot)."""
+    gait: GaitSettings = dataclasses.field(default_factory=GaitSettings)
+    """the expert's gait settings given by the robot's YAML (``gait``); unset fields are scaled."""
 
     def __post_init__(self) -> None:
         where = f"robot {self.name!r}"
@@ -216,6 +254,26 @@ class RobotDescription:
 
         return float(-np.min(feet_positions_B(self, self.standing_joints)[:, 2]) + self.foot_radius)
 
+    @property
+    def base_height_limits(self) -> tuple[float, float]:
+        """m, the env's default ``termination.min_base_height`` and ``max_base_height``: the paper robot's
+        :data:`PAPER_BASE_HEIGHT_LIMITS` in units of its standing height (a third of the standing height, and
+        2.78 times it)."""
+        if self.config is not None:
+            return PAPER_BASE_HEIGHT_LIMITS
+        k = self.standing_height / PAPER_STANDING_HEIGHT
+        return PAPER_BASE_HEIGHT_LIMITS[0] * k, PAPER_BASE_HEIGHT_LIMITS[1] * k
+
+    @property
+    def joint_pd_gains(self) -> tuple[float, float]:
+        """(N m/rad, N m s/rad), the env's default ``joint_pd`` gains: the paper robot's
+        :data:`PAPER_PD_GAINS` scaled with the robot's weight times leg length (stiffness) and with the same
+        damping ratio at a natural frequency ~ 1 / sqrt(leg length) (damping ~ mass x leg length^1.5)."""
+        if self.config is not None:
+            return PAPER_PD_GAINS
+        m, s = self.total_mass / PAPER_MASS, self.leg_length / PAPER_LEG_LENGTH
+        return PAPER_PD_GAINS[0] * m * s, PAPER_PD_GAINS[1] * m * s**1.5
+
     # ------------------------------------------------------------------ builders
     @classmethod
     def from_robot_config(cls, cfg: RobotConfig) -> RobotDescription:
@@ -291,6 +349,7 @@ class RobotDescription:
             damping=raw.get("damping", 0.0),
             friction=raw.get("friction", 1.0),
             link_radius=raw.get("link_radius"),
+            gait=raw.get("gait"),
             where=where,
         )
 
@@ -299,7 +358,7 @@ URDF_REQUIRED = frozenset({"name", "urdf", "legs", "foot_radius"})
 """Fields every URDF robot YAML has."""
 URDF_OPTIONAL = frozenset(
     {"srdf", "standing_state", "standing_joints", "torque_limit", "joint_range", "armature", "damping", "friction",
-     "link_radius", "description"}
+     "link_radius", "description", "gait"}
 )  # fmt: skip
 """Fields a URDF robot YAML may have (``description``: free text)."""
 
@@ -483,6 +542,7 @@ def from_urdf(
     damping: Any = 0.0,
     friction: float = 1.0,
     link_radius: float | None = None,
+    gait: Mapping[str, Any] | None = None,
     where: str = "robot",
 ) -> RobotDescription:
     """Read a quadruped's URDF through Pinocchio (``buildModelFromUrdf`` with a free-flyer root).
@@ -496,6 +556,7 @@ def from_urdf(
     :param joint_range: rad, overrides of the URDF's limits (keys :data:`RANGE_KEYS`).
     :param armature: kg m^2, reflected rotor inertia (a number or a mapping over joint kinds); URDFs lack it.
     :param damping: N m s/rad, joint damping (a number or a mapping over joint kinds).
+    :param gait: the expert's gait settings (fields of :class:`GaitSettings`; None: all scaled).
     :raises ValueError: naming the field, for anything but 12 revolute joints in four HAA-HFE-KFE chains on a
         free-floating trunk, a missing joint or foot frame, and every check of :class:`RobotDescription`.
     """
@@ -518,6 +579,7 @@ def from_urdf(
     arm = _per_kind(armature, f"{where}.armature", lo_open=False)
     damp = _per_kind(damping, f"{where}.damping", lo_open=False)
     radius = _float(foot_radius, f"{where}.foot_radius")
+    gait_settings = from_mapping(GaitSettings, gait, f"{where}.gait")
 
     def inertia(jid: int) -> LinkInertia:
         y = model.inertias[jid]
@@ -589,6 +651,7 @@ def from_urdf(
         friction=_float(friction, f"{where}.friction"),
         standing_joints=standing,
         trunk_box=_trunk_box(urdf, root_link),
+        gait=gait_settings,
     )
 
 

@@ -111,6 +111,13 @@ def _chains(desc: RobotDescription) -> tuple[_Chain, ...]:
     return tuple(_chain(leg, q[3 * i : 3 * i + 3]) for i, leg in enumerate(desc.legs))
 
 
+def chain_constants(desc: RobotDescription) -> tuple[_Chain, ...]:
+    """Per leg, the constants of its analytic inverse (see the module docstring): HAA origin ``h``, axes ``a1``,
+    ``a2``, ``n``, the HFE offset ``alpha`` and the lateral offset ``lat`` (m), the planar thigh ``U1`` and shank
+    ``U2`` (complex, m), the KFE axis sign ``sigma`` and the standing pose's knee ``branch``."""
+    return _chains(desc)
+
+
 def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % (2.0 * np.pi) - np.pi
 

@@ -122,6 +122,10 @@ CASES: dict[str, Case] = {
         lambda t, m: evaluate_argv(t, "--expert-config", '{"friction": 0.8}'), ("--expert-config", "--policy expert")
     ),
     # -- --env-kwargs
+    "robot twice": Case(
+        lambda t, m: evaluate_argv(t, "--robot", "go1", "--env-kwargs", '{"robot": "hyq"}'), ("--robot", "differ")
+    ),
+    "robot unknown, scaled": Case(lambda t, m: evaluate_argv(t, "--robot", "nosuch", "--scale-terrain"), ("nosuch",)),
     "env kwargs not JSON": Case(lambda t, m: env_kwargs(t, "{frame_skip: 5"), ("--env-kwargs", "JSON")),
     "env kwargs not an object": Case(lambda t, m: env_kwargs(t, "[1]"), ("--env-kwargs", "JSON object")),
     "env kwargs repeated key": Case(lambda t, m: env_kwargs(t, '{"frame_skip": 5, "frame_skip": 6}'), ("frame_skip",)),

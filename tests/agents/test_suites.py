@@ -166,3 +166,44 @@ def test_episode_tasks_cap_offset_and_order():
         episode_tasks(s, episodes=0)
     with pytest.raises(ValueError, match="negative"):
         episode_tasks(s, seed_offset=-2)
+
+
+# ---------------------------------------------------------------------- suites at the robot's scale
+def test_a_suite_scales_its_lengths_and_time_to_the_robot():
+    """Terrain lengths (defaults too) and the goal x s, time x sqrt(s); the goal leaves 1 m x s of the 8 m grid."""
+    from agents.evaluation.suites import scale_suite
+
+    suite = load_suite("targets")
+    small = scale_suite(suite, 0.9)
+    assert small.goal_distance == pytest.approx(4.5) and small.time_limit == pytest.approx(120.0 * 0.9**0.5)
+    rough, slope, stairs = small.terrains[1], small.terrains[2], small.terrains[3]
+    assert rough.params == {"amplitude": pytest.approx(0.036), "wavelength": pytest.approx(0.54)}
+    assert slope.params["angle_deg"] == 10 and slope.params["ramp_length"] == pytest.approx(1.35)
+    assert stairs.params["riser"] == pytest.approx(0.072) and stairs.params["n_steps"] == 5
+    assert [e.seeds for e in small.terrains] == [e.seeds for e in suite.terrains]
+    big = scale_suite(suite, 1.5)
+    assert big.goal_distance == pytest.approx(5.0)  # 7.5 m does not fit: the grid's end (6.5 m) less 1 m x 1.5
+    flat = scale_suite(suite_from_dict({**_suite_raw(), "terrains": [{"kind": "stairs", "seeds": [0]}]}), 2.0)
+    assert flat.terrains[0].params["riser"] == pytest.approx(0.16)  # the default 0.08 m, scaled
+
+
+def test_a_scaled_parameter_out_of_range_is_named():
+    from agents.evaluation.suites import scale_suite
+
+    with pytest.raises(SuiteError, match=r"scaled by 0\.700: terrains\[5\]\.params\.gap must be >= 2 \* cell_size"):
+        scale_suite(load_suite("targets"), 0.7)
+
+
+def test_a_suite_may_ask_to_be_scaled_to_the_robot():
+    from agents.evaluation.run import robot_scale
+
+    assert suite_from_dict({**_suite_raw(), "scale": "leg_length"}).scale == "leg_length"
+    assert suite_from_dict(_suite_raw()).scale == "none"
+    with pytest.raises(SuiteError, match=r"scale must be one of \['none', 'leg_length'\], got 'body'"):
+        suite_from_dict({**_suite_raw(), "scale": "body"})
+    assert robot_scale("paper") == 1.0
+    assert robot_scale("hyq") == pytest.approx(0.696 / 0.42, abs=1e-3)
+
+
+def _suite_raw() -> dict:
+    return {"name": "s", "goal_distance": 1.0, "time_limit": 10.0, "terrains": [{"kind": "flat", "seeds": [0]}]}

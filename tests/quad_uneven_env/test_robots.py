@@ -220,12 +220,28 @@ def test_env_builds_and_steps_on_each_robot(name):
         paper.close()
 
 
-def test_expert_refuses_a_urdf_robot():
-    from agents.expert import attach_expert
-
-    env = gym.make("QuadUneven-v0", robot="go1")
-    with pytest.raises(ValueError, match=r"paper's robot only.*'go1'"):
-        attach_expert(env)
+@pytest.mark.parametrize("name", ("paper", *URDF_ROBOTS))
+def test_env_defaults_follow_the_robot(name):
+    """The base-height limits are a third of the standing height and 2.78 times it, the joint_pd gains scale with
+    weight x leg length; the paper robot's are exactly 0.12 m, 1 m and (100, 3)."""
+    desc = load_robot(name)
+    env = gym.make("QuadUneven-v0", robot=name, action_mode="joint_pd")
+    u = env.unwrapped
+    if name == "paper":
+        assert (u.termination.min_base_height, u.termination.max_base_height) == (0.12, 1.0)
+        assert (desc.joint_pd_gains) == (100.0, 3.0)
+    else:
+        assert u.termination.min_base_height == pytest.approx(desc.standing_height / 3.0)
+        assert u.termination.max_base_height == pytest.approx(desc.standing_height / 0.36)
+        kp = 100.0 * desc.total_mass * desc.leg_length / (50.0 * 0.42)
+        assert desc.joint_pd_gains[0] == pytest.approx(kp)
+    assert u.model.actuator_gainprm[0, 0] == pytest.approx(desc.joint_pd_gains[0])
+    assert u.model.actuator_biasprm[0, 2] == pytest.approx(-desc.joint_pd_gains[1])
+    env.close()
+    # given values win
+    given = {"termination": {"min_base_height": 0.05}, "pd_kp": 7.0}
+    env = gym.make("QuadUneven-v0", robot=name, action_mode="joint_pd", **given)
+    assert env.unwrapped.termination.min_base_height == 0.05 and env.unwrapped.model.actuator_gainprm[0, 0] == 7.0
     env.close()
 
 
@@ -251,6 +267,12 @@ def _user_robot(tmp_path: Path, urdf_text: str | None = None, **yaml_over: str) 
     path = tmp_path / "mine.yaml"
     path.write_text(text)
     return path
+
+
+def test_a_robot_yamls_gait_section_is_read(tmp_path):
+    assert load_robot("go1").gait.cycle_time is None  # the shipped Go1 scales every gait setting
+    desc = load_robot(_user_robot(tmp_path, gait="{cycle_time: 2.0, stride: 0.2}"))
+    assert (desc.gait.cycle_time, desc.gait.stride, desc.gait.swing_height) == (2.0, 0.2, None)
 
 
 def test_a_users_robot_by_yaml_path(tmp_path):
@@ -281,6 +303,9 @@ def test_a_users_robot_by_yaml_path(tmp_path):
         ),
         (None, {"torque_limit": "{HAA: 0}"}, r"torque_limit\.HAA must be a finite number > 0"),
         (None, {"colour": "red"}, r"unknown field\(s\) \['colour'\]"),
+        (None, {"gait": "{stride: -0.1}"}, r"gait\.stride must be a number in \(0, 1\] or null \(m\), got -0\.1"),
+        (None, {"gait": "{cycle_time: 0.01}"}, r"gait\.cycle_time must be a number in \[0\.2, 20\]"),
+        (None, {"gait": "{speed: 1}"}, r"gait.*unknown.*speed"),
         (
             lambda s: s.replace(
                 '<joint name="FL_calf_joint" type="revolute">', '<joint name="FL_calf_joint" type="fixed">'
@@ -309,7 +334,10 @@ def test_a_users_robot_by_yaml_path(tmp_path):
             r"LF\.HFE \(FL_thigh_joint\) must turn about trunk y",
         ),
     ],
-    ids=["radius", "legs", "foot", "torque", "unknown", "joints", "mass", "inertia", "axis"],
+    ids=[
+        *("radius", "legs", "foot", "torque", "unknown", "gait_stride", "gait_cycle", "gait_unknown"),
+        *("joints", "mass", "inertia", "axis"),
+    ],
 )
 def test_bad_descriptions_are_refused_naming_the_field(tmp_path, edit, yaml_over, message):
     path = _user_robot(tmp_path, edit, **yaml_over)

@@ -1,0 +1,70 @@
+"""The expert on the URDF robots (HyQ, ANYmal C, Go1, Solo12): its settings scaled from the robot, and it walks."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from agents.expert import ExpertConfig, attach_expert
+from planners.robot_geometry import robot_geometry
+from quad_uneven_env.robot.description import load_robot
+
+URDF_ROBOTS = ("anymal_c", "go1", "hyq", "solo12")
+
+
+def test_the_paper_robot_gets_the_defaults():
+    paper = load_robot("paper")
+    assert ExpertConfig.for_robot(paper) == ExpertConfig()
+    assert ExpertConfig.for_robot(paper, {"stride": 0.2}) == ExpertConfig(stride=0.2)
+
+
+@pytest.mark.parametrize("name", URDF_ROBOTS)
+def test_settings_scale_with_the_robot(name):
+    """Lengths ~ leg length s, times ~ sqrt(s) (equal Froude number), margin ~ mass x s, gains ~ 1/s, 1/sqrt(s)."""
+    desc = load_robot(name)
+    s, m = desc.leg_length / 0.42, desc.total_mass / 50.0
+    base, cfg = ExpertConfig(), ExpertConfig.for_robot(desc)
+    assert robot_geometry(desc).scale == pytest.approx(s)
+    assert np.allclose(cfg.durations, np.array(base.durations) * math.sqrt(s), atol=0.005)
+    assert np.allclose(np.array(cfg.durations) / 0.01, np.round(np.array(cfg.durations) / 0.01))  # 10 ms multiples
+    assert cfg.stride == pytest.approx(0.33 * s) and cfg.clearance == pytest.approx(0.05 * s)
+    assert cfg.epsilon == pytest.approx(20.0 * m * s)
+    assert cfg.gains.kp_pos == pytest.approx(400.0 / s) and cfg.gains.kd_joint == pytest.approx(60.0 / math.sqrt(s))
+    assert cfg.foothold_scale == pytest.approx(s)
+    # the COG walks a little below its standing height (the paper robot's ratio, 0.33 / 0.349)
+    assert 0.85 * desc.standing_height < cfg.cog_height < desc.standing_height
+
+
+def test_the_robot_yaml_and_the_caller_override_the_scaled_settings():
+    desc = dataclasses.replace(load_robot("go1"))
+    object.__setattr__(desc, "gait", dataclasses.replace(desc.gait, cycle_time=2.0, body_height=0.25, gain_scale=2.0))
+    cfg = ExpertConfig.for_robot(desc)
+    assert sum(cfg.durations) == pytest.approx(2.0, abs=0.03) and cfg.cog_height == 0.25
+    assert cfg.gains.kp_pos == pytest.approx(2.0 * ExpertConfig.for_robot(load_robot("go1")).gains.kp_pos)
+    given = ExpertConfig.for_robot(desc, {"cog_height": 0.22, "gains": {"kp_joint": 500.0}})
+    assert given.cog_height == 0.22 and given.gains.kp_joint == 500.0 and given.gains.kp_pos == cfg.gains.kp_pos
+    with pytest.raises(ValueError, match=r"expert_config: unknown field\(s\) \['stryde'\]"):
+        ExpertConfig.for_robot(desc, {"stryde": 0.1})
+
+
+@pytest.mark.parametrize("name", URDF_ROBOTS)
+def test_the_expert_walks_on_flat_ground(name):
+    """8 s on flat ground (2.5-3 gait cycles): at least 1.3 strides forward, no fall, index >= 0 >= 99 % of the time."""
+    env = gym.make("QuadUneven-v0", robot=name, terrain="flat")
+    try:
+        expert = attach_expert(env)
+        obs, info = env.reset(seed=0)
+        x0, index = info["cog"][0], []
+        for _ in range(400):
+            obs, _, terminated, truncated, info = env.step(expert.predict(obs)[0])
+            index.append(info["stability_index"])
+            assert not (terminated or truncated), info["termination_reason"]
+        assert info["cog"][0] - x0 > 1.3 * expert.config.stride
+        assert abs(info["cog"][1]) < 0.1
+        assert np.mean(np.array(index) >= 0.0) >= 0.99
+    finally:
+        env.close()
