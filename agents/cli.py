@@ -129,6 +129,14 @@ def run_demo_command(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------------------ evaluate
+def add_suite_run_arguments(p: argparse.ArgumentParser) -> None:
+    """``--suite``, ``--out``, ``--episodes`` and ``--seed``: which episodes of a suite a command runs, and where to."""
+    p.add_argument("--suite", required=True, help=f"shipped suite name {suite_names()} or the path of a suite .yaml")
+    p.add_argument("--out", type=Path, required=True, help="output directory DIR")
+    p.add_argument("--episodes", type=int, default=None, help="at most N seeds per terrain entry (default: all)")
+    p.add_argument("--seed", type=int, default=0, help="offset added to every seed of the suite (default 0)")
+
+
 def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register the ``evaluate`` subcommand on ``sub`` (its handler is in ``func``)."""
     p = sub.add_parser(
@@ -140,10 +148,7 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         "finished episodes are kept: continue with --resume).",
     )
     p.add_argument("--policy", required=True, help="'zero', 'expert', or the path of an SB3 model .zip")
-    p.add_argument("--suite", required=True, help=f"shipped suite name {suite_names()} or the path of a suite .yaml")
-    p.add_argument("--out", type=Path, required=True, help="output directory DIR")
-    p.add_argument("--episodes", type=int, default=None, help="at most N seeds per terrain entry (default: all)")
-    p.add_argument("--seed", type=int, default=0, help="offset added to every seed of the suite (default 0)")
+    add_suite_run_arguments(p)
     p.add_argument(
         "--workers",
         type=int,
@@ -349,10 +354,7 @@ def add_collect_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
         "or output directory; 130 when interrupted (the finished episodes are kept: continue with --resume).",
     )
     p.add_argument("--policy", required=True, help="'expert' (the scripted expert; the only policy collect records)")
-    p.add_argument("--suite", required=True, help=f"shipped suite name {suite_names()} or the path of a suite .yaml")
-    p.add_argument("--out", type=Path, required=True, help="output directory DIR")
-    p.add_argument("--episodes", type=int, default=None, help="at most N seeds per terrain entry (default: all)")
-    p.add_argument("--seed", type=int, default=0, help="offset added to every seed of the suite (default 0)")
+    add_suite_run_arguments(p)
     p.add_argument("--workers", type=int, default=1, help="parallel episode processes (default 1; same dataset)")
     p.add_argument(
         "--env-kwargs", default="{}", help="JSON object of extra QuadUneven-v0 arguments, e.g. '{\"frame_skip\": 5}'"
