@@ -474,6 +474,12 @@ def add_train_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         "'{\"adaptation\": \"knee\"}' (replaces the config's expert:; default: the config's)",
     )
     p.add_argument(
+        "--robot",
+        default=None,
+        help="the robot: a shipped name (quad_uneven_env.robots()) or a robot YAML path; sets the config's env_kwargs "
+        "robot (default: the config's, else the paper's robot); docs/robots.md",
+    )
+    p.add_argument(
         "--time-limit-min", type=float, default=None, help="stop (and save) after this many minutes of training"
     )
     p.add_argument("--config", default=None, help="training config YAML (default configs/rl/ALGO_residual.yaml)")
@@ -522,6 +528,8 @@ def run_train_command(args: argparse.Namespace) -> int:
     if args.randomization is not None:
         randomization = None if args.randomization.lower() == "none" else args.randomization
         cfg = validate(dataclasses.replace(cfg, randomization=randomization))
+    if args.robot is not None:
+        cfg = validate(dataclasses.replace(cfg, env_kwargs={**cfg.env_kwargs, "robot": args.robot}))
     from agents.rl.training import train  # deferred: SB3, torch and the expert's kernels
 
     summary = train(

@@ -32,7 +32,7 @@ from agents.rl.learning_curve import plot_learning_curve
 from agents.rl.model_io import write_metadata
 from agents.rl.normalization import ObsNormalization, norm_path
 from agents.rl.residual_env import RESIDUAL_ENV_ID
-from agents.rl.vec_env import EVAL_SEED_OFFSET, SCRATCH_ENV_KWARGS, build_vec_env, normalize
+from agents.rl.vec_env import EVAL_SEED_OFFSET, SCRATCH_ENV_KWARGS, build_vec_env, make_train_env, normalize
 from agents.rl.warm_start import check_init_model, warm_start
 
 __all__ = [
@@ -290,6 +290,22 @@ def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCa
     return callbacks, eval_env
 
 
+def _preflight_env(cfg: TrainConfig) -> None:
+    """Build one training env in this process, so that an env argument the env refuses (an unknown
+    robot, a bad ``env_kwargs`` value) is reported before ``out`` is touched, not as a worker's traceback.
+
+    :raises TrainConfigError: naming ``env_kwargs`` and what the env refused.
+    """
+    try:
+        env = make_train_env(
+            cfg.terrain, cfg.max_episode_steps, dict(cfg.env_kwargs), cfg.randomization,
+            cfg.residual_config() if cfg.residual else None,
+        )  # fmt: skip
+    except (ValueError, TypeError) as err:
+        raise TrainConfigError(f"env_kwargs {cfg.env_kwargs!r}: {err}") from None
+    env.close()
+
+
 def train(
     cfg: TrainConfig,
     out: str | Path,
@@ -325,6 +341,7 @@ def train(
         init = check_init_model(cfg.init_from, meta)
         if init[0].resolve().is_relative_to(Path(out).resolve()):
             raise TrainConfigError(f"init_from: {init[0]} lies in --out {str(out)!r}, whose outputs this run replaces")
+    _preflight_env(cfg)
     out = prepare_output_dir(out, TRAIN_OUTPUTS, overwrite=overwrite, field="--out")
     with OutputManifest(out, "train"):
         torch.set_num_threads(1)  # small networks: threads only contend with the env processes on 2 cores

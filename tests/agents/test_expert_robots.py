@@ -68,3 +68,28 @@ def test_the_expert_walks_on_flat_ground(name):
         assert np.mean(np.array(index) >= 0.0) >= 0.99
     finally:
         env.close()
+
+
+def test_the_residual_env_scales_its_expert_to_the_robot():
+    """The residual env's expert settings lie over the robot's scaled settings."""
+    from agents.rl.residual_env import ResidualConfig
+
+    config = ResidualConfig(expert=ExpertConfig(adaptation="knee"))
+    go1 = gym.make("QuadUnevenResidual-v0", robot="go1", config=config)
+    go1.reset(seed=0)
+    expected = ExpertConfig.for_robot(load_robot("go1"), {"adaptation": "knee"})
+    assert go1.unwrapped.controller.expert.config == expected
+    assert expected.stride != ExpertConfig().stride  # scaled: not the paper robot's gait
+    paper = gym.make("QuadUnevenResidual-v0", config=config)
+    paper.reset(seed=0)
+    assert paper.unwrapped.controller.expert.config == ExpertConfig(adaptation="knee")
+
+
+def test_train_refuses_an_unknown_robot_before_writing(tmp_path, capsys):
+    from agents.cli import main
+
+    out = tmp_path / "run"
+    assert main(["train", "--robot", "nosuch", "--timesteps", "16", "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: env_kwargs") and "nosuch" in err[0]
+    assert not out.exists()
