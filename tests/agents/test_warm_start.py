@@ -135,7 +135,8 @@ def test_a_from_scratch_model_continues_too(tmp_path):
     the same config would record, not the config's own env_kwargs."""
     from agents.rl.training import train
 
-    scratch = {"residual": False, "expert_features": False, "timesteps": 16}
+    scratch = {"residual": False, "expert_features": False, "residual_legs": "all", "residual_basis": "torque_limit",
+               "residual_scale": 0.1, "timesteps": 16}  # fmt: skip
     train(load_train_config(write_config(tmp_path / "a.yaml", **scratch)), tmp_path / "a", progress=False)
     cfg = load_train_config(write_config(tmp_path / "b.yaml", **scratch, init_from=str(tmp_path / "a")))
     summary = train(cfg, tmp_path / "b", progress=False)
