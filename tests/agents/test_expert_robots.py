@@ -93,3 +93,29 @@ def test_train_refuses_an_unknown_robot_before_writing(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: env_kwargs") and "nosuch" in err[0]
     assert not out.exists()
+
+
+def test_the_expert_follows_a_command_on_a_urdf_robot():
+    env = gym.make(
+        "QuadUneven-v0",
+        robot="go1",
+        command={"ranges": {"vx": [0.05, 0.1], "yaw_rate": [-0.1, 0.1]}, "resample_interval": 5.0},
+        max_episode_steps=400,
+    )
+    attach_expert(env)
+    env.reset(seed=1)
+    for _ in range(400):
+        _, _, terminated, truncated, info = env.step(np.zeros(12, dtype=np.float32))
+        assert not terminated
+        if truncated:
+            break
+    assert info["distance"] > 0.5  # m in 8 s at 0.05-0.1 m/s commanded
+
+
+def test_make_vec_runs_a_urdf_robot():
+    venv = gym.make_vec("QuadUneven-v0", num_envs=2, vectorization_mode="sync", robot="solo12")
+    obs, _ = venv.reset(seed=0)
+    for _ in range(5):
+        obs, _, terminated, _, _ = venv.step(np.zeros((2, 12), dtype=np.float32))
+    assert obs.shape == (2, 134) and not terminated.any()
+    assert venv.envs[0].unwrapped.robot.name == "solo12"
