@@ -130,11 +130,19 @@ def run_demo_command(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------------------------------ evaluate
 def add_suite_run_arguments(p: argparse.ArgumentParser) -> None:
-    """``--suite``, ``--out``, ``--episodes`` and ``--seed``: which episodes of a suite a command runs, and where to."""
+    """``--suite``, ``--out``, ``--episodes``, ``--seed`` and ``--episode-wall-limit``: which episodes of a suite a
+    command runs, where to, and how long one may take."""
     p.add_argument("--suite", required=True, help=f"shipped suite name {suite_names()} or the path of a suite .yaml")
     p.add_argument("--out", type=Path, required=True, help="output directory DIR")
     p.add_argument("--episodes", type=int, default=None, help="at most N seeds per terrain entry (default: all)")
     p.add_argument("--seed", type=int, default=0, help="offset added to every seed of the suite (default 0)")
+    p.add_argument(
+        "--episode-wall-limit",
+        type=float,
+        default=DEFAULT_WALL_TIME_LIMIT,
+        help="s of wall-clock time after which an episode is ended as 'wall_time_limit' "
+        f"(default {DEFAULT_WALL_TIME_LIMIT:g})",
+    )
 
 
 def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -219,13 +227,6 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         action="store_true",
         help="DIR may hold an earlier evaluation: delete the files its manifest (DIR/.quad-uneven-manifest.json) "
         "lists first, other files are kept; without it, or --resume, a non-empty DIR is refused",
-    )
-    p.add_argument(
-        "--episode-wall-limit",
-        type=float,
-        default=DEFAULT_WALL_TIME_LIMIT,
-        help="s of wall-clock time after which an episode is ended as 'wall_time_limit' "
-        f"(default {DEFAULT_WALL_TIME_LIMIT:g})",
     )
     p.add_argument(
         "--allow-pickle",
@@ -375,13 +376,6 @@ def add_collect_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
         action="store_true",
         help="DIR may hold an earlier collection: delete its outputs first (other files are kept); without it, or "
         "--resume, a non-empty DIR is refused",
-    )
-    p.add_argument(
-        "--episode-wall-limit",
-        type=float,
-        default=DEFAULT_WALL_TIME_LIMIT,
-        help="s of wall-clock time after which an episode is ended as 'wall_time_limit' "
-        f"(default {DEFAULT_WALL_TIME_LIMIT:g})",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_collect_command)
