@@ -573,6 +573,12 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
     )
     p.add_argument("--workers", type=int, default=1, help="rollout processes (default 1; the same result)")
     p.add_argument(
+        "--no-course-frame",
+        dest="course_frame",
+        action="store_false",
+        help="the student does not observe its heading and sideways offset on the course (env course_frame=False)",
+    )
+    p.add_argument(
         "--expert-config",
         default='{"recovery": false}',
         help="JSON object of agents.expert.ExpertConfig fields of the teacher (default '{\"recovery\": false}')",
@@ -604,6 +610,7 @@ def run_distill_command(args: argparse.Namespace) -> int:
     cfg = DistillConfig(
         dagger_rounds=args.dagger_rounds, beta_decay=args.beta_decay, episodes=args.episodes, epochs=args.epochs,
         seed=args.seed, seed_offset=args.seed_offset, workers=args.workers, budget_min=args.budget_min, expert=expert,
+        course_frame=args.course_frame,
     )  # fmt: skip
     try:
         cfg.expert_config()

@@ -114,6 +114,13 @@ ENV_ARGS: tuple[Param, ...] = (
         lo=1,
         hi=MAX_EPISODE_STEPS,
     ),
+    Param(
+        "course_frame",
+        False,
+        "-",
+        "append the trunk's heading and sideways offset on the course to the observation (not with ``command``)",
+        kind="bool",
+    ),
 )
 """The env's scalar arguments: their checks at make time, their error messages and the Arguments table."""
 
@@ -203,6 +210,12 @@ class QuadUnevenEnv(gym.Env):
     its slice. Every entry is clipped to its bounds:
 
     OBSERVATION_TABLE
+
+    With ``course_frame=True`` two fields are appended last instead of ``command`` (refused together with a
+    command): ``course_heading`` (2, [-1, 1]: sin and cos of the trunk's yaw about world z, measured from the
+    course's +x axis, the direction the robot walks and ``info["distance"]`` counts) and ``course_lateral``
+    (1, [-10, 10] m: the trunk origin's world y minus the spawn point's, its sideways offset from the course's
+    centre line). The default observation does not change.
 
     **Reward**: the sum of named terms (weights ``reward_weights``, see
     :class:`quad_uneven_env.config.RewardWeights`), each reported in ``info["reward_terms"]``:
@@ -323,6 +336,7 @@ class QuadUnevenEnv(gym.Env):
         episode_step_cap: int = 1_000_000,
         randomization: str | Mapping[str, Any] | RandomizationConfig | None = None,
         command: Mapping[str, Any] | CommandConfig | None = None,
+        course_frame: bool = False,
     ) -> None:
         if not isinstance(robot, str | os.PathLike):
             raise ValueError(
@@ -339,6 +353,7 @@ class QuadUnevenEnv(gym.Env):
             frame_skip=frame_skip, timestep=timestep, action_mode=action_mode, gait_period=gait_period,
             reset_noise_scale=reset_noise_scale, pd_kp=pd_kp, pd_kd=pd_kd, pd_action_scale=pd_action_scale,
             render_mode=render_mode, width=width, height=height, episode_step_cap=episode_step_cap,
+            course_frame=course_frame,
         )  # fmt: skip
         args = {q.name: q.check(given[q.name], "") for q in ENV_ARGS}
         frame_skip, timestep, action_mode = args["frame_skip"], args["timestep"], args["action_mode"]
@@ -357,6 +372,14 @@ class QuadUnevenEnv(gym.Env):
         self.command_config: CommandConfig | None = load_command(command)
         """the ``command`` argument (None: no command)."""
         self._command = None if self.command_config is None else CommandSchedule(self.command_config)
+        self.course_frame: bool = args["course_frame"]
+        """the observation ends with ``course_heading`` and ``course_lateral`` (see **Observation**)."""
+        if self.course_frame and self._command is not None:
+            raise ValueError(
+                "course_frame must be False with a command: a commanded robot walks where the command takes it, "
+                "not along the course's +x line, so its heading and offset from that line mean nothing; got "
+                "course_frame=True and command=..."
+            )
         if self._command is None:
             for name in COMMAND_REWARD_TERMS:
                 if getattr(self.reward_weights, name) != 0.0:
@@ -417,7 +440,9 @@ class QuadUnevenEnv(gym.Env):
             self._make_servos(args["pd_kp"], args["pd_kd"])
 
         self.action_space = spaces.Box(-1.0, 1.0, (C.N_JOINTS,), dtype=np.float32)
-        self._fields = observation_fields(self.height_scan, C.N_JOINTS, command=self._command is not None)
+        self._fields = observation_fields(
+            self.height_scan, C.N_JOINTS, command=self._command is not None, course_frame=self.course_frame
+        )
         self.observation_structure: dict[str, slice] = observation_structure(self._fields)
         self.observation_space = observation_space(self._fields)
 
@@ -929,7 +954,9 @@ class QuadUnevenEnv(gym.Env):
         """Refresh :attr:`_meas` (contacts, COG, stability, terrain scan, observation) from ``data``."""
         mujoco.mj_subtreeVel(self.model, self.data)
         command = None if self._command is None else self._command.value
-        self._meas.update(self.terrain.heightfield, self._prev_action, self.gait_period, command)
+        self._meas.update(
+            self.terrain.heightfield, self._prev_action, self.gait_period, command, self.terrain.spawn_xy[1]
+        )
         return self._meas
 
     def _info(

@@ -43,8 +43,9 @@ OBS_ORDER = (
 )
 """Observation fields in the order the kernel writes them (must match the layout)."""
 
-OPTIONAL_TRAILING = ("command",)
-"""Fields a layout may add after :data:`OBS_ORDER`, written by :meth:`StepMeasurement.update` from its arguments."""
+OPTIONAL_TRAILING = (("command",), ("course_heading", "course_lateral"))
+"""Field groups a layout may add after :data:`OBS_ORDER` (one of them at most), written by
+:meth:`StepMeasurement.update` after the kernel."""
 
 # Offsets of the scalar outputs in StepMeasurement._scalars.
 _INDEX, _N_STANCE, _GROUND, _TRUNK, _OTHER = range(5)
@@ -64,7 +65,7 @@ class StepMeasurement:
     :param foot_radius: m, foot sphere radius (a foot without contact is measured at its lowest point).
     :param scan_B: (k, 2) m, terrain query points in the yaw-aligned base frame; row 0 is the point under the base.
     :param fields: the observation layout; its field names must be :data:`OBS_ORDER`, optionally followed by
-        ``"command"`` (:data:`OPTIONAL_TRAILING`).
+        one group of :data:`OPTIONAL_TRAILING` (``"command"``, or ``"course_heading", "course_lateral"``).
     :param obs_low: observation lower bounds, same length as the layout.
     :param obs_high: observation upper bounds.
     """
@@ -81,10 +82,12 @@ class StepMeasurement:
         obs_high: np.ndarray,
     ) -> None:
         names = tuple(f.name for f in fields)
-        if names not in (OBS_ORDER, OBS_ORDER + OPTIONAL_TRAILING):
-            raise ValueError(f"observation fields must be {OBS_ORDER} (+ {OPTIONAL_TRAILING}), got {names}")
+        if names not in (OBS_ORDER, *(OBS_ORDER + group for group in OPTIONAL_TRAILING)):
+            raise ValueError(f"observation fields must be {OBS_ORDER} (+ one of {OPTIONAL_TRAILING}), got {names}")
         structure = observation_structure(fields)
         self._command = structure.get("command")
+        self._heading = structure.get("course_heading")
+        self._lateral = structure.get("course_lateral")
         self._obs_start = np.array([structure[name].start for name in OBS_ORDER], dtype=np.int64)
         self._obs_low = np.ascontiguousarray(obs_low, dtype=np.float64)
         self._obs_high = np.ascontiguousarray(obs_high, dtype=np.float64)
@@ -199,6 +202,7 @@ class StepMeasurement:
         prev_action: np.ndarray,
         gait_period: float,
         command: np.ndarray | None = None,
+        course_y: float = 0.0,
     ) -> None:
         """Measure ``data``'s state and build the observation.
 
@@ -206,6 +210,9 @@ class StepMeasurement:
         :param prev_action: (12,) the previous clipped action (observation field ``prev_action``).
         :param gait_period: s, period of the observation's gait clock.
         :param command: (3,) the commanded vx, vy (m/s), yaw rate (rad/s) (field ``command``, when the layout has it).
+        :param course_y: m, world y of the course's centre line (fields ``course_heading`` and ``course_lateral``,
+            when the layout has them: the trunk's yaw ``atan2(R[1, 0], R[0, 0])`` from world +x and its origin's
+            y minus ``course_y``).
         """
         flat, nrow, ncol, ox, oy, inv_cell = heightfield.kernel_args
         call = self._call
@@ -264,3 +271,10 @@ class StepMeasurement:
         sl = self._command
         if sl is not None:
             np.clip(command, self._obs_low[sl], self._obs_high[sl], out=self.obs[sl])
+        if self._heading is not None:
+            R, obs = self.R, self.obs
+            yaw = math.atan2(R[1, 0], R[0, 0])
+            obs[self._heading.start] = math.sin(yaw)
+            obs[self._heading.start + 1] = math.cos(yaw)
+            k = self._lateral.start
+            obs[k] = min(max(float(self.base[1]) - course_y, self._obs_low[k]), self._obs_high[k])

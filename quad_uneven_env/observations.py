@@ -40,15 +40,43 @@ COMMAND_FIELD = ObsField(
 )
 """The commanded base velocity (:mod:`quad_uneven_env.command`), appended last when the env has a command."""
 
+COURSE_LATERAL_LIMIT = 10.0
+"""m: the lateral offset from the course's centre line is clipped to [-10, 10]."""
 
-def observation_fields(scan: HeightScanConfig, n_actions: int = 12, command: bool = False) -> tuple[ObsField, ...]:
-    """The observation layout, in order; ``command``: append :data:`COMMAND_FIELD` (the env has a command).
+COURSE_FRAME_FIELDS = (
+    ObsField(
+        "course_heading",
+        2,
+        -1.0,
+        1.0,
+        "-",
+        "sin and cos of the trunk's yaw about world z from the course's +x axis; only with ``course_frame``",
+    ),
+    ObsField(
+        "course_lateral",
+        1,
+        -COURSE_LATERAL_LIMIT,
+        COURSE_LATERAL_LIMIT,
+        "m",
+        "trunk origin's world y minus the spawn point's (the course's centre line, along +x); only with "
+        "``course_frame``",
+    ),
+)
+"""Where the trunk is on the course (:class:`quad_uneven_env.env.QuadUnevenEnv`'s ``course_frame``): its heading
+and its sideways offset from the line the robot is spawned on and walks along (+x), appended last."""
 
-    The command goes last, so an env without one has exactly the layout it had before commands existed,
-    and the fields before it keep their slices when one is added.
+
+def observation_fields(
+    scan: HeightScanConfig, n_actions: int = 12, command: bool = False, course_frame: bool = False
+) -> tuple[ObsField, ...]:
+    """The observation layout, in order; ``command``: append :data:`COMMAND_FIELD` (the env has a command);
+    ``course_frame``: append :data:`COURSE_FRAME_FIELDS` (the env's ``course_frame``).
+
+    Optional fields go last, so the default layout does not depend on them and the fields before them keep
+    their slices when one is added. The env never has both (a commanded robot has no course to follow).
     """
     nx, ny = scan.shape
-    return (
+    base = (
         ObsField("base_height", 1, -1.0, 2.0, "m", "trunk origin above the terrain directly below it"),
         ObsField("projected_gravity", 3, -1.0, 1.0, "-", "unit gravity direction in the base frame"),
         ObsField("base_lin_vel", 3, -10.0, 10.0, "m/s", "trunk linear velocity, base frame"),
@@ -83,7 +111,8 @@ def observation_fields(scan: HeightScanConfig, n_actions: int = 12, command: boo
             f"{scan.resolution} m in the yaw-aligned base frame",
         ),
         ObsField("prev_action", n_actions, -1.0, 1.0, "-", "previous (clipped) action"),
-    ) + ((COMMAND_FIELD,) if command else ())
+    )
+    return base + ((COMMAND_FIELD,) if command else ()) + (COURSE_FRAME_FIELDS if course_frame else ())
 
 
 def observation_structure(fields: tuple[ObsField, ...]) -> dict[str, slice]:

@@ -80,6 +80,10 @@ class ObservationNoise:
     """m, in [0, 1]."""
     prev_action: float = param(0.0, "-", lo=0.0, hi=1.0)
     """-, in [0, 1]."""
+    course_heading: float = param(0.0, "-", lo=0.0, hi=1.0)
+    """-, in [0, 1] (sin and cos of the yaw; only with the env's ``course_frame``)."""
+    course_lateral: float = param(0.0, "m", lo=0.0, hi=1.0)
+    """m, in [0, 1] (only with the env's ``course_frame``)."""
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -3,7 +3,10 @@
 The student acts at the env's rate (50 Hz) in ``action_mode="joint_pd"``: its action is a joint target
 ``q_home + pd_action_scale x a`` that PD servos track at physics rate. It observes ``QuadUneven-v0``'s own
 observation with the gait clock's period set to the expert's cycle (``gait_period`` = the sum of
-``ExpertConfig.durations``, 3.1 s by default): no planner state.
+``ExpertConfig.durations``, 3.1 s by default) and, with ``course_frame`` (the default), the trunk's heading and
+sideways offset on the course (the env's ``course_frame`` fields): no planner state. The expert without a command
+plans every cycle at yaw 0 and tracks its plan's base pose, so it turns a heading error back to the course's +x axis;
+without these fields the student cannot see that error.
 
 **Labels.** A PD servo cannot follow the plan's joint angles alone: the stance legs carry the robot's weight, and
 at ``pd_kp`` = 100 N m/rad a 40 N m knee torque costs 0.4 rad of sag (tracking the plan's angles with the expert
@@ -96,6 +99,8 @@ class DistillConfig:
     """rad per unit of action (``pd_action_scale``; the labels stay within [-1, 1] at 1.0)."""
     gait_period: float | None = None
     """s, the observation's gait clock (None: the teacher expert's cycle, the sum of its ``durations``)."""
+    course_frame: bool = True
+    """the student observes its heading and sideways offset on the course (the env's ``course_frame``)."""
     expert: dict[str, Any] = dataclasses.field(default_factory=lambda: {"recovery": False})
     """the teacher's :class:`agents.expert.ExpertConfig` fields."""
     seed: int = 0
@@ -119,6 +124,7 @@ class DistillConfig:
             ("pd_kd", self.pd_kd >= 0, "a number >= 0 (N m s/rad)"),
             ("pd_action_scale", 0 < self.pd_action_scale <= math.pi, "in (0, pi] (rad)"),
             ("gait_period", self.gait_period is None or self.gait_period > 0, "None or a number > 0 (s)"),
+            ("course_frame", isinstance(self.course_frame, bool), "True or False"),
             ("budget_min", self.budget_min > 0, "a number > 0 (min)"),
             ("workers", self.workers >= 1, "an integer >= 1"),
         )
@@ -142,6 +148,7 @@ class DistillConfig:
             "pd_kd": self.pd_kd,
             "pd_action_scale": self.pd_action_scale,
             "gait_period": self.clock_period(),
+            **({"course_frame": True} if self.course_frame else {}),
         }
 
 

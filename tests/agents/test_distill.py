@@ -92,7 +92,7 @@ def test_labels_are_the_expert_references_and_torques_in_the_action_scale():
     res = rollout(RolloutJob(task, suite.goal_distance, 0.4, cfg, 1.0, None, (0,)))
     assert res["steps"] == 20 and not res["student_acted"].any()
 
-    env = gym.make("QuadUneven-v0", terrain=task.params | {"kind": task.kind}, gait_period=3.1)
+    env = gym.make("QuadUneven-v0", terrain=task.params | {"kind": task.kind}, gait_period=3.1, course_frame=True)
     expert = ExpertPolicy(env, ExpertConfig(recovery=False))
     rec = TorqueRecorder(expert, env.unwrapped.frame_skip)
     env.unwrapped.set_controller(rec)
@@ -165,7 +165,9 @@ def test_a_tiny_run_writes_a_train_folder_that_evaluate_and_export_read(tiny_run
     assert meta["residual"] is False and meta["algo"] == "ppo" and meta["env_id"] == "QuadUneven-v0"
     assert meta["env_kwargs"] == {
         "action_mode": "joint_pd", "pd_kp": 100.0, "pd_kd": 3.0, "pd_action_scale": 1.0, "gait_period": 3.1,
+        "course_frame": True,
     }  # fmt: skip
+    assert policy_obs_size(out / "model.zip") == 137  # the default layout (134) + course_heading + course_lateral
 
     # the loaded policy acts as the student did in the rollouts (numpy forward == SB3 predict)
     from agents.rl.distill import mlp_forward, policy_params
@@ -211,6 +213,33 @@ def test_the_same_seed_gives_the_same_student(tiny_run, tmp_path):
     assert other["rounds"][0]["steps"] == summary["rounds"][0]["steps"]  # the expert's rollouts: no seed in them
     wc = policy_weights(tmp_path / "c" / "model.zip")
     assert not np.array_equal(wa["action_net.weight"], wc["action_net.weight"])
+
+
+def test_the_course_frame_is_the_students_default_and_can_be_left_out(monkeypatch, tmp_path):
+    """``DistillConfig.course_frame`` (True by default) puts the env's ``course_frame`` into the student's env;
+    ``--no-course-frame`` leaves it out (the env's default layout)."""
+    from agents.rl import distill as module
+
+    assert tiny_config().student_env_kwargs()["course_frame"] is True
+    assert "course_frame" not in tiny_config(course_frame=False).student_env_kwargs()
+    with pytest.raises(ValueError, match=r"distill\.course_frame must be True or False, got 1"):
+        tiny_config(course_frame=1)
+    seen = []
+    monkeypatch.setattr(module, "distill", lambda suite, out, cfg, overwrite: seen.append(cfg) or {"wall_time_s": 0})
+    assert main(["distill", "--suite", "smoke", "--out", str(tmp_path / "a"), "--no-course-frame"]) == 0
+    assert main(["distill", "--suite", "smoke", "--out", str(tmp_path / "b")]) == 0
+    assert [c.course_frame for c in seen] == [False, True]
+
+
+def policy_obs_size(path):
+    import io
+    import zipfile
+
+    import torch
+
+    with zipfile.ZipFile(path) as z:
+        state = torch.load(io.BytesIO(z.read("policy.pth")), weights_only=True)
+    return state["mlp_extractor.policy_net.0.weight"].shape[1]
 
 
 def policy_weights(path):

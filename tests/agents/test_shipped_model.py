@@ -1,6 +1,7 @@
 """The shipped models (models/ppo_residual_adaptive, the PPO residual over the expert with the knee adaptation;
-models/ppo_scratch, PPO from scratch): load as data, run, match their configs, and carry a model card whose file
-list and sha256 match the folder and whose config and Makefile target retrain it."""
+models/ppo_scratch, PPO from scratch; models/distilled, the expert distilled into a network policy): load as data,
+run, match their configs, and carry a model card whose file list and sha256 match the folder and whose config (or
+command) and Makefile target retrain it."""
 
 from __future__ import annotations
 
@@ -30,8 +31,20 @@ SHIPPED = {"ppo_residual_adaptive": "rl-baseline", "ppo_scratch": "rl-scratch"}
 """models/NAME (trained by configs/rl/NAME.yaml) -> the Makefile target that retrains it."""
 
 
+DISTILLED = {"distilled": "distilled"}
+"""models/NAME (trained by ``quad-uneven distill``, no config file) -> the Makefile target that retrains it."""
+
+
 def test_models_holds_the_shipped_agents_only():
-    assert sorted(p.name for p in (ROOT / "models").iterdir()) == sorted(SHIPPED)
+    assert sorted(p.name for p in (ROOT / "models").iterdir()) == sorted(SHIPPED | DISTILLED)
+
+
+def _card_files_match(folder: Path, card: str) -> None:
+    """Every file of ``folder`` but the card is listed in it with its sha256, and nothing else."""
+    listed = dict(re.findall(r"^\| `([^`]+)` \| `([0-9a-f]{64})` \|", card, re.M))
+    assert set(listed) == {p.name for p in folder.iterdir()} - {"README.md"}
+    for file, digest in listed.items():
+        assert hashlib.sha256((folder / file).read_bytes()).hexdigest() == digest, file
 
 
 def _recipe(target: str) -> str:
@@ -51,10 +64,27 @@ def test_the_shipped_model_has_a_card_with_its_files_config_and_target(name):
     assert config in card and f"make {target}" in card
     recipe = _recipe(target)
     assert f"--config {config}" in recipe and f"models/{name})" in recipe  # $(call ship,RUN,models/NAME)
-    listed = dict(re.findall(r"^\| `([^`]+)` \| `([0-9a-f]{64})` \|", card, re.M))
-    assert set(listed) == {p.name for p in folder.iterdir()} - {"README.md"}
-    for file, digest in listed.items():
-        assert hashlib.sha256((folder / file).read_bytes()).hexdigest() == digest, file
+    _card_files_match(folder, card)
+
+
+@pytest.mark.parametrize("name", sorted(DISTILLED))
+def test_the_distilled_model_has_a_card_with_its_files_command_and_target(name):
+    """models/NAME/README.md lists every file of the folder with its sha256 and names the Makefile target, whose
+    recipe runs the card's ``quad-uneven distill`` command and copies its files into this folder."""
+    folder = ROOT / "models" / name
+    card = (folder / "README.md").read_text()
+    target = DISTILLED[name]
+    assert f"make {target}" in card
+    recipe = _recipe(target)
+    command = re.search(r"`quad-uneven distill ([^`]+)`", card)
+    assert command, "the card names no quad-uneven distill command"
+    flags = command.group(1).replace("--out runs/distilled", "").split()
+    run = " ".join(recipe.replace("\\\n", " ").split())
+    assert "agents.cli distill" in run and all(f in run.split() for f in flags), flags
+    assert f"models/{name}" in recipe
+    _card_files_match(folder, card)
+    summary = json.loads((folder / "distill_summary.json").read_text())
+    assert summary["config"]["course_frame"] is True and summary["suite"] == "targets"
 
 
 @pytest.mark.parametrize("name", sorted(RESIDUAL_MODELS))
@@ -105,6 +135,27 @@ def test_the_shipped_model_drives_the_expert_in_a_randomized_world(name):
 
 
 SCRATCH = ROOT / "models" / "ppo_scratch" / "model.zip"
+DISTILLED_MODEL = ROOT / "models" / "distilled" / "model.zip"
+
+
+def test_the_distilled_model_walks_the_plain_env_straight():
+    """models/distilled: a joint_pd policy with the expert's gait clock and the course frame, without the expert;
+    on flat ground it walks forward for 6 s (0.3-0.9 m at its 0.1 m/s) and keeps to the centre line."""
+    meta = read_metadata(DISTILLED_MODEL)
+    assert meta["residual"] is False and meta["env_kwargs"]["course_frame"] is True
+    assert meta["env_kwargs"]["action_mode"] == "joint_pd" and meta["env_kwargs"]["gait_period"] == pytest.approx(3.1)
+    env = gym.make("QuadUneven-v0", terrain="flat", **policy_env_kwargs(str(DISTILLED_MODEL)))
+    policy = make_policy(str(DISTILLED_MODEL), env)  # the safe loader: nothing unpickled
+    assert isinstance(policy, SB3Policy) and env.unwrapped.controller is None
+    assert policy.model.observation_space.shape == (137,)
+    obs, _ = env.reset(seed=7)
+    x0 = env.unwrapped.data.qpos[0]
+    for _ in range(300):
+        obs, _, terminated, truncated, info = env.step(policy.predict(obs)[0])
+        assert not (terminated or truncated), info["termination_reason"]
+    assert 0.3 < env.unwrapped.data.qpos[0] - x0 < 0.9
+    assert abs(env.unwrapped.data.qpos[1]) < 0.1
+    assert not list(DISTILLED_MODEL.parent.glob("*.pkl"))
 
 
 def test_the_shipped_from_scratch_model_runs_on_the_plain_env():

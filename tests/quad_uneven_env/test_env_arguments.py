@@ -73,6 +73,8 @@ BAD = [
     ("randomization", {"bogus": 1}, "randomization: unknown field(s) ['bogus']"),
     ("command", {"vx": 5.0}, "command.vx must be a number in [-1, 1] (m/s), got 5.0"),
     ("command", "fast", "command must be None or a mapping"),
+    ("course_frame", 1, "course_frame must be true or false, got 1 of type int"),
+    ("course_frame", "yes", "course_frame must be true or false, got 'yes' of type str"),
     ("height_scan", {"size_x": "1"}, "height_scan.size_x must be a number in [0, 10] (m), got '1' of type str"),
     (
         "height_scan",
