@@ -374,8 +374,8 @@ def add_collect_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="DIR may hold an earlier collection: delete its outputs first (other files are kept); without it, or "
-        "--resume, a non-empty DIR is refused",
+        help="DIR may hold an earlier collection: delete the files its manifest (DIR/.quad-uneven-manifest.json) "
+        "lists first, other files are kept; without it, or --resume, a non-empty DIR is refused",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_collect_command)

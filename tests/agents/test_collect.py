@@ -313,3 +313,26 @@ def test_without_minari_collect_names_the_extra(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err
     assert code == 2 and "'datasets' extra" in err and 'pip install -e ".[datasets]"' in err
     assert not (tmp_path / "o").exists()
+
+
+def test_overwrite_replaces_the_collection_and_keeps_the_users_files(tmp_path):
+    suite, out = write_suite(tmp_path / "suite.yaml"), tmp_path / "out"
+    args = [
+        "collect",
+        "--policy",
+        "expert",
+        "--suite",
+        str(suite),
+        "--out",
+        str(out),
+        "--episodes",
+        "1",
+        "--no-progress",
+    ]
+    assert main(args) == 0
+    (out / "episodes" / "notes.txt").write_text("mine")
+    (out / "plot.png").write_bytes(b"mine")
+    assert main([*args, "--overwrite"]) == 0
+    assert (out / "episodes" / "notes.txt").read_text() == "mine"
+    assert (out / "plot.png").read_bytes() == b"mine"
+    assert (out / "collect.json").is_file() and any(out.glob("quad-uneven-*/data/metadata.json"))
