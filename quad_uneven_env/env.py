@@ -44,6 +44,7 @@ from quad_uneven_env.randomization import (
     RandomizationConfig,
     draw_episode,
     load_randomization,
+    randomization_for_robot,
 )
 from quad_uneven_env.rewards import COMMAND_REWARD_TERMS, REWARD_TERMS, command_reward_terms, reward_terms
 from quad_uneven_env.robot.description import RobotDescription, load_robot
@@ -360,7 +361,10 @@ class QuadUnevenEnv(gym.Env):
         self.action_mode = action_mode
         self._check_controller(controller)
 
-        self.randomization: RandomizationConfig | None = load_randomization(randomization)
+        self.randomization: RandomizationConfig | None = randomization_for_robot(
+            load_randomization(randomization), self.robot
+        )
+        """the randomization in SI units for this robot (a preset's ``scale: robot`` ranges scaled to it)."""
         self.terrain = Terrain(parse_terrain_spec(terrain))
         self.reward_weights: RewardWeights = from_mapping(RewardWeights, reward_weights, "reward_weights")
         if termination is None or isinstance(termination, Mapping):

@@ -35,12 +35,17 @@ from quad_uneven_env import constants as C
 from quad_uneven_env.config import read_yaml, resolve_config_path
 from quad_uneven_env.fields import check_fields, from_mapping, param, params_of
 from quad_uneven_env.physics import RobotIndex
+from quad_uneven_env.robot.description import PAPER_LEG_LENGTH, PAPER_MASS, RobotDescription
 
 ROBOT_BODIES: tuple[str, ...] = (
     C.TRUNK_BODY,
     *(b for leg in C.LEG_NAMES for b in (C.thigh_body(leg), C.shank_body(leg))),
 )
 """Bodies whose mass ``link_mass_scale`` scales, in this order (trunk, then thigh and shank per leg)."""
+
+
+RANDOMIZATION_SCALES: tuple[str, ...] = ("none", "robot")
+"""Allowed ``scale`` of a :class:`RandomizationConfig`."""
 
 
 def _range(unit: str, doc: str, **bounds: Any) -> Any:
@@ -101,6 +106,16 @@ class RandomizationConfig:
     per body (:data:`ROBOT_BODIES`).
     """
 
+    scale: str = param(
+        "none",
+        "-",
+        "how the ranges read: `none` as written; `robot` written for the paper's robot (50 kg, 0.42 m legs) and "
+        "scaled to the env's robot by dynamic similarity (docs/randomization.md)",
+        kind="choice",
+        choices=RANDOMIZATION_SCALES,
+    )
+    """``"none"``: the ranges are in SI units as written. ``"robot"``: written for the paper's robot and scaled to the
+    env's robot (:meth:`for_robot`); the shipped presets say ``robot``."""
     friction: tuple[float, float] | None = _range(
         "-",
         "foot-terrain sliding friction (terrain and every robot geom); U(low, high) per episode",
@@ -202,6 +217,42 @@ class RandomizationConfig:
                 f"(pushes must not overlap), got {list(self.push_duration)}"
             )
 
+    def for_robot(self, mass_ratio: float, length_ratio: float) -> RandomizationConfig:
+        """The config in SI units for a robot ``mass_ratio`` (-) times the paper robot's mass and ``length_ratio`` (-)
+        times its leg length: itself when ``scale`` is ``"none"``.
+
+        Dynamic similarity (the Froude number kept, gravity unchanged): with m = ``mass_ratio`` and s =
+        ``length_ratio``, lengths x s, masses x m, times x sqrt(s), speeds x sqrt(s), angular speeds / sqrt(s),
+        torques x m s, impulses x m sqrt(s), viscous damping x m s^1.5. Ratios, friction and latency (the robot's
+        computer, not its body) stay as written.
+
+        :raises ValueError: if a scaled range leaves its allowed interval (naming ``randomization.<field>``).
+        """
+        if self.scale == "none":
+            return self
+        m, s = float(mass_ratio), float(length_ratio)
+        t = math.sqrt(s)
+        factors = {
+            "payload_mass": m, "payload_com_x": s, "payload_com_y": s, "payload_com_z": s,
+            "joint_damping": m * s * t, "joint_frictionloss": m * s,
+            "push_impulse": m * t, "push_interval": t, "push_duration": t,
+        }  # fmt: skip
+        changes: dict[str, Any] = {"scale": "none"}
+        for name, k in factors.items():
+            r = getattr(self, name)
+            if r is not None:
+                changes[name] = (r[0] * k, r[1] * k)
+        noise = self.observation_noise
+        if noise is not None:
+            noise_factors = {
+                "base_height": s, "base_lin_vel": t, "base_ang_vel": 1.0 / t, "joint_vel": 1.0 / t,
+                "stability_index": s, "edge_moments": s, "height_scan": s, "course_lateral": s,
+            }  # fmt: skip
+            changes["observation_noise"] = dataclasses.replace(
+                noise, **{n: getattr(noise, n) * k for n, k in noise_factors.items()}
+            )
+        return dataclasses.replace(self, **changes)
+
     @property
     def pushes(self) -> bool:
         """Pushes are on."""
@@ -228,6 +279,16 @@ def load_randomization(
     else:
         raise ValueError(f"{where} must be None, a preset name, a YAML path or a mapping, got {spec!r}")
     return from_mapping(RandomizationConfig, raw, where)
+
+
+def randomization_for_robot(cfg: RandomizationConfig | None, robot: RobotDescription) -> RandomizationConfig | None:
+    """``cfg`` in SI units for ``robot``: :meth:`RandomizationConfig.for_robot` with its mass and leg length over the
+    paper robot's (:data:`PAPER_MASS`, :data:`PAPER_LEG_LENGTH`); the paper's robot takes the ranges as written."""
+    if cfg is None:
+        return None
+    if robot.config is not None:
+        return dataclasses.replace(cfg, scale="none")
+    return cfg.for_robot(robot.total_mass / PAPER_MASS, robot.leg_length / PAPER_LEG_LENGTH)
 
 
 def config_table() -> str:

@@ -18,7 +18,9 @@ from quad_uneven_env.randomization import (
     config_table,
     factor_values,
     load_randomization,
+    randomization_for_robot,
 )
+from quad_uneven_env.robot.description import load_robot
 
 
 def make(**kwargs):
@@ -67,6 +69,7 @@ def assert_bit_identical(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> 
         ({"observation_noise": {"joint_pos": -0.1}}, r"randomization\.observation_noise\.joint_pos must be"),
         ("nonexistent_preset", r"randomization: unknown randomization config 'nonexistent_preset'.*mild"),
         (42, r"randomization must be None, a preset name"),
+        ({"scale": "mass"}, r"randomization\.scale must be one of \['none', 'robot'\]"),
     ],
 )
 def test_bad_config_raises_at_make_naming_the_field(spec, match):
@@ -89,6 +92,50 @@ def test_presets_match_the_robust_suites():
     assert extreme.motor_strength == (0.5, 1.3) and extreme.payload_mass[1] == pytest.approx(0.5 * total)
     changed = {f for f in hard.__dataclass_fields__ if getattr(hard, f) != getattr(extreme, f)}
     assert changed == {"motor_strength", "payload_mass"}
+
+
+def test_for_robot_scales_by_dynamic_similarity_hand_computed():
+    """m = 0.5, s = 0.25 (time and speed x 0.5): masses x 0.5, lengths x 0.25, impulses x 0.25, torques x 0.125,
+    damping x 0.0625, angular speeds x 2; ratios, friction and latency as written."""
+    raw = {
+        "scale": "robot", "friction": [0.4, 0.9], "payload_mass": [0.0, 10.0], "payload_com_x": [-0.08, 0.08],
+        "link_mass_scale": [0.8, 1.2], "motor_strength": [0.7, 1.3], "joint_damping": [0.0, 1.0],
+        "joint_frictionloss": [0.0, 2.0], "latency": [0.0, 0.01], "push_impulse": [0.0, 20.0],
+        "push_interval": [4.0, 6.0], "push_duration": [0.1, 0.2],
+        "observation_noise": {"base_lin_vel": 0.2, "base_ang_vel": 0.4, "joint_pos": 0.02, "height_scan": 0.1},
+    }  # fmt: skip
+    got = RandomizationConfig(**raw).for_robot(0.5, 0.25)
+    assert got.scale == "none"
+    assert got.payload_mass == (0.0, 5.0) and got.payload_com_x == (-0.02, 0.02)
+    assert got.push_impulse == (0.0, 5.0) and got.push_interval == (2.0, 3.0) and got.push_duration == (0.05, 0.1)
+    assert got.joint_frictionloss == (0.0, 0.25) and got.joint_damping == (0.0, 0.0625)
+    assert (got.friction, got.link_mass_scale, got.motor_strength, got.latency) == (
+        (0.4, 0.9),
+        (0.8, 1.2),
+        (0.7, 1.3),
+        (0.0, 0.01),
+    )
+    noise = got.observation_noise
+    assert (noise.base_lin_vel, noise.base_ang_vel, noise.joint_pos, noise.height_scan) == (0.1, 0.8, 0.02, 0.025)
+    plain = RandomizationConfig(**{**raw, "scale": "none"})
+    assert plain.for_robot(0.5, 0.25) is plain  # a user's own ranges are taken as written
+
+
+def test_the_paper_robot_takes_the_presets_as_written_and_a_urdf_robot_scales_them():
+    hard = load_randomization("hard")
+    assert hard.scale == "robot"
+    paper = randomization_for_robot(hard, load_robot("paper"))
+    assert paper.scale == "none" and paper == RandomizationConfig(**{**hard.__dict__, "scale": "none"})
+    go1 = load_robot("go1")
+    m, s = go1.total_mass / 50.0, go1.leg_length / 0.42
+    env = make(robot="go1", randomization="hard", action_mode="joint_pd")
+    try:
+        r = env.unwrapped.randomization
+        assert r.payload_mass[1] == pytest.approx(17.5 * m) and r.push_impulse[1] == pytest.approx(25.0 * m * s**0.5)
+        _, info = env.reset(seed=3)
+        assert 0.0 <= info["randomization"]["payload_mass"] <= 17.5 * m
+    finally:
+        env.close()
 
 
 def test_yaml_path_and_dict_give_the_same_config(tmp_path):
