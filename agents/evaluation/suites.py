@@ -21,9 +21,10 @@ waypoint is reached (in order); its env gets the command ``{}`` (all zero) unles
 waypoint follower then steers (:mod:`agents.waypoints`).
 
 With ``scale: leg_length`` (or ``quad-uneven evaluate --scale-terrain``) the suite is written for the paper's
-robot and run on the evaluated robot at its own scale (:func:`scale_suite`): every length (terrain parameters in
-m, their defaults included, and the goal distance, capped where the terrain grid ends) is multiplied by the
-robot's leg length over 0.42 m and the time limit by the square root of it (equal Froude number).
+robot and run on the evaluated robot at its own scale (:func:`scale_suite`): the whole terrain is magnified by
+the robot's leg length over 0.42 m (every terrain parameter in m, defaults and the shared grid parameters
+included: the same nodes at scaled positions and heights), so is the goal distance, and the time limit is
+multiplied by the square root of it (equal Froude number).
 
 Terrain parameters are validated by :func:`quad_uneven_env.terrain.parse_terrain_spec`. Errors are
 ``SuiteError`` (a ``ValueError``) whose message starts with the offending field, e.g.
