@@ -325,21 +325,10 @@ def scale_suite(suite: Suite, factor: float) -> Suite:
         raise SuiteError(f"scale factor must be a number in (0, 100), got {factor!r}")
     terrains = []
     for i, e in enumerate(suite.terrains):
-        params = dict(e.params)
-        for p in KINDS[e.kind].all_params:
-            value = params.get(p.name, p.default)
-            if p.name == "x_start" and params.get("origin") is not None:
-                continue  # a heightmap placed by its origin (scaled) takes no x_start
-            if p.unit == "m" or p.name in SCALED_FACTORS:
-                try:
-                    scaled = _magnified(value, factor)
-                except TypeError:
-                    raise SuiteError(
-                        f"terrains[{i}].params.{p.name} cannot be scaled to the robot: give the values (m) in the "
-                        f"suite, not a file ({value!r})"
-                    ) from None
-                if scaled is not None:
-                    params[p.name] = scaled
+        try:
+            params = scale_terrain_params(e.kind, e.params, factor)
+        except ValueError as err:
+            raise SuiteError(f"terrains[{i}].params.{err}") from None
         raw = {"kind": e.kind, "params": params, "seeds": list(e.seeds)}
         for key in ("randomization", "command", "waypoints"):
             if getattr(e, key) is not None:
@@ -355,6 +344,32 @@ def scale_suite(suite: Suite, factor: float) -> Suite:
         return suite_from_dict(raw_suite, suite.source)
     except SuiteError as err:
         raise SuiteError(f"scaled by {factor:.3f}: {err}") from None
+
+
+def scale_terrain_params(kind: str, params: Mapping[str, Any], factor: float) -> dict[str, Any]:
+    """The parameters of a ``kind`` terrain magnified by ``factor`` (-), as :func:`scale_suite` does for each entry.
+
+    Every parameter in m (the kind's defaults filled in where ``params`` does not give them, the shared grid
+    parameters included) and every one in :data:`SCALED_FACTORS` is multiplied; the others are kept as given.
+    The result is not validated (:func:`quad_uneven_env.terrain.parse_terrain_spec` does that).
+
+    :raises ValueError: ``"NAME cannot be scaled ..."`` for a parameter given as a file path (a heightmap's .npy).
+    """
+    out = dict(params)
+    for p in KINDS[kind].all_params:
+        value = out.get(p.name, p.default)
+        if p.name == "x_start" and out.get("origin") is not None:
+            continue  # a heightmap placed by its origin (scaled) takes no x_start
+        if p.unit == "m" or p.name in SCALED_FACTORS:
+            try:
+                scaled = _magnified(value, factor)
+            except TypeError:
+                raise ValueError(
+                    f"{p.name} cannot be scaled to the robot: give the values (m) in the suite, not a file ({value!r})"
+                ) from None
+            if scaled is not None:
+                out[p.name] = scaled
+    return out
 
 
 SCALED_FACTORS = ("scale",)
