@@ -1,6 +1,7 @@
 """Planning speed and success: COG time per gait cycle, swing time per leg, fraction solved.
 
-Usage: ``.venv/bin/python benchmarks/planning.py [--cycles 50] [--fd-cycles 10] [--slsqp-cycles N] [--seed 0]``
+Usage: ``.venv/bin/python benchmarks/planning.py [--robot NAME] [--cycles 50] [--fd-cycles 10] [--slsqp-cycles N]
+[--seed 0]``
 
 For each terrain (rough, amplitude 5 cm; stepping stones; a 25 deg slope; stones with 15 cm gaps
 and +-5 cm tops), ``--cycles`` random gait cycles:
@@ -9,6 +10,14 @@ automatically, the COG goal above them. Each problem is solved by the SQP (defau
 plain SLSQP with analytic gradients and by SLSQP with finite-difference gradients (the
 reference, on the first ``--fd-cycles`` problems: it is slow) in the same run. Prints a
 Markdown table.
+
+``--robot NAME`` (a shipped robot or a robot YAML; default ``paper``) plans for that robot as the expert sees it
+(:func:`planners.robot_geometry.robot_geometry` of its description) on the same terrains magnified by its scale
+``s`` = leg length / 0.42 m (:func:`agents.evaluation.suites.scale_terrain_params`), with the settings above scaled
+by the expert's rules (:meth:`agents.expert.ExpertConfig.for_robot`: the phases, swing clearance, stability margin,
+COG height and the start area in proportion to the robot's expert settings over the paper robot's). The paper
+robot's problems are the same with or without ``--robot paper``, and only its run adds the continuous-walking
+table.
 """
 
 from __future__ import annotations
@@ -25,7 +34,7 @@ import dataclasses  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from planners import PlanningError, Scenario, choose_footholds, plan_gait_cycle  # noqa: E402
+from planners import PAPER_DURATIONS, PlanningError, Scenario, choose_footholds, plan_gait_cycle  # noqa: E402
 from quad_uneven_env.config import load_robot_config  # noqa: E402
 from quad_uneven_env.robot.kinematics import hip_positions_B  # noqa: E402
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec  # noqa: E402
@@ -38,40 +47,111 @@ TERRAINS = {
 }
 
 
-def random_scenario(hf, cfg, rng: np.random.Generator) -> Scenario:
-    """A cycle starting at a random x on the course with the feet under the hips."""
+def _paper_feet_xy() -> np.ndarray:
+    return hip_positions_B(load_robot_config("paper"))[:, :2]
+
+
+@dataclasses.dataclass(frozen=True)
+class Setting:
+    """The random cycles' settings for one robot (the paper robot's: the values below)."""
+
+    robot: object = None
+    """the robot as the planners see it (None: the paper's Table 1)."""
+    feet_xy_B: np.ndarray = dataclasses.field(default_factory=lambda: _paper_feet_xy())
+    """(4, 2) m, the standing feet in the trunk frame."""
+    scale: float = 1.0
+    """-, lengths (terrain, start area) x scale."""
+    cog_height: float = 0.36
+    """m, COG above the mean foothold."""
+    epsilon: float = 0.1
+    """N m, the stability margin."""
+    clearance: float = 0.05
+    """m, swing clearance."""
+    durations: tuple[float, ...] = PAPER_DURATIONS
+    """s, the seven phases."""
+
+
+def robot_setting(name: str) -> Setting:
+    """The paper robot's :class:`Setting` scaled to robot ``name`` by the expert's rules (the paper's: unchanged)."""
+    from agents.expert.config import ExpertConfig
+    from planners.robot_geometry import robot_geometry
+    from quad_uneven_env.robot.description import load_robot
+
+    desc = load_robot(name)
+    if desc.config is not None:
+        return Setting()
+    paper, mine = ExpertConfig(), ExpertConfig.for_robot(desc)
+    geometry = robot_geometry(desc)
+    t = sum(mine.durations) / sum(paper.durations)
+    base = Setting()
+    return Setting(
+        robot=geometry,
+        feet_xy_B=geometry.feet_B[:, :2].copy(),
+        scale=geometry.scale,
+        cog_height=base.cog_height * mine.cog_height / paper.cog_height,
+        epsilon=base.epsilon * mine.epsilon / paper.epsilon,
+        clearance=base.clearance * mine.clearance / paper.clearance,
+        durations=tuple(max(round(d * t, 2), 0.01) for d in base.durations),
+    )
+
+
+def robot_terrain(spec: dict, setting: Setting) -> dict:
+    """``spec`` magnified by the robot's scale (every length of the terrain, the grid's included)."""
+    if setting.scale == 1.0:
+        return spec
+    from agents.evaluation.suites import scale_terrain_params
+
+    kind = spec["kind"]
+    return {"kind": kind, **scale_terrain_params(kind, {k: v for k, v in spec.items() if k != "kind"}, setting.scale)}
+
+
+def random_scenario(hf, cfg, rng: np.random.Generator, setting: Setting | None = None) -> Scenario:
+    """A cycle starting at a random x on the course with the feet under the hips (lengths x the robot's scale)."""
+    st = setting or Setting()
+    s, h = st.scale, st.cog_height
+    robot = cfg if st.robot is None else st.robot
     (x0, x1), _ = hf.extent
-    bx = rng.uniform(max(x0 + 1.0, 0.0), min(x1 - 1.5, 4.0))
-    by = rng.uniform(-0.2, 0.2)
-    feet = np.column_stack([hip_positions_B(cfg)[:, :2] + [bx, by], np.zeros(4)])
+    bx = rng.uniform(max(x0 + 1.0 * s, 0.0), min(x1 - 1.5 * s, 4.0 * s))
+    by = rng.uniform(-0.2 * s, 0.2 * s)
+    feet = np.column_stack([st.feet_xy_B + np.array([bx, by]), np.zeros(4)])
     feet[:, 2] = hf.height(feet[:, 0], feet[:, 1])
     # Start on acceptable footholds near the hips (on stepping stones, not in the gaps).
-    feet = choose_footholds(hf, cfg, feet, np.array([bx, by, feet[:, 2].mean() + 0.36]), np.array([bx, by]), 0.36)
-    cog = np.array([*feet[:, :2].mean(axis=0), feet[:, 2].mean() + 0.36])
-    return Scenario(terrain=hf, feet_start=feet, cog_start={"pos": cog}, epsilon=0.1, clearance=0.05)
+    cog0 = np.array([bx, by, feet[:, 2].mean() + h])
+    feet = choose_footholds(hf, robot, feet, cog0, np.array([bx, by]), h, st.durations)
+    cog = np.array([*feet[:, :2].mean(axis=0), feet[:, 2].mean() + h])
+    return Scenario(
+        terrain=hf, feet_start=feet, cog_start={"pos": cog}, epsilon=st.epsilon, clearance=st.clearance,
+        durations=st.durations, cog_height=h, robot=st.robot,
+    )  # fmt: skip
 
 
 def pct(a, q):
     return float(np.percentile(a, q)) * 1e3 if len(a) else float("nan")
 
 
-def main() -> None:
+def main() -> str:
+    """Run the table of random cycles; return the robot's name (``--robot``)."""
     ap = argparse.ArgumentParser()
     ap.add_argument("--cycles", type=int, default=50)
     ap.add_argument("--fd-cycles", type=int, default=10)
     ap.add_argument("--slsqp-cycles", type=int, default=None, help="cycles also solved by SLSQP (default: all)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--robot", default="paper", help="a shipped robot or a robot YAML (default: paper)")
     args = ap.parse_args()
     cfg = load_robot_config("paper")
+    setting = robot_setting(args.robot)
     rng = np.random.default_rng(args.seed)
     rows = []
+    if setting.robot is not None:
+        print(f"robot {args.robot}: lengths x {setting.scale:.3f}, cycle {sum(setting.durations):.2f} s\n")
     for name, spec in TERRAINS.items():
+        spec = robot_terrain(spec, setting)
         hf = Terrain(parse_terrain_spec(spec)).generate(np.random.default_rng(int(rng.integers(1 << 31))))
         cog_t, swing_t, total_t, slsqp_t, fd_t, iters = [], [], [], [], [], []
         solved, dev_slsqp, dev_fd, failures = 0, [], [], []
         for k in range(args.cycles + 1):  # the first cycle only warms the caches
             try:
-                sc = random_scenario(hf, cfg, rng)
+                sc = random_scenario(hf, cfg, rng, setting)
                 plan = plan_gait_cycle(sc)
                 if k == 0:
                     continue
@@ -105,20 +185,22 @@ def main() -> None:
 
     print(
         "| terrain | solved | COG SQP median / p95 (ms) | SQP iters (mean) | swing per leg median (ms) | "
-        "cycle total median (ms) | SLSQP analytic median / p95 (ms) | SLSQP finite-diff median (ms) "
+        "cycle total median / p95 (ms) | SLSQP analytic median / p95 (ms) | SLSQP finite-diff median (ms) "
         "| max |ΔP| vs SLSQP (mm) |"
     )
     print("|---|---|---|---|---|---|---|---|---|")
     for name, n, solved, cog_t, swing_t, total_t, slsqp_t, fd_t, iters, dev_s, dev_f, _ in rows:
         print(
             f"| {name} | {solved}/{n} ({100 * solved / n:.0f} %) | {pct(cog_t, 50):.1f} / {pct(cog_t, 95):.1f} | "
-            f"{np.mean(iters) if iters else float('nan'):.2f} | {pct(swing_t, 50):.2f} | {pct(total_t, 50):.1f} | "
+            f"{np.mean(iters) if iters else float('nan'):.2f} | {pct(swing_t, 50):.2f} | "
+            f"{pct(total_t, 50):.1f} / {pct(total_t, 95):.1f} | "
             f"{pct(slsqp_t, 50):.1f} / {pct(slsqp_t, 95):.1f} | {pct(fd_t, 50):.0f} (n={len(fd_t)}) | "
             f"{1e3 * max(dev_s + dev_f, default=float('nan')):.3f} |"
         )
     for name, *_, failures in rows:
         for f in failures[:5]:
             print(f"- {name} failure: {f}")
+    return args.robot
 
 
 def walk(n_cycles: int = 16) -> None:
@@ -159,5 +241,5 @@ def walk(n_cycles: int = 16) -> None:
 
 
 if __name__ == "__main__":
-    main()
-    walk()
+    if main() == "paper":
+        walk()

@@ -21,9 +21,10 @@ waypoint is reached (in order); its env gets the command ``{}`` (all zero) unles
 waypoint follower then steers (:mod:`agents.waypoints`).
 
 With ``scale: leg_length`` (or ``quad-uneven evaluate --scale-terrain``) the suite is written for the paper's
-robot and run on the evaluated robot at its own scale (:func:`scale_suite`): every length (terrain parameters in
-m, their defaults included, and the goal distance, capped where the terrain grid ends) is multiplied by the
-robot's leg length over 0.42 m and the time limit by the square root of it (equal Froude number).
+robot and run on the evaluated robot at its own scale (:func:`scale_suite`): the whole terrain is magnified by
+the robot's leg length over 0.42 m (every terrain parameter in m, defaults and the shared grid parameters
+included: the same nodes at scaled positions and heights), so is the goal distance, and the time limit is
+multiplied by the square root of it (equal Froude number).
 
 Terrain parameters are validated by :func:`quad_uneven_env.terrain.parse_terrain_spec`. Errors are
 ``SuiteError`` (a ``ValueError``) whose message starts with the offending field, e.g.
@@ -38,6 +39,8 @@ import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from agents.waypoints import load_waypoints
 from quad_uneven_env.command import load_command
@@ -55,10 +58,6 @@ SUITE_FIELDS = ("name", "goal_distance", "time_limit", "terrains")
 
 SUITE_SCALES = ("none", "leg_length")
 """Values of a suite's optional ``scale`` field: as written, or in units of the robot's leg length."""
-
-GOAL_ROOM = 1.0
-"""m in the paper robot's lengths: the room a scaled goal leaves before the end of the terrain grid (the front
-feet and a stride ahead of the COG; the shipped suites' 5 m goals leave 1.5 m)."""
 
 ENTRY_FIELDS = ("kind", "params", "seeds", "randomization", "command", "waypoints")
 """Fields of one ``terrains`` entry (``params`` optional, default ``{}``; ``randomization``, ``command`` and
@@ -97,7 +96,7 @@ class TerrainEntry:
     @property
     def label(self) -> str:
         """Short human-readable name, e.g. ``stairs(direction=up)`` or ``rough(amplitude=0.05) + mild``."""
-        inner = ", ".join(f"{k}={v}" for k, v in self.params.items())
+        inner = ", ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in self.params.items())
         label = f"{self.kind}({inner})" if inner else self.kind
         if self.command is not None:
             fixed = ", ".join(f"{k}={v}" for k, v in self.command.items() if k != "ranges")
@@ -309,44 +308,92 @@ def suite_from_dict(raw: Mapping[str, Any], source: str = "") -> Suite:
 
 
 def scale_suite(suite: Suite, factor: float) -> Suite:
-    """``suite`` with every length times ``factor`` (-) and its time limit times ``sqrt(factor)``.
+    """``suite`` magnified by ``factor`` (-): every length times ``factor``, its time limit times ``sqrt(factor)``.
 
-    Lengths: each entry's terrain parameters in m (its kind's defaults filled in where the suite does not give
-    them) and the goal distance, capped so that it leaves :data:`GOAL_ROOM` x ``factor`` before the end of every
-    entry's terrain grid (the robot's feet stay on it). The result says ``scale: none``; its name
-    records the factor.
+    Lengths: each entry's terrain parameters in m, its kind's defaults filled in where the suite does not give
+    them, the shared grid parameters (``length``, ``width``, ``cell_size``, ``x_start``, ``spawn_radius``)
+    included, a heightmap's inline heights and ``origin`` too; the ``paper`` kind's ``scale`` (its scripted blocks)
+    is multiplied as well. The scaled terrain is the written one magnified: the same nodes, each at ``factor``
+    times its position and height. The goal distance is multiplied too (the room the suite leaves before the end
+    of each grid grows with it). The result says ``scale: none``; its name records the factor. A factor of 1
+    gives the suite's own terrains, goal and time limit.
 
-    :raises SuiteError: if a scaled parameter leaves its allowed range (naming it).
+    :raises SuiteError: if a scaled parameter leaves its allowed range (e.g. ``cell_size`` outside [0.005, 0.5]
+        m), if a heightmap's heights are a .npy path, or if the scaled goal lies beyond a grid's exit (naming it).
     """
     if not (factor > 0 and factor < 100):
         raise SuiteError(f"scale factor must be a number in (0, 100), got {factor!r}")
     terrains = []
-    exits = []
-    for e in suite.terrains:
-        params = dict(e.params)
-        for p in KINDS[e.kind].params:
-            value = params.get(p.name, p.default)
-            if p.unit == "m" and p.kind == "float" and isinstance(value, int | float) and not isinstance(value, bool):
-                params[p.name] = round(float(value) * factor, 6)
+    for i, e in enumerate(suite.terrains):
         try:
-            spec = parse_terrain_spec({"kind": e.kind, **params})
+            params = scale_terrain_params(e.kind, e.params, factor)
         except ValueError as err:
-            raise SuiteError(f"scaled by {factor:.3f}: {_rename_terrain_error(str(err), len(terrains))}") from None
-        grid = KINDS[e.kind].grid(spec.params)
-        exits.append(grid.origin[0] + grid.size[0] - GOAL_ROOM * factor)
+            raise SuiteError(f"terrains[{i}].params.{err}") from None
         raw = {"kind": e.kind, "params": params, "seeds": list(e.seeds)}
         for key in ("randomization", "command", "waypoints"):
             if getattr(e, key) is not None:
                 raw[key] = getattr(e, key)
         terrains.append(raw)
-    goal = round(min(suite.goal_distance * factor, min(exits)), 6)
     raw_suite = {
         "name": f"{suite.name} (lengths x{factor:.3f})",
-        "goal_distance": goal,
-        "time_limit": round(suite.time_limit * factor**0.5, 6),
+        "goal_distance": suite.goal_distance * factor,
+        "time_limit": suite.time_limit * factor**0.5,
         "terrains": terrains,
     }
-    return suite_from_dict(raw_suite, suite.source)
+    try:
+        return suite_from_dict(raw_suite, suite.source)
+    except SuiteError as err:
+        raise SuiteError(f"scaled by {factor:.3f}: {err}") from None
+
+
+def scale_terrain_params(kind: str, params: Mapping[str, Any], factor: float) -> dict[str, Any]:
+    """The parameters of a ``kind`` terrain magnified by ``factor`` (-), as :func:`scale_suite` does for each entry.
+
+    Every parameter in m (the kind's defaults filled in where ``params`` does not give them, the shared grid
+    parameters included) and every one in :data:`SCALED_FACTORS` is multiplied; the others are kept as given.
+    The result is not validated (:func:`quad_uneven_env.terrain.parse_terrain_spec` does that).
+
+    :raises ValueError: ``"NAME cannot be scaled ..."`` for a parameter given as a file path (a heightmap's .npy).
+    """
+    out = dict(params)
+    for p in KINDS[kind].all_params:
+        value = out.get(p.name, p.default)
+        if p.name == "x_start" and out.get("origin") is not None:
+            continue  # a heightmap placed by its origin (scaled) takes no x_start
+        if p.unit == "m" or p.name in SCALED_FACTORS:
+            try:
+                scaled = _magnified(value, factor)
+            except TypeError:
+                raise ValueError(
+                    f"{p.name} cannot be scaled to the robot: give the values (m) in the suite, not a file ({value!r})"
+                ) from None
+            if scaled is not None:
+                out[p.name] = scaled
+    return out
+
+
+SCALED_FACTORS = ("scale",)
+"""Terrain parameters without a unit that :func:`scale_suite` multiplies too (the ``paper`` kind's block scale)."""
+
+
+def _magnified(value: Any, factor: float) -> Any:
+    """``value`` (a length in m, an (x, y) pair or a 2-D list of heights) times ``factor``; None if it has no number.
+
+    Not rounded: a scaled grid keeps every node where the written one has it (features on node edges stay there).
+
+    :raises TypeError: if ``value`` is a string (a file path).
+    """
+    if isinstance(value, bool) or value is None or value is REQUIRED:
+        return None
+    if isinstance(value, str | os.PathLike):
+        raise TypeError(value)
+    if isinstance(value, int | float):
+        return float(value) * factor
+    if isinstance(value, list | tuple):
+        return [_magnified(v, factor) for v in value]
+    if isinstance(value, np.ndarray):
+        return (np.asarray(value, dtype=np.float64) * factor).tolist()
+    return None
 
 
 def episode_tasks(suite: Suite, episodes: int | None = None, seed_offset: int = 0) -> list[EpisodeTask]:

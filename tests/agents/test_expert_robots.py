@@ -119,3 +119,20 @@ def test_make_vec_runs_a_urdf_robot():
         obs, _, terminated, _, _ = venv.step(np.zeros((2, 12), dtype=np.float32))
     assert obs.shape == (2, 134) and not terminated.any()
     assert venv.envs[0].unwrapped.robot.name == "solo12"
+
+
+def test_an_evaluation_runs_the_suite_at_the_robot_scale(tmp_path):
+    """A ``scale: leg_length`` suite on Solo12 (s = 0.3248 / 0.42): the episode's terrain is the written one with
+    every length x s (the grid's 0.02 m cells are 1.55 cm), the goal is 1 m x s, the time limit 1 s x sqrt(s)."""
+    from agents.evaluation.run import evaluate
+    from agents.evaluation.suites import suite_from_dict
+
+    s = load_robot("solo12").leg_length / 0.42
+    raw = {"name": "stones", "scale": "leg_length", "goal_distance": 1.0, "time_limit": 1.0,
+           "terrains": [{"kind": "stepping_stones", "params": {"gap": 0.05}, "seeds": [0]}]}  # fmt: skip
+    res = evaluate(suite_from_dict(raw), "zero", tmp_path / "o", env_kwargs={"robot": "solo12"}, progress=False)
+    params = res["episodes"][0]["params"]
+    assert params["gap"] == pytest.approx(0.05 * s) and params["cell_size"] == pytest.approx(0.02 * s)
+    assert params["length"] == pytest.approx(8.0 * s) and params["stone_size"] == pytest.approx(0.25 * s)
+    assert res["meta"]["goal_distance"] == pytest.approx(s)
+    assert res["meta"]["time_limit"] == pytest.approx(math.sqrt(s))

@@ -170,28 +170,113 @@ def test_episode_tasks_cap_offset_and_order():
 
 # ---------------------------------------------------------------------- suites at the robot's scale
 def test_a_suite_scales_its_lengths_and_time_to_the_robot():
-    """Terrain lengths (defaults too) and the goal x s, time x sqrt(s); the goal leaves 1 m x s of the 8 m grid."""
+    """Terrain lengths (defaults and the shared grid parameters too) and the goal x s, time x sqrt(s)."""
     from agents.evaluation.suites import scale_suite
 
     suite = load_suite("targets")
     small = scale_suite(suite, 0.9)
     assert small.goal_distance == pytest.approx(4.5) and small.time_limit == pytest.approx(120.0 * 0.9**0.5)
     rough, slope, stairs = small.terrains[1], small.terrains[2], small.terrains[3]
-    assert rough.params == {"amplitude": pytest.approx(0.036), "wavelength": pytest.approx(0.54)}
+    grid = {"length": 7.2, "width": 2.7, "cell_size": 0.018, "x_start": -1.35, "spawn_radius": 0.54}
+    assert rough.params == pytest.approx({"amplitude": 0.036, "wavelength": 0.54, **grid})
     assert slope.params["angle_deg"] == 10 and slope.params["ramp_length"] == pytest.approx(1.35)
     assert stairs.params["riser"] == pytest.approx(0.072) and stairs.params["n_steps"] == 5
     assert [e.seeds for e in small.terrains] == [e.seeds for e in suite.terrains]
-    big = scale_suite(suite, 1.5)
-    assert big.goal_distance == pytest.approx(5.0)  # 7.5 m does not fit: the grid's end (6.5 m) less 1 m x 1.5
     flat = scale_suite(suite_from_dict({**_suite_raw(), "terrains": [{"kind": "stairs", "seeds": [0]}]}), 2.0)
     assert flat.terrains[0].params["riser"] == pytest.approx(0.16)  # the default 0.08 m, scaled
+    assert flat.terrains[0].params["length"] == pytest.approx(16.0)  # the default 8 m grid, scaled
+
+
+def test_a_suite_at_solo12_and_hyq_scale_is_the_paper_terrain_magnified():
+    """Solo12 (s = 0.773): the stones' gap 0.05 x s = 0.0387 m stays above 2 cells (2 x 0.02 x s = 0.0309 m).
+    HyQ (s = 0.696 / 0.42 = 1.657): the grid is 8 s = 13.26 m long, so the goal is 5 s = 8.29 m, uncapped."""
+    import numpy as np
+
+    from agents.evaluation.suites import scale_suite
+    from quad_uneven_env.terrain import Terrain
+
+    suite = load_suite("targets")
+    solo = scale_suite(suite, 0.773)
+    stones = solo.terrains[5].params
+    assert stones["gap"] == pytest.approx(0.03865) and stones["cell_size"] == pytest.approx(0.01546)
+    assert stones["stone_size"] == pytest.approx(0.19325) and solo.goal_distance == pytest.approx(3.865)
+    s = 0.696 / 0.42
+    hyq = scale_suite(suite, s)
+    assert hyq.goal_distance == pytest.approx(5.0 * s) and hyq.goal_distance == pytest.approx(8.2857, abs=1e-4)
+    assert hyq.terrains[0].params["length"] == pytest.approx(8.0 * s)
+    # Node by node: the same grid shape, every height x s (the rough noise, the step and stone edges included).
+    for scaled in (solo, hyq):
+        f = scaled.goal_distance / suite.goal_distance
+        for a, b in zip(suite.terrains, scaled.terrains, strict=True):
+            ha = np.asarray(Terrain(a.spec).generate(np.random.default_rng(3)).heights)
+            hb = np.asarray(Terrain(b.spec).generate(np.random.default_rng(3)).heights)
+            assert ha.shape == hb.shape and np.ptp(ha) >= 0.0
+            np.testing.assert_allclose(hb / f, ha, rtol=0, atol=1e-12, err_msg=a.label)
+
+
+def test_scaling_by_one_changes_nothing():
+    """The paper robot (s = 1): every shipped suite's terrains, goal and time limit stay as written."""
+    import numpy as np
+
+    from agents.evaluation.suites import scale_suite
+    from quad_uneven_env.terrain import Terrain
+
+    for name in suite_names():
+        suite = load_suite(name)
+        same = scale_suite(suite, 1.0)
+        assert (same.goal_distance, same.time_limit) == (suite.goal_distance, suite.time_limit), name
+        for a, b in zip(suite.terrains, same.terrains, strict=True):
+            assert parse_terrain_spec(a.spec) == parse_terrain_spec(b.spec), f"{name}: {a.label}"
+            ha = np.asarray(Terrain(a.spec).generate(np.random.default_rng(0)).heights)
+            hb = np.asarray(Terrain(b.spec).generate(np.random.default_rng(0)).heights)
+            assert np.array_equal(ha, hb), f"{name}: {a.label}"
+
+
+def test_a_scaled_paper_terrain_moves_its_blocks():
+    import numpy as np
+
+    from agents.evaluation.suites import scale_suite
+    from quad_uneven_env.terrain import PAPER_BLOCKS, Terrain
+
+    big = scale_suite(load_suite("paper"), 1.5)
+    p = big.terrains[0].params
+    assert p["scale"] == pytest.approx(1.5) and p["base_height"] == pytest.approx(0.18)
+    terrain = Terrain(big.terrains[0].spec)
+    terrain.generate(np.random.default_rng(0))
+    target = PAPER_BLOCKS["target"] * 1.5
+    assert terrain.height(target[:, 0], target[:, 1]) == pytest.approx(target[:, 2], abs=1e-6)
+    assert terrain.spawn_height == pytest.approx(0.19 * 1.5, abs=1e-6)
+
+
+def test_a_scaled_heightmap_scales_its_heights_and_refuses_a_file(tmp_path):
+    import numpy as np
+
+    from agents.evaluation.suites import scale_suite
+
+    heights = [[0.0] * 101 for _ in range(61)]  # 2 m x 1.2 m at 0.02 m
+    heights[50][90] = 0.1
+    given = {"heights": heights, "x_start": -0.8, "spawn_radius": 0.3}
+    raw = {**_suite_raw(), "goal_distance": 0.5, "terrains": [{"kind": "heightmap", "params": given, "seeds": [0]}]}
+    params = scale_suite(suite_from_dict(raw), 2.0).terrains[0].params
+    assert params["heights"][50][90] == pytest.approx(0.2) and params["cell_size"] == pytest.approx(0.04)
+    assert params["x_start"] == pytest.approx(-1.6) and params["spawn_radius"] == pytest.approx(0.6)
+    assert "length" not in params
+    raw["terrains"][0]["params"] = {"heights": heights, "origin": [-0.8, -0.6], "spawn_radius": 0.3}
+    params = scale_suite(suite_from_dict(raw), 2.0).terrains[0].params
+    assert params["origin"] == pytest.approx([-1.6, -1.2]) and "x_start" not in params
+    np.save(tmp_path / "ground.npy", np.array(heights))
+    raw["terrains"][0]["params"] = {**given, "heights": str(tmp_path / "ground.npy")}
+    with pytest.raises(SuiteError, match=r"terrains\[0\]\.params\.heights cannot be scaled to the robot"):
+        scale_suite(suite_from_dict(raw), 2.0)
 
 
 def test_a_scaled_parameter_out_of_range_is_named():
     from agents.evaluation.suites import scale_suite
 
-    with pytest.raises(SuiteError, match=r"scaled by 0\.700: terrains\[5\]\.params\.gap must be >= 2 \* cell_size"):
-        scale_suite(load_suite("targets"), 0.7)
+    with pytest.raises(SuiteError, match=r"scaled by 0\.200: terrains\[0\]\.params\.cell_size must be a number in"):
+        scale_suite(load_suite("targets"), 0.2)
+    with pytest.raises(SuiteError, match=r"scaled by 3\.500: terrains\[3\]\.params\.riser must be a number in"):
+        scale_suite(load_suite("targets"), 3.5)
 
 
 def test_a_suite_may_ask_to_be_scaled_to_the_robot():

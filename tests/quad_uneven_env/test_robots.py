@@ -347,3 +347,16 @@ def test_bad_descriptions_are_refused_naming_the_field(tmp_path, edit, yaml_over
         ).read_text()
     with pytest.raises(ValueError, match=message):
         load_robot(path)
+
+
+@pytest.mark.parametrize("name", ("paper", *URDF_ROBOTS))
+def test_every_robot_passes_the_env_checkers(name):
+    """Gymnasium's checker (spaces, seeding, the exact determinism of a seeded reset and step) and SB3's, on each
+    robot's QuadUneven-v0 in its default action mode."""
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = gym.make("QuadUneven-v0", robot=name, terrain="rough")
+    assert env.unwrapped.robot.name == name
+    check_env(env.unwrapped, skip_render_check=True)
+    sb3_check_env(env.unwrapped, warn=True)

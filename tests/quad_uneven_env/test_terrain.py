@@ -515,6 +515,8 @@ def test_presets_load():
         ({"kind": "stepping_stones", "gap": 0.01}, "gap"),
         ({"kind": "stepping_stones", "hole_depth": 0.0}, "hole_depth"),
         ({"kind": "paper", "block_size": 0.5}, "block_size"),
+        ({"kind": "paper", "base_height": 0.16}, r"base_height must be <= 0.15 \* scale"),
+        ({"kind": "paper", "scale": 0.1}, "scale"),
         ({"kind": "heightmap"}, "heights"),
         ({"kind": "heightmap", "heights": np.zeros(10)}, "heights"),
         ({"kind": "heightmap", "heights": np.full((80, 80), np.inf)}, "heights"),

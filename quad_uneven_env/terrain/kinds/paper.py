@@ -34,7 +34,18 @@ of block-top centres (x, y, z) (m, world), legs in LF, RF, LH, RH order. A foot 
 is ``cfg.foot_radius`` (0.02 m) above its top."""
 
 FIELD_START_X = 0.6
-"""World x (m) where the seeded block field beyond the scripted blocks begins."""
+"""World x (m) where the seeded block field beyond the scripted blocks begins (times the kind's ``scale``)."""
+
+BASE_HEIGHT_MAX = 0.15
+"""m (times ``scale``): the highest ``base_height``, below the lowest block top (0.16 m)."""
+
+BLOCK_SIZE_MAX = 0.2
+"""m (times ``scale``): the widest ``block_size``, the blocks' spacing along x (0.2 m), so that none merge."""
+
+
+def blocks(p: Params, key: str) -> np.ndarray:
+    """(4, 3) block-top centres (x, y, z) (m, world) of ``PAPER_BLOCKS[key]`` times the kind's ``scale``."""
+    return PAPER_BLOCKS[key] * p["scale"]
 
 
 def _generate(p: Params, grid: Grid, rng: np.random.Generator) -> np.ndarray:
@@ -42,35 +53,39 @@ def _generate(p: Params, grid: Grid, rng: np.random.Generator) -> np.ndarray:
     pitch, base = p["field_pitch"], p["base_height"]
     h = np.full((grid.nrow, grid.ncol), base)
     # Seeded field: tiles of `pitch` from FIELD_START_X, centred on y = k pitch (feet near y = ±0.185 sit mid-tile).
-    ix = np.floor((xs - FIELD_START_X) / pitch + 1e-9).astype(int)
+    field_x = FIELD_START_X * p["scale"]
+    ix = np.floor((xs - field_x) / pitch + 1e-9).astype(int)
     iy = np.floor(ys / pitch + 0.5 + 1e-9).astype(int)
     iy0 = int(iy.min())
     n_ix = max(int(ix.max()) + 1, 1)
     tops = base + rng.uniform(0.0, p["block_jitter"], size=(int(iy.max()) - iy0 + 1, n_ix))
     field = tops[(iy - iy0)[:, None], np.clip(ix, 0, n_ix - 1)[None, :]]
-    h = np.where((xs >= FIELD_START_X - 1e-9)[None, :], field, h)
+    h = np.where((xs >= field_x - 1e-9)[None, :], field, h)
     half = p["block_size"] / 2.0 + 1e-9
-    for xc, yc, top in np.concatenate([PAPER_BLOCKS["start"], PAPER_BLOCKS["target"]]):
+    for xc, yc, top in np.concatenate([blocks(p, "start"), blocks(p, "target")]):
         on = (np.abs(ys - yc) <= half)[:, None] & (np.abs(xs - xc) <= half)[None, :]
         h[on] = top
     return h
 
 
 def _bounds(p: Params) -> tuple[float, float]:
-    tops = max(float(PAPER_BLOCKS["start"][:, 2].max()), float(PAPER_BLOCKS["target"][:, 2].max()))
+    tops = max(float(blocks(p, "start")[:, 2].max()), float(blocks(p, "target")[:, 2].max()))
     return p["base_height"], max(tops, p["base_height"] + p["block_jitter"])
 
 
 def _check(p: Params, where: str) -> None:
-    x0, lx = p["x_start"], p["length"]
-    blocks = np.concatenate([PAPER_BLOCKS["start"], PAPER_BLOCKS["target"]])
+    x0, lx, k = p["x_start"], p["length"], p["scale"]
+    for name, most in (("base_height", BASE_HEIGHT_MAX), ("block_size", BLOCK_SIZE_MAX)):
+        if p[name] > most * k:
+            raise ValueError(f"{where}.{name} must be <= {most:g} * scale = {most * k:g} m, got {p[name]:g}")
+    tops = np.concatenate([blocks(p, "start"), blocks(p, "target")])
     half = p["block_size"] / 2.0
-    if x0 > blocks[:, 0].min() - half - p["cell_size"] or x0 + lx < FIELD_START_X:
+    if x0 > tops[:, 0].min() - half - p["cell_size"] or x0 + lx < FIELD_START_X * k:
         raise ValueError(
-            f"{where}: x_start and length must put the scripted blocks and x = {FIELD_START_X} m on the grid"
+            f"{where}: x_start and length must put the scripted blocks and x = {FIELD_START_X * k:g} m on the grid"
         )
-    if p["width"] / 2.0 < np.abs(blocks[:, 1]).max() + half + p["cell_size"]:
-        raise ValueError(f"{where}.width must be > {2 * (np.abs(blocks[:, 1]).max() + half + p['cell_size']):g} m")
+    if p["width"] / 2.0 < np.abs(tops[:, 1]).max() + half + p["cell_size"]:
+        raise ValueError(f"{where}.width must be > {2 * (np.abs(tops[:, 1]).max() + half + p['cell_size']):g} m")
 
 
 KIND = TerrainKind(
@@ -81,16 +96,19 @@ KIND = TerrainKind(
         "footholds of `PAPER_BLOCKS` (tops 0.16-0.23 m), and beyond x = 0.6 m a seeded field of square tiles "
         "(`field_pitch`, centred on y = k field_pitch) with tops base_height + U(0, block_jitter), so a robot "
         "can keep walking 5+ m. The spawn area is NOT flat here: it is the four start blocks, and spawn_height "
-        "is the highest start-block top (0.19 m); spawn_radius is only checked to fit in the grid."
+        "is the highest start-block top (0.19 m); spawn_radius is only checked to fit in the grid. `scale` "
+        "magnifies the scripted blocks (positions and tops) and the field's start x; a suite scaled to a robot "
+        "(`scale: leg_length`) sets it with every length, and base_height <= 0.15 scale, block_size <= 0.2 scale."
     ),
     params=(
-        Param("base_height", 0.12, "m", "height of the ground around the blocks", lo=0.0, hi=0.15),
-        Param("block_size", 0.16, "m", "side of the scripted blocks' square tops", lo=0.04, hi=0.2),
+        Param("base_height", 0.12, "m", "height of the ground around the blocks (<= 0.15 scale)", lo=0.0, hi=1.5),
+        Param("block_size", 0.16, "m", "side of the scripted blocks' square tops (<= 0.2 scale)", lo=0.04, hi=2.0),
         Param("block_jitter", 0.06, "m", "field tiles' tops are base_height + U(0, block_jitter)", lo=0.0, hi=0.3),
         Param("field_pitch", 0.2, "m", "side of the field's square tiles", lo=0.1, hi=1.0),
+        Param("scale", 1.0, "-", "magnification of the scripted blocks and the field start", lo=0.25, hi=10.0),
     ),
     generate=_generate,
     z_bounds=_bounds,
     check=_check,
-    spawn_height=lambda p: float(PAPER_BLOCKS["start"][:, 2].max()),
+    spawn_height=lambda p: float(blocks(p, "start")[:, 2].max()),
 )
