@@ -143,7 +143,9 @@ def _results(suite: Suite, policy: str, records: list[dict[str, Any]], meta: dic
         "policy": str(policy),
         "episodes": records,
         "summary": summary,
-        "targets": json_safe(check_targets(suite.terrains, summary["by_entry"], suite.goal_distance)),
+        "targets": json_safe(
+            check_targets(suite.terrains, summary["by_entry"], suite.goal_distance, suite.length_scale)
+        ),
         "command_targets": json_safe(check_command_targets(suite.terrains, records)),
         "meta": json_safe(meta),
     }

@@ -124,6 +124,8 @@ class Suite:
     """file the suite was read from ("" if built from a mapping)."""
     scale: str = "none"
     """"none" (lengths as written) or "leg_length" (to be scaled to the robot's leg length, :func:`scale_suite`)."""
+    length_scale: float = 1.0
+    """-: the factor :func:`scale_suite` magnified the written suite by (1: as written)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -341,9 +343,10 @@ def scale_suite(suite: Suite, factor: float) -> Suite:
         "terrains": terrains,
     }
     try:
-        return suite_from_dict(raw_suite, suite.source)
+        scaled = suite_from_dict(raw_suite, suite.source)
     except SuiteError as err:
         raise SuiteError(f"scaled by {factor:.3f}: {err}") from None
+    return dataclasses.replace(scaled, length_scale=suite.length_scale * factor)
 
 
 def scale_terrain_params(kind: str, params: Mapping[str, Any], factor: float) -> dict[str, Any]:

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 from agents.evaluation.metrics import INDEX_OK_FRACTION
 from agents.evaluation.suites import TerrainEntry
 from quad_uneven_env.terrain import parse_terrain_spec
+from quad_uneven_env.terrain.kinds import KINDS
 
 MIN_SEEDS = 10
 """A target is judged on at least this many seeds of its terrain."""
@@ -45,17 +47,28 @@ TARGETS: tuple[Target, ...] = (
 measured stability index >= 0 for >= 99% of its time."""
 
 
-def _matches(target: Target, entry: TerrainEntry) -> bool:
+def _matches(target: Target, entry: TerrainEntry, length_scale: float) -> bool:
     if entry.kind != target.kind or entry.randomization is not None:  # the targets are for the nominal world
         return False
     if entry.command is not None or entry.waypoints is not None:  # walking to the goal, not where it is told
         return False
     params = parse_terrain_spec(entry.spec).params
-    return all(params.get(k) == v for k, v in target.params.items())
+    units = {p.name: p.unit for p in KINDS[target.kind].all_params}
+    for name, want in target.params.items():
+        got = params.get(name)
+        if units.get(name) == "m":
+            if not (isinstance(got, int | float) and math.isclose(got, want * length_scale, rel_tol=1e-9)):
+                return False
+        elif got != want:
+            return False
+    return True
 
 
 def check_targets(
-    entries: Sequence[TerrainEntry], by_entry: Sequence[Mapping[str, Any]], goal_distance: float
+    entries: Sequence[TerrainEntry],
+    by_entry: Sequence[Mapping[str, Any]],
+    goal_distance: float,
+    length_scale: float = 1.0,
 ) -> list[dict[str, Any]]:
     """One row per (target, matching entry) with the measured values and ``passed``.
 
@@ -63,14 +76,18 @@ def check_targets(
     entry with at least ``MIN_SEEDS`` seeds (a short check such as the ``smoke`` suite gives no rows).
     ``passed`` needs: >= ``MIN_SEEDS`` episodes run (fewer with ``--episodes``), the success rate, the speed
     (mean over successes) and every success with the index >= 0 for >= 99% of its time.
+
+    :param length_scale: -, the factor the suite was magnified by for a robot (``scale: leg_length``): the targets'
+        lengths (goal, terrain parameters in m) are judged times it and their speeds times its square root (the
+        same Froude number).
     """
     rows: list[dict[str, Any]] = []
-    if goal_distance < MIN_GOAL_DISTANCE:
+    if goal_distance < MIN_GOAL_DISTANCE * length_scale * (1 - 1e-9):
         return rows
     groups = {g["entry"]: g for g in by_entry}
     for target in TARGETS:
         for i, entry in enumerate(entries):
-            if i not in groups or len(entry.seeds) < MIN_SEEDS or not _matches(target, entry):
+            if i not in groups or len(entry.seeds) < MIN_SEEDS or not _matches(target, entry, length_scale):
                 continue
             g = groups[i]
             why = []
@@ -80,8 +97,9 @@ def check_targets(
             if rate < target.success_rate:
                 why.append(f"success rate {rate:.0%} < {target.success_rate:.0%}")
             speed = g["mean_speed_success"]
-            if target.min_speed is not None and (speed is None or speed < target.min_speed):
-                why.append(f"mean speed {speed if speed is None else round(speed, 3)} m/s < {target.min_speed} m/s")
+            min_speed = None if target.min_speed is None else target.min_speed * math.sqrt(length_scale)
+            if min_speed is not None and (speed is None or speed < min_speed):
+                why.append(f"mean speed {speed if speed is None else round(speed, 3)} m/s < {min_speed:.4g} m/s")
             if g["successes_index_ok"] < g["successes"]:
                 why.append(
                     f"{g['successes'] - g['successes_index_ok']} success(es) with the index < 0 for more than "
@@ -95,7 +113,7 @@ def check_targets(
                     "success_rate": g["success_rate"],
                     "required_success_rate": target.success_rate,
                     "mean_speed_success": speed,
-                    "required_speed": target.min_speed,
+                    "required_speed": min_speed,
                     "successes_index_ok": g["successes_index_ok"],
                     "successes": g["successes"],
                     "passed": not why,

@@ -371,6 +371,32 @@ def test_the_smoke_suite_judges_no_target_and_the_targets_suite_all_of_them():
     assert check_targets(smoke.terrains, perfect(smoke), smoke.goal_distance) == []
 
 
+@pytest.mark.parametrize("factor", [0.773, 1.551, 1.657])
+def test_a_suite_scaled_to_a_robot_judges_every_target_at_its_scale(factor):
+    """``targets`` magnified by a robot's factor: every target judged on its scaled entry (riser 8 cm x factor, goal
+    5 m x factor), the speed targets x sqrt(factor); the unscaled suite's entries judged at that factor match none."""
+    from agents.evaluation.suites import load_suite, scale_suite
+    from agents.evaluation.targets import TARGETS, check_targets
+
+    suite = load_suite("targets")
+    scaled = scale_suite(suite, factor)
+    assert scaled.length_scale == factor
+    n = len(suite.terrains[0].seeds)
+    group = {"episodes": n, "successes": n, "successes_index_ok": n, "success_rate": 1.0}
+    slow = 0.1 * factor**0.5 * 0.99  # just under the flat target's scaled 0.1 m/s
+    by_entry = [{"entry": i, **group, "mean_speed_success": slow} for i in range(len(scaled.terrains))]
+    rows = check_targets(scaled.terrains, by_entry, scaled.goal_distance, scaled.length_scale)
+    assert sorted(r["target"] for r in rows) == sorted(t.name for t in TARGETS)
+    speed_rows = {r["target"]: r for r in rows if r["required_speed"] is not None}
+    assert set(speed_rows) == {"flat", "rough 4 cm"}
+    assert all(r["required_speed"] == pytest.approx(0.1 * factor**0.5) and not r["passed"] for r in speed_rows.values())
+    assert all(r["passed"] for r in rows if r["required_speed"] is None)
+    unscaled_rows = check_targets(suite.terrains, by_entry, suite.goal_distance * factor, factor)
+    assert sorted(r["target"] for r in unscaled_rows) == ["flat", "slope 10°", "stepping stones"]  # no length
+    if factor > 1.0:  # a goal short of 5 m x factor judges nothing
+        assert check_targets(scaled.terrains, by_entry, suite.goal_distance, factor) == []
+
+
 class InstrumentedPolicy:
     """Stands still and exposes what the expert exposes: planner times, a failure log and a phase."""
 
