@@ -1034,6 +1034,37 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     return 1 if any(row["error"] for row in summary["runs"]) else 0
 
 
+def add_plot_curves_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register the ``plot-curves`` subcommand on ``sub``."""
+    p = sub.add_parser(
+        "plot-curves",
+        help="several training runs' learning curves in one figure",
+        description="Draw the learning curves of several `quad-uneven train` folders side by side: the rolling "
+        "mean of the training episodes' return, distance and fall rate, and the evaluations' mean return, against "
+        "env steps.",
+    )
+    p.add_argument("runs", nargs="+", type=Path, metavar="RUN", help="a quad-uneven train output folder")
+    p.add_argument("--out", type=Path, required=True, help="the figure (.png)")
+    p.add_argument("--labels", nargs="+", default=None, help="one legend label per RUN (default: the folder names)")
+    p.add_argument("--title", default="", help="the figure's title")
+    p.set_defaults(func=run_plot_curves_command)
+    return p
+
+
+def run_plot_curves_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven plot-curves``: 0, or 2 on bad input."""
+    from agents.rl.learning_curve import plot_learning_curves
+
+    labels = args.labels or [run.name for run in args.runs]
+    if len(labels) != len(args.runs):
+        raise ValueError(f"--labels: {len(labels)} labels for {len(args.runs)} runs; give one per RUN")
+    if args.out.suffix.lower() != ".png":
+        raise ValueError(f"--out must be a .png file, got {str(args.out)!r}")
+    out = plot_learning_curves(list(zip(labels, args.runs, strict=True)), args.out, title=args.title)
+    print(f"wrote {out}")
+    return 0
+
+
 # ---------------------------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
     """The ``quad-uneven`` parser with every subcommand."""
@@ -1042,7 +1073,7 @@ def build_parser() -> argparse.ArgumentParser:
     for add in (
         add_demo_parser, add_evaluate_parser, add_collect_parser, add_train_parser, add_export_parser, add_paper_parser,
         add_plan_paper_parser, add_robustness_parser, add_compare_parser, add_select_parser, add_sweep_parser,
-        add_fit_strength_parser, add_distill_parser,
+        add_fit_strength_parser, add_distill_parser, add_plot_curves_parser,
     ):  # fmt: skip
         add(sub)
     return parser

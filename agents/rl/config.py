@@ -110,6 +110,18 @@ class TrainConfig:
     observation statistics this run starts from (:mod:`agents.rl.warm_start`); it must have been trained for the
     same env (``algo``, ``residual_*``, ``expert``, ``expert_features``, ``normalize_obs``, ``env_kwargs``). None: a
     new model."""
+    init_log_std: float | None = param(None, "log(action units)", kind="float", lo=-20.0, hi=2.0, none_ok=True)
+    """PPO: the log standard deviation of the policy's action noise at the start of training, set after the
+    model is built and warm-started (a warm start otherwise keeps the saved model's, e.g. a distilled policy's
+    untrained -1); None: the saved model's, or ``policy_kwargs.log_std_init`` for a new model."""
+    freeze_obs_norm: bool = param(False, kind="bool")
+    """keep the observation statistics fixed during training (those of ``init_from``): the policy's inputs keep
+    the meaning its weights were trained for. Needs ``init_from`` and ``normalize_obs``; the rewards are still
+    normalised."""
+    critic_warmup_steps: int = param(0, "steps", kind="int", lo=0)
+    """PPO: env steps (all envs) at the start of training during which only the value function learns (the
+    actor's layers and log std are frozen): a warm-started actor then meets a critic that has seen its returns.
+    Counted in ``timesteps``; 0: none."""
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-serialisable copy."""
@@ -176,6 +188,17 @@ def validate(cfg: TrainConfig) -> TrainConfig:
     if cfg.init_from is not None and (not isinstance(cfg.init_from, str) or not cfg.init_from):
         raise TrainConfigError(
             f"init_from must be a path to a saved model (folder or .zip) or null, got {cfg.init_from!r}"
+        )
+    for name, value, unset in (
+        ("init_log_std", cfg.init_log_std, None),
+        ("critic_warmup_steps", cfg.critic_warmup_steps, 0),
+    ):
+        if value != unset and cfg.algo != "ppo":
+            raise TrainConfigError(f"{name} applies to PPO only, got algo={cfg.algo!r} with {name}={value!r}")
+    if cfg.freeze_obs_norm and (cfg.init_from is None or not cfg.normalize_obs):
+        raise TrainConfigError(
+            "freeze_obs_norm keeps the observation statistics of init_from, so it needs init_from and "
+            f"normalize_obs: true, got init_from={cfg.init_from!r}, normalize_obs={cfg.normalize_obs}"
         )
     expert = _mapping("expert", cfg.expert)
     if expert:

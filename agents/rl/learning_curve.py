@@ -117,4 +117,55 @@ def plot_learning_curve(monitor_dir: Path, eval_file: Path | None, out_png: Path
     }
 
 
-__all__ = ["plot_learning_curve", "read_evaluations", "read_monitor", "rolling_mean"]
+CURVE_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
+"""Colour of each run in :func:`plot_learning_curves`, in order (then repeated)."""
+
+
+def plot_learning_curves(runs: list[tuple[str, Path]], out_png: Path, title: str = "") -> Path:
+    """Several training runs' curves side by side: per run, the rolling mean of the training episodes' return,
+    distance (m) and fall rate, and the deterministic evaluations' mean return, against env steps.
+
+    :param runs: (label, ``quad-uneven train`` folder) pairs; each folder needs ``monitor/*.monitor.csv``.
+    :param out_png: the figure (PNG) written.
+    :raises ValueError: ``RUN: ...`` naming a folder without a finished training episode.
+    """
+    from agents.plotting import pyplot, save
+
+    curves = []
+    for label, folder in runs:
+        mon = read_monitor(Path(folder) / "monitor")
+        if not len(mon["timesteps"]):
+            raise ValueError(
+                f"RUN: {str(folder)!r} has no finished training episode in monitor/*.monitor.csv "
+                "(a quad-uneven train folder?)"
+            )
+        curves.append((label, mon, read_evaluations(Path(folder) / "eval" / "evaluations.npz")))
+    plt = pyplot()
+    panels = [
+        ("r", "episode return"),
+        ("ep_distance", "distance per episode (m)"),
+        ("ep_fell", "fall rate"),
+    ]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 8), sharex=True)
+    for i, (label, mon, ev) in enumerate(curves):
+        colour = CURVE_COLOURS[i % len(CURVE_COLOURS)]
+        for ax, (key, _) in zip(axes, panels, strict=True):
+            y = mon.get(key, np.full(len(mon["timesteps"]), np.nan))
+            ax.plot(
+                mon["timesteps"], rolling_mean(y), "-", color=colour, label=f"{label} (training, rolling {ROLLING})"
+            )
+            if key == "r" and ev is not None and len(ev["timesteps"]):
+                ax.plot(ev["timesteps"], ev["returns"], "o--", ms=4, color=colour, label=f"{label} (evaluation)")
+    for ax, (_, name) in zip(axes, panels, strict=True):
+        ax.set_ylabel(name)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    axes[-1].set_xlabel("environment steps")
+    if title:
+        axes[0].set_title(textwrap.fill(title, 70), fontsize=10)
+    fig.tight_layout()
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    return save(fig, out_png, dpi=110, tight=False)
+
+
+__all__ = ["plot_learning_curve", "plot_learning_curves", "read_evaluations", "read_monitor", "rolling_mean"]

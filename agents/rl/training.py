@@ -38,11 +38,14 @@ from agents.rl.warm_start import check_init_model, warm_start
 __all__ = [
     "TRAIN_OUTPUTS",
     "CheckpointWithStatsCallback",
+    "CriticWarmupCallback",
     "EpisodeMetricsCallback",
     "ProgressCallback",
     "SaveObsNormalizationCallback",
     "WallClockLimitCallback",
+    "actor_parameters",
     "save_obs_normalization",
+    "set_log_std",
     "train",
 ]
 
@@ -258,8 +261,56 @@ def _zero_mean_action(model: Any) -> None:
         head.bias.zero_()
 
 
+def set_log_std(model: Any, value: float) -> None:
+    """Set every entry of a PPO policy's ``log_std`` (the log standard deviation of its action noise) to ``value``."""
+    import torch
+
+    with torch.no_grad():
+        model.policy.log_std.fill_(value)
+
+
+def actor_parameters(model: Any) -> list[Any]:
+    """The parameters of a PPO policy's actor: its hidden layers, action head and log std (not the critic's)."""
+    policy = model.policy
+    return [
+        *policy.mlp_extractor.policy_net.parameters(),
+        *policy.action_net.parameters(),
+        policy.log_std,
+    ]
+
+
+class CriticWarmupCallback(BaseCallback):
+    """Freezes the actor (:func:`actor_parameters`) for the PPO updates on the first ``steps`` env steps: they
+    train the value function only.
+
+    The actor thaws at the first rollout end past ``steps`` (before that rollout's update).
+    """
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        self.steps = steps
+        self.frozen = False
+
+    def _set(self, frozen: bool) -> None:
+        for p in actor_parameters(self.model):
+            p.requires_grad_(not frozen)
+        self.frozen = frozen
+
+    def _on_training_start(self) -> None:
+        self._set(self.model.num_timesteps < self.steps)
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if self.frozen and self.model.num_timesteps > self.steps:
+            self._set(False)
+
+
 def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCallback], Any]:
     callbacks: list[BaseCallback] = [ProgressCallback(progress), EpisodeMetricsCallback()]
+    if cfg.critic_warmup_steps > 0:
+        callbacks.append(CriticWarmupCallback(cfg.critic_warmup_steps))
     if cfg.time_limit_min > 0:
         callbacks.append(WallClockLimitCallback(cfg.time_limit_min))
     eval_env = None
@@ -354,7 +405,9 @@ def train(
         try:
             model = _make_model(cfg, venv, None if tensorboard is None else Path(tensorboard))
             if init is not None:
-                warm_start(model, *init)
+                warm_start(model, *init, freeze_obs_norm=cfg.freeze_obs_norm)
+            if cfg.init_log_std is not None:
+                set_log_std(model, cfg.init_log_std)
             callbacks, eval_env = _callbacks(cfg, out, progress)
             wall0, interrupted = time.perf_counter(), False
             with sigterm_as_keyboard_interrupt():

@@ -5,7 +5,8 @@ weights, optimizer states and learned variables (SAC's entropy temperature) read
 :func:`agents.rl.model_io.read_model_zip`, which reads tensors only (``torch.load(weights_only=True)``) and
 checks every entry: nothing in the file is unpickled. The observation statistics come from the ``.npz`` next to
 the model and keep their weight (the saved run's step count), so the first new rollouts do not reset them.
-The replay buffer of an off-policy model is not saved and starts empty.
+The replay buffer of an off-policy model is not saved and starts empty. With ``freeze_obs_norm`` the statistics
+stay fixed for the whole run.
 
 The saved model must have been trained for the same env: every field that changes the observation, the
 action or what an action does (:data:`ENV_FIELDS`) must be equal in its ``rl_meta.json`` and in the metadata a
@@ -16,6 +17,9 @@ from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+from stable_baselines3.common.running_mean_std import RunningMeanStd
 
 from agents.rl.config import TrainConfigError
 from agents.rl.model_io import META_DEFAULTS, META_FILE, ModelError, read_metadata, read_model_zip, recorded_shape
@@ -86,12 +90,28 @@ def check_init_model(init_from: str | Path, expected: dict[str, Any]) -> tuple[P
     return path, int(steps) if isinstance(steps, int) and steps > 0 else 0
 
 
-def warm_start(model: Any, path: Path, steps: int) -> None:
+class FrozenRunningMeanStd(RunningMeanStd):
+    """SB3's running mean and variance with an ``update`` that changes nothing: statistics kept fixed."""
+
+    def __init__(self, mean: np.ndarray, var: np.ndarray, count: float) -> None:
+        super().__init__(shape=mean.shape)
+        self.mean, self.var, self.count = mean, var, count
+
+    def update(self, arr: np.ndarray) -> None:
+        """Ignore ``arr``: the statistics stay those given."""
+
+    def copy(self) -> FrozenRunningMeanStd:
+        """A copy (SB3 copies the statistics when it syncs envs)."""
+        return FrozenRunningMeanStd(self.mean.copy(), self.var.copy(), self.count)
+
+
+def warm_start(model: Any, path: Path, steps: int, freeze_obs_norm: bool = False) -> None:
     """Give ``model`` (built from the config) the weights, optimizers and variables saved in ``path``.
 
     :param model: a fresh SB3 algorithm on the training VecEnv.
     :param path: the saved model zip (:func:`check_init_model`).
     :param steps: the saved run's env steps: the weight of its observation statistics.
+    :param freeze_obs_norm: keep the saved observation statistics fixed during training.
     :raises TrainConfigError: ``init_from: ...`` if the networks differ (another ``net_arch``, observation or
         action size), or the model was trained with observation statistics and they are missing.
     """
@@ -118,9 +138,12 @@ def warm_start(model: Any, path: Path, steps: int) -> None:
         stats = ObsNormalization.load(norm_path(path), vn.obs_rms.mean.shape)
     except ValueError as err:
         raise TrainConfigError(f"init_from: {err}") from None
+    if freeze_obs_norm:
+        vn.obs_rms = FrozenRunningMeanStd(stats.mean.copy(), stats.var.copy(), float(max(steps, 1)))
+        return
     vn.obs_rms.mean = stats.mean.copy()
     vn.obs_rms.var = stats.var.copy()
     vn.obs_rms.count = float(max(steps, 1))
 
 
-__all__ = ["ENV_FIELDS", "check_init_model", "init_model_path", "warm_start"]
+__all__ = ["ENV_FIELDS", "FrozenRunningMeanStd", "check_init_model", "init_model_path", "warm_start"]

@@ -338,3 +338,67 @@ def test_overwrite_refuses_an_older_run_without_a_manifest(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith(f"error: --out {str(run)!r} holds outputs (checkpoints/)") and "manifest" in err
     assert (run / "checkpoints" / "model_999_steps.zip").is_file()
+
+
+def _fake_run(folder: Path, returns: list[float], evals: list[float] | None) -> Path:
+    """A train folder with one monitor CSV (episodes of 100 steps) and optionally an evaluations.npz."""
+    (folder / "monitor").mkdir(parents=True)
+    lines = ['#{"t_start": 0, "env_id": "None"}', "r,l,t,ep_stability_mean,ep_distance,ep_fell"]
+    lines += [f"{r},100,{i + 1},10.0,{0.1 * i},{i % 2}" for i, r in enumerate(returns)]
+    (folder / "monitor" / "0.monitor.csv").write_text("\n".join(lines) + "\n")
+    if evals is not None:
+        (folder / "eval").mkdir()
+        steps = 100 * np.arange(1, len(evals) + 1)
+        np.savez(folder / "eval" / "evaluations.npz", timesteps=steps, results=np.array(evals)[:, None],
+                 ep_lengths=np.full((len(evals), 1), 100))  # fmt: skip
+    return folder
+
+
+def test_plot_curves_draws_each_runs_rolling_means_and_evaluations(tmp_path, monkeypatch, capsys):
+    import agents.plotting
+    from agents.rl.learning_curve import rolling_mean
+
+    a = _fake_run(tmp_path / "a", [1.0, 2.0, 3.0, 4.0], [5.0, 6.0])
+    b = _fake_run(tmp_path / "b", [10.0, 0.0, 10.0], None)
+    figures = []
+    real_save = agents.plotting.save
+    monkeypatch.setattr(
+        agents.plotting, "save", lambda fig, path, **kw: figures.append(fig) or real_save(fig, path, **kw)
+    )
+    out = tmp_path / "fig.png"
+    assert main(["plot-curves", str(a), str(b), "--labels", "fine-tuned", "scratch", "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and str(out) in capsys.readouterr().out
+    returns, distance, falls = figures[0].axes
+    lines = {line.get_label(): line for line in returns.lines}
+    assert set(lines) == {
+        "fine-tuned (training, rolling 20)",
+        "fine-tuned (evaluation)",
+        "scratch (training, rolling 20)",
+    }
+    np.testing.assert_allclose(lines["fine-tuned (training, rolling 20)"].get_xdata(), [100, 200, 300, 400])
+    np.testing.assert_allclose(lines["fine-tuned (training, rolling 20)"].get_ydata(), [1.0, 1.5, 2.0, 2.5])
+    np.testing.assert_allclose(
+        lines["scratch (training, rolling 20)"].get_ydata(), rolling_mean(np.array([10.0, 0, 10]))
+    )
+    np.testing.assert_allclose(lines["fine-tuned (evaluation)"].get_ydata(), [5.0, 6.0])
+    np.testing.assert_allclose(distance.lines[0].get_ydata(), [0.0, 0.05, 0.1, 0.15])
+    np.testing.assert_allclose(falls.lines[1].get_ydata(), [0.0, 0.5, 1 / 3])
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["EMPTY"], "error: RUN: "),
+        (["A", "--labels", "x", "y"], "error: --labels: 2 labels for 1 runs"),
+        (["A", "--out", "fig.pdf"], "error: --out must be a .png"),
+    ],
+)
+def test_plot_curves_bad_input_exits_2_with_one_line(tmp_path, capsys, argv, message):
+    (tmp_path / "EMPTY").mkdir()
+    _fake_run(tmp_path / "A", [1.0], None)
+    argv = [str(tmp_path / x) if x in ("EMPTY", "A") else x for x in argv]
+    if "--out" not in argv:
+        argv += ["--out", str(tmp_path / "fig.png")]
+    assert main(["plot-curves", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(message) and err.count("\n") == 1

@@ -177,3 +177,170 @@ def test_sb3_sac_ignores_log_std_init(tmp_path):
     with pytest.warns(UserWarning, match=r"^policy_kwargs.log_std_init has no effect on SAC without use_sde"):
         std = _std(tmp_path, policy_kwargs={"net_arch": [16], "log_std_init": -2.3})
     assert np.median(std) > 0.5 and std.std() > 1e-3
+
+
+# PPO from a saved policy: the action noise it starts with, fixed observation statistics, a critic warm-up.
+
+TINY_PPO_SCRATCH = {
+    "algo": "ppo",
+    "residual": False,
+    "expert_features": False,
+    "residual_penalty": 0.0,
+    "terrain": "flat",
+    "timesteps": 64,
+    "n_envs": 1,
+    "vec_env": "dummy",
+    "max_episode_steps": 40,
+    "eval_freq": 0,
+    "checkpoint_freq": 0,
+    "hyperparams": {"n_steps": 32, "batch_size": 16, "n_epochs": 2, "learning_rate": 1e-3},
+    "policy_kwargs": {"net_arch": [16], "log_std_init": -1.0},
+}
+"""A PPO-from-scratch run of a few seconds."""
+
+
+def write_ppo_config(path: Path, **changes) -> Path:
+    path.write_text(yaml.safe_dump({**TINY_PPO_SCRATCH, **changes}))
+    return path
+
+
+@pytest.fixture(scope="module")
+def saved_ppo_run(tmp_path_factory) -> Path:
+    """A tiny PPO-from-scratch run of 64 steps."""
+    from agents.rl.training import train
+
+    tmp = tmp_path_factory.mktemp("warm_ppo")
+    train(load_train_config(write_ppo_config(tmp / "c.yaml")), tmp / "saved", progress=False)
+    return tmp / "saved"
+
+
+def _policy_params(path: Path) -> dict[str, np.ndarray]:
+    from agents.rl.model_io import read_model_zip
+
+    return {k: v.numpy().copy() for k, v in read_model_zip(path, where="test").params["policy"].items()}
+
+
+ACTOR = ("mlp_extractor.policy_net.", "action_net.", "log_std")
+
+
+def test_a_warm_start_with_the_actor_frozen_trains_only_the_critic_and_keeps_the_statistics(saved_ppo_run, tmp_path):
+    """critic_warmup_steps over the whole run: the actor leaves as it came (with the log std it was given),
+    the critic moved; freeze_obs_norm: the saved statistics come out unchanged."""
+    from agents.rl.normalization import ObsNormalization
+    from agents.rl.training import train
+
+    cfg = write_ppo_config(
+        tmp_path / "c.yaml",
+        init_from=str(saved_ppo_run),
+        init_log_std=-3.0,
+        freeze_obs_norm=True,
+        critic_warmup_steps=64,
+        seed=5,
+    )
+    train(load_train_config(cfg), tmp_path / "out", progress=False)
+    before, after = _policy_params(saved_ppo_run / "model.zip"), _policy_params(tmp_path / "out" / "model.zip")
+    assert before.keys() == after.keys()
+    for key in before:
+        if key == "log_std":
+            np.testing.assert_array_equal(after[key], np.full(12, -3.0, np.float32))
+        elif key.startswith(ACTOR):
+            np.testing.assert_array_equal(after[key], before[key], err_msg=key)
+    assert any(
+        not np.array_equal(after[k], before[k]) for k in before if k.startswith(("value_net", "mlp_extractor.value"))
+    )
+    saved, out = (
+        ObsNormalization.load(saved_ppo_run / "model_obs_norm.npz"),
+        ObsNormalization.load(tmp_path / "out" / "model_obs_norm.npz"),
+    )
+    np.testing.assert_array_equal(out.mean, saved.mean)
+    np.testing.assert_array_equal(out.var, saved.var)
+
+
+def test_the_actor_thaws_after_the_warm_up_and_statistics_move_unless_frozen(saved_ppo_run, tmp_path):
+    from agents.rl.normalization import ObsNormalization
+    from agents.rl.training import train
+
+    cfg = write_ppo_config(
+        tmp_path / "c.yaml", init_from=str(saved_ppo_run), critic_warmup_steps=32, timesteps=96, seed=5
+    )
+    train(load_train_config(cfg), tmp_path / "out", progress=False)
+    before, after = _policy_params(saved_ppo_run / "model.zip"), _policy_params(tmp_path / "out" / "model.zip")
+    assert not np.array_equal(after["action_net.weight"], before["action_net.weight"])
+    assert not np.array_equal(after["log_std"], before["log_std"])
+    saved, out = (
+        ObsNormalization.load(saved_ppo_run / "model_obs_norm.npz"),
+        ObsNormalization.load(tmp_path / "out" / "model_obs_norm.npz"),
+    )
+    assert not np.array_equal(out.mean, saved.mean)
+
+
+def test_critic_warmup_freezes_exactly_the_actor():
+    """actor_parameters: the policy net, the action head and the log std; none of the critic's."""
+    from stable_baselines3 import PPO
+
+    from agents.rl.training import CriticWarmupCallback, actor_parameters
+
+    env = gym.make("Pendulum-v1")
+    model = PPO("MlpPolicy", env, policy_kwargs={"net_arch": [8]}, n_steps=16, batch_size=16, device="cpu")
+    actor = {id(p) for p in actor_parameters(model)}
+    names = {n for n, p in model.policy.named_parameters() if id(p) in actor}
+    assert names == {
+        "log_std",
+        "mlp_extractor.policy_net.0.weight",
+        "mlp_extractor.policy_net.0.bias",
+        "action_net.weight",
+        "action_net.bias",
+    }
+    callback = CriticWarmupCallback(32)
+    callback.init_callback(model)
+    callback.on_training_start({}, {})
+    assert callback.frozen
+    assert {n for n, p in model.policy.named_parameters() if not p.requires_grad} == names
+    model.num_timesteps = 32
+    callback.on_rollout_end()
+    assert callback.frozen  # the update on steps 1-32 is still the critic's
+    model.num_timesteps = 48
+    callback.on_rollout_end()
+    assert not callback.frozen and all(p.requires_grad for p in model.policy.parameters())
+    env.close()
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"init_log_std": 5.0}, "^init_log_std must be"),
+        ({"init_log_std": "small"}, "^init_log_std must be"),
+        ({"critic_warmup_steps": -1}, "^critic_warmup_steps must be"),
+        ({"freeze_obs_norm": True}, "^freeze_obs_norm .*needs init_from"),
+        ({"freeze_obs_norm": True, "init_from": "x", "normalize_obs": False}, "^freeze_obs_norm .*normalize_obs"),
+    ],
+)
+def test_bad_fine_tuning_options_are_named(tmp_path, changes, message):
+    with pytest.raises(TrainConfigError, match=message):
+        load_train_config(write_ppo_config(tmp_path / "c.yaml", **changes))
+
+
+@pytest.mark.parametrize(
+    ("changes", "field"),
+    [({"init_log_std": -2.0}, "init_log_std"), ({"critic_warmup_steps": 8}, "critic_warmup_steps")],
+)
+def test_ppo_only_options_are_refused_for_sac(tmp_path, changes, field):
+    with pytest.raises(TrainConfigError, match=rf"^{field} applies to PPO only"):
+        load_train_config(write_config(tmp_path / "c.yaml", **changes))
+
+
+def test_the_distilled_comparison_configs_differ_only_in_the_start():
+    """configs/rl/ppo_from_distilled.yaml starts from models/distilled (its env checked as a warm start does);
+    configs/rl/ppo_scratch_distilled_env.yaml is the same run from random weights."""
+    from agents.rl.training import _metadata
+    from agents.rl.warm_start import check_init_model
+
+    fine = load_train_config(Path("configs/rl/ppo_from_distilled.yaml"))
+    scratch = load_train_config(Path("configs/rl/ppo_scratch_distilled_env.yaml"))
+    start = {"init_from", "init_log_std", "freeze_obs_norm", "critic_warmup_steps"}
+    a, b = fine.to_dict(), scratch.to_dict()
+    assert {k for k in a if a[k] != b[k]} == start
+    assert scratch.init_from is None and fine.init_from == "models/distilled"
+    path, _ = check_init_model(fine.init_from, _metadata(fine))
+    assert path == Path("models/distilled/model.zip")
+    assert len(fine.terrain) == 6
