@@ -118,6 +118,22 @@ class Reference:
             )
         return None
 
+    def joint_range_excess(self) -> tuple[float, int, float]:
+        """How far the joint references go beyond the robot's joint ranges (:attr:`RobotGeometry.joint_ranges`).
+
+        The planners bound each leg's reach (hip-to-foot distance), not its joint angles: a narrow joint range
+        (HyQ's HFE: 70 deg forward of the standing thigh at most) can be planned past, and the simulated joint then
+        stops at its limit while its reference goes on (docs/robots.md, "What fails").
+
+        :return: ``(excess, joint, t)``: the largest excess (rad; <= 0: every reference within its range), the joint
+            (index in ``JOINT_NAMES``) and the grid time (s from the cycle start) where it occurs.
+        """
+        lo, hi = self.geometry.joint_ranges.T  # type: ignore[union-attr]
+        q = self._grid[3]
+        over = np.maximum(q - hi, lo - q)
+        k, j = np.unravel_index(int(np.argmax(over)), over.shape)
+        return float(over[k, j]), int(j), float(self._grid_t[k])
+
     def feet(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Planned foot-site positions, velocities, accelerations (T, 4, 3) (m, m/s, m/s^2) at times ``t`` (s)."""
         t = np.atleast_1d(np.asarray(t, dtype=float))

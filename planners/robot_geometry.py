@@ -199,15 +199,19 @@ class RobotGeometry:
     """the description of a URDF robot, else None."""
     chain: LegChainModel | None = None
     """the legs' chain constants (a URDF robot), else None."""
+    joint_ranges: np.ndarray | None = None
+    """(12, 2) rad, each joint's [low, high] in ``JOINT_NAMES`` order (the robot's config or description)."""
 
     @classmethod
     def from_config(cls, cfg: RobotConfig) -> RobotGeometry:
         """The paper's Table-1 robot: hips, shoulders and standing feet at the trunk corners."""
         hips = hip_positions_B(cfg)
+        ranges = [r for leg in LEG_NAMES for r in (cfg.joint_range["HAA"], cfg.joint_range["HFE"], cfg.knee_range(leg))]
         return cls(
             name=cfg.name, mass=cfg.total_mass, hips_B=hips, shoulders_B=hips, feet_B=hips,
             leg_length=cfg.leg_length, shank_length=cfg.shank.length, foot_radius=cfg.foot_radius,
             link_radius=cfg.link_radius, min_reach=PAPER_MIN_REACH, scale=1.0, config=cfg,
+            joint_ranges=np.array(ranges, dtype=float),
         )  # fmt: skip
 
     @classmethod
@@ -238,7 +242,7 @@ class RobotGeometry:
             feet_B=feet_positions_B(desc, desc.standing_joints), leg_length=leg_length,
             shank_length=float(np.max(l2)), foot_radius=desc.foot_radius, link_radius=desc.link_radius,
             min_reach=max(PAPER_MIN_REACH * scale, float(np.max(bent)) + 0.006 * scale), scale=scale,
-            description=desc, chain=LegChainModel.from_description(desc),
+            description=desc, chain=LegChainModel.from_description(desc), joint_ranges=desc.joint_ranges,
         )  # fmt: skip
 
     # ------------------------------------------------------------------ kinematics

@@ -203,3 +203,49 @@ def test_defect_reports_a_non_finite_grid(ref):
     broken._grid = tuple(grid)
     assert broken.defect() == f"non-finite base reference at t={ref._grid_t[7]:.3f} s"
     assert ref.defect() is None
+
+
+def _flat_first_cycle(name: str):
+    """The expert's first gait cycle of robot ``name`` on flat ground, from its standing footholds (its scaled
+    settings: ``ExpertConfig.for_robot``)."""
+    from agents.expert import ExpertConfig
+    from planners.robot_geometry import robot_geometry
+    from quad_uneven_env.robot.description import load_robot
+
+    desc = load_robot(name)
+    g, cfg = robot_geometry(desc), ExpertConfig.for_robot(desc)
+    feet = np.column_stack([g.feet_B[:, :2], np.zeros(4)])
+    sc = planners.Scenario(
+        terrain="flat", feet_start=feet, cog_start={"pos": (0.0, 0.0, cfg.cog_height)}, durations=cfg.durations,
+        epsilon=cfg.epsilon, clearance=cfg.clearance, cog_height=cfg.cog_height, stride=(cfg.stride, 0.0),
+        robot=g, body_pitch=cfg.body_pitch,
+    )  # fmt: skip
+    return planners.plan_gait_cycle(sc).reference()
+
+
+def test_joint_range_excess_finds_a_reference_beyond_its_range(ref):
+    """The paper's cycle stays inside the joint ranges; a knee pushed 0.1 rad past its limit at one grid row is
+    found, by joint and time."""
+    excess, _, _ = ref.joint_range_excess()
+    assert excess < 0.0
+    broken = copy.copy(ref)
+    grid = [a.copy() for a in ref._grid]
+    j = C.JOINT_NAMES.index("LH_KFE")
+    grid[3][40, j] = ref.geometry.joint_ranges[j, 1] + 0.1
+    broken._grid = tuple(grid)
+    excess, joint, t = broken.joint_range_excess()
+    assert excess == pytest.approx(0.1) and joint == j and t == pytest.approx(ref._grid_t[40])
+
+
+@pytest.mark.parametrize("name", ["paper", "anymal_c", "go1", "solo12"])
+def test_the_first_flat_cycle_stays_inside_the_joint_ranges(name):
+    assert _flat_first_cycle(name).joint_range_excess()[0] < 0.0
+
+
+def test_hyq_swing_is_planned_past_its_hfe_range():
+    """The limitation docs/robots.md describes: the planners bound HyQ's reach, not its HFE range (-1.22 rad for
+    the hind legs), and its hind swing is planned ~0.2 rad past it on flat ground. A planner that learns the joint
+    ranges makes this test fail: update it and docs/robots.md then."""
+    excess, joint, _ = _flat_first_cycle("hyq").joint_range_excess()
+    assert 0.1 < excess < 0.4
+    assert C.JOINT_NAMES[joint] in ("LH_HFE", "RH_HFE")
