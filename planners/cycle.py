@@ -155,6 +155,7 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
             phases[-1].t_end, yaw0, yaw1,
         )  # fmt: skip
     rotation = None if pitch is None else pitch.rotation
+    hips_com = cfg.hips_B + com_to_base  # HAA origins minus whole-body COM (m, base frame): the leg IK's origin
     hip_offsets = cfg.shoulders_B + com_to_base  # shoulders (reach centres) minus whole-body COM (m, base frame)
 
     def hips_at(t: float) -> np.ndarray:
@@ -208,16 +209,36 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         def hip_path(t, hip=hip):
             return cog.position(t) + (hip if rotation is None else rotation(np.asarray(t)) @ hip)
 
+        def range_excess(t, sites, i=i):
+            return _joint_range_excess(cfg, i, cog.position(t), rotation, t, hips_com[i], sites)
+
         swings[ph.swing_leg] = plan_swing(
             ph.swing_leg, foot_site_on(terrain, start[i], r), foot_site_on(terrain, target[i], r),
             ph.t_start, ph.t_end, terrain, scenario.clearance, r, hip_path,
-            (cfg.min_reach, REACH_MARGIN * cfg.leg_length),
+            (cfg.min_reach, REACH_MARGIN * cfg.leg_length), range_excess=range_excess,
         )  # fmt: skip
     t_end = time.perf_counter()
     stats = _stats(cstats, t_end - t_sw, t_end - t_all, swings)
     return GaitCyclePlan(
         phases, cog, swings, start, target, targets, terrain, mass, scenario.epsilon, r, stats, cfg, pitch
     )  # fmt: skip
+
+
+def _joint_range_excess(
+    cfg: RobotGeometry, i: int, cog: np.ndarray, rotation, t: np.ndarray, hip: np.ndarray, sites: np.ndarray
+) -> np.ndarray:
+    """How far (rad) leg ``i``'s joints pass their ranges (<= 0: inside) with its foot site at ``sites`` (K, M, 3)
+    (world, m) and the base at the planned COG ``cog`` (K, 3) at times ``t`` (K,) (s), turned by ``rotation``
+    (None: level); ``hip``: the leg's HAA origin minus the whole-body COM (base frame, nominal pose). (K, M)."""
+    if rotation is None:
+        R = np.broadcast_to(np.eye(3), (len(t), 3, 3))
+    else:
+        R = np.broadcast_to(rotation(np.asarray(t)), (len(t), 3, 3))
+    hip_W = cog + R @ hip  # (K, 3)
+    e_B = np.einsum("kji,kmj->kmi", R, sites - hip_W[:, None])  # R^T (site - hip)
+    q = cfg.leg_ik(i, e_B)
+    lo, hi = cfg.joint_ranges[3 * i : 3 * i + 3].T  # type: ignore[index]
+    return np.maximum(q - hi, lo - q).max(axis=-1)
 
 
 def _stats(c: CogStats, swing_time: float, total: float, swings: dict[str, SwingPath]) -> dict[str, Any]:

@@ -26,6 +26,13 @@ KNOT_TRAVEL = (0.0, 0.04, 0.5, 0.96, 1.0)
 """Horizontal progress of each knot as a fraction of the lift-off -> touch-down step."""
 CHECK_SAMPLES = 120
 """Dense samples per swing for the clearance check."""
+RANGE_MARGIN = 0.05
+"""rad: how far inside its joint ranges a swing knot moved by the joint-range test is placed."""
+RANGE_STEPS = 12
+"""candidate positions tried per knot by the joint-range test, from the knot to the middle of the step."""
+RANGE_TOLERANCE = 0.3
+"""rad: a swing knot that no position toward the middle of the step brings within this of its joint ranges is
+left where it is (a step far past a joint range is walked as planned, the joint stopping at its limit)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,6 +79,28 @@ def _dense_clearance(
     return float(gap[inner].min()), float(gap[~inner].min() - rest_gap), t, gap
 
 
+def _fit_joint_ranges(
+    points: np.ndarray, tau: np.ndarray, p0: np.ndarray, p1: np.ndarray, range_excess: Callable
+) -> None:
+    """Move the lift and descent points (in place) toward the middle of the step where the leg's joints would
+    pass their ranges there: to the first of :data:`RANGE_STEPS` positions :data:`RANGE_MARGIN` inside them, else
+    to the one least outside if that is within :data:`RANGE_TOLERANCE`. A point inside its ranges, or one that
+    no position brings within the tolerance, is not moved."""
+    step = p1[:2] - p0[:2]
+    for k in (1, len(points) - 2):
+        if range_excess(tau[k : k + 1], points[None, k : k + 1])[0, 0] <= 0.0:
+            continue
+        s0 = float(KNOT_TRAVEL[k])
+        s = np.linspace(s0, 0.5, RANGE_STEPS)
+        cand = np.repeat(points[k][None], RANGE_STEPS, axis=0)
+        cand[:, :2] = p0[:2] + s[:, None] * step
+        over = range_excess(tau[k : k + 1], cand[None])[0]
+        ok = np.flatnonzero(over <= -RANGE_MARGIN)
+        j = int(ok[0]) if ok.size else int(np.argmin(over))
+        if over[j] <= RANGE_TOLERANCE:
+            points[k, :2] = cand[j, :2]
+
+
 def plan_swing(
     leg: str,
     site_lift: np.ndarray,
@@ -84,6 +113,7 @@ def plan_swing(
     hip_position: Callable[[np.ndarray], np.ndarray] | None = None,
     reach: tuple[float, float] = (0.0, np.inf),
     max_raises: int = 6,
+    range_excess: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> SwingPath:
     """Plan the swing of ``leg``'s foot site from ``site_lift`` to ``site_touch`` (world, m).
 
@@ -95,6 +125,10 @@ def plan_swing(
     :param foot_radius: foot sphere radius (m).
     :param hip_position: ``t (T,) -> (T, 3)`` planned hip position (m) for the workspace check (eq. 29).
     :param reach: (min, max) hip-to-foot-site distance (m) allowed at the intermediate points.
+    :param range_excess: ``(t (K,), sites (K, M, 3)) -> (K, M)``: how far (rad) the leg's joints would pass their
+        ranges with the foot site at ``sites[k, m]`` at time ``t[k]`` (<= 0: inside). The lift and descent points
+        whose joints pass their ranges are moved toward the middle of the step until they are
+        :data:`RANGE_MARGIN` inside (or as far inside as the middle allows); None: no joint-range test.
     :raises PlanningError: naming the leg when no collision-free reachable path is found.
     """
     p0, p1 = np.asarray(site_lift, dtype=float), np.asarray(site_touch, dtype=float)
@@ -114,6 +148,8 @@ def plan_swing(
     # Resting on a slope, the conservative gap is already r (n_z - 1) < 0: ends are judged against it.
     rest_gap = float(min(0.0, sphere_clearance(terrain, np.stack([p0, p1]), foot_radius).min()))
     t_in = (float(tau[1]), float(tau[-2]))
+    if range_excess is not None:
+        _fit_joint_ranges(points, tau, p0, p1, range_excess)
     for _ in range(max_raises + 1):
         spline = ClampedCubicSpline(tau, points)
         inner, ends, _, _ = _dense_clearance(spline, terrain, foot_radius, t_in, rest_gap)
@@ -121,6 +157,8 @@ def plan_swing(
         if deficit <= 1e-9:
             break
         points[1:-1, 2] += deficit + 0.005
+        if range_excess is not None:
+            _fit_joint_ranges(points, tau, p0, p1, range_excess)
     else:
         raise PlanningError(
             f"swing of {leg}: no collision-free path after {max_raises} raises: clearance {inner:.4f} m "
