@@ -212,10 +212,14 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         def range_excess(t, sites, i=i):
             return _joint_range_excess(cfg, i, cog.position(t), rotation, t, hips_com[i], sites)
 
+        # The paper's robot is planned as the paper plans it (reach only); a URDF robot's swing knots are also
+        # tested against its joint ranges.
+        joint_test = None if cfg.description is None else range_excess
+
         swings[ph.swing_leg] = plan_swing(
             ph.swing_leg, foot_site_on(terrain, start[i], r), foot_site_on(terrain, target[i], r),
             ph.t_start, ph.t_end, terrain, scenario.clearance, r, hip_path,
-            (cfg.min_reach, REACH_MARGIN * cfg.leg_length), range_excess=range_excess,
+            (cfg.min_reach, REACH_MARGIN * cfg.leg_length), range_excess=joint_test,
         )  # fmt: skip
     t_end = time.perf_counter()
     stats = _stats(cstats, t_end - t_sw, t_end - t_all, swings)

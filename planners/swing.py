@@ -26,6 +26,9 @@ KNOT_TRAVEL = (0.0, 0.04, 0.5, 0.96, 1.0)
 """Horizontal progress of each knot as a fraction of the lift-off -> touch-down step."""
 CHECK_SAMPLES = 120
 """Dense samples per swing for the clearance check."""
+RANGE_SLACK = 0.05
+"""rad: a swing knot at most this past its leg's joint ranges is left where it is (as far as a moved knot is placed
+inside them)."""
 RANGE_MARGIN = 0.05
 """rad: how far inside its joint ranges a swing knot moved by the joint-range test is placed."""
 RANGE_STEPS = 12
@@ -83,12 +86,12 @@ def _fit_joint_ranges(
     points: np.ndarray, tau: np.ndarray, p0: np.ndarray, p1: np.ndarray, range_excess: Callable
 ) -> None:
     """Move the lift and descent points (in place) toward the middle of the step where the leg's joints would
-    pass their ranges there: to the first of :data:`RANGE_STEPS` positions :data:`RANGE_MARGIN` inside them, else
-    to the one least outside if that is within :data:`RANGE_TOLERANCE`. A point inside its ranges, or one that
-    no position brings within the tolerance, is not moved."""
+    pass their ranges there by more than :data:`RANGE_SLACK`: to the first of :data:`RANGE_STEPS` positions
+    :data:`RANGE_MARGIN` inside them, else to the one least outside if that is within :data:`RANGE_TOLERANCE`.
+    Other points are not moved."""
     step = p1[:2] - p0[:2]
     for k in (1, len(points) - 2):
-        if range_excess(tau[k : k + 1], points[None, k : k + 1])[0, 0] <= 0.0:
+        if range_excess(tau[k : k + 1], points[None, k : k + 1])[0, 0] <= RANGE_SLACK:
             continue
         s0 = float(KNOT_TRAVEL[k])
         s = np.linspace(s0, 0.5, RANGE_STEPS)
@@ -127,8 +130,9 @@ def plan_swing(
     :param reach: (min, max) hip-to-foot-site distance (m) allowed at the intermediate points.
     :param range_excess: ``(t (K,), sites (K, M, 3)) -> (K, M)``: how far (rad) the leg's joints would pass their
         ranges with the foot site at ``sites[k, m]`` at time ``t[k]`` (<= 0: inside). The lift and descent points
-        whose joints pass their ranges are moved toward the middle of the step until they are
-        :data:`RANGE_MARGIN` inside (or as far inside as the middle allows); None: no joint-range test.
+        whose joints pass their ranges by more than :data:`RANGE_SLACK` are moved toward the middle of the step,
+        :data:`RANGE_MARGIN` inside them or as far inside as the middle allows (not beyond
+        :data:`RANGE_TOLERANCE`: else they stay); None: no joint-range test.
     :raises PlanningError: naming the leg when no collision-free reachable path is found.
     """
     p0, p1 = np.asarray(site_lift, dtype=float), np.asarray(site_touch, dtype=float)
