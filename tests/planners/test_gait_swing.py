@@ -93,6 +93,38 @@ def test_swing_workspace_violation_names_leg():
         )
 
 
+def _swing_with_range(limit: float):
+    """A 1 m flat step whose joints (a stand-in for the IK) pass their range by ``x - limit`` rad, x the knot's
+    forward position (m)."""
+
+    def excess(t, sites):
+        assert sites.shape[0] == len(t) == 1
+        return sites[..., 0] - limit
+
+    p0, p1 = np.array([0.0, 0.0, 0.02]), np.array([1.0, 0.0, 0.02])
+    return plan_swing("RH", p0, p1, 0.0, 1.0, BlockTerrain(0.0), 0.05, 0.02, range_excess=excess)
+
+
+def test_swing_moves_a_knot_past_its_joint_range_toward_the_middle():
+    """The descent point (x = 0.96, 0.16 rad past) goes to the first candidate toward the middle that is
+    RANGE_MARGIN inside (x = 0.709 of 0.96, 0.918, ..., 0.5); the lift point (inside) stays."""
+    from planners.swing import RANGE_MARGIN, RANGE_STEPS
+
+    knots = _swing_with_range(0.8).knots
+    s = np.linspace(0.96, 0.5, RANGE_STEPS)
+    first = s[np.flatnonzero(s - 0.8 <= -RANGE_MARGIN)[0]]
+    assert knots[3, 0] == pytest.approx(first) and first == pytest.approx(0.709, abs=1e-3)
+    assert knots[1, 0] == pytest.approx(0.04) and knots[2, 0] == pytest.approx(0.5)
+
+
+def test_swing_leaves_knots_the_middle_cannot_bring_near_their_range():
+    """x - 0.1: the descent point is 0.86 rad past its range, still 0.4 (> RANGE_TOLERANCE) at the middle: it
+    stays; a point less than RANGE_SLACK past (x - 0.92 at 0.96) stays too."""
+    assert _swing_with_range(0.1).knots[3, 0] == pytest.approx(0.96)
+    assert _swing_with_range(0.92).knots[3, 0] == pytest.approx(0.96)
+    assert _swing_with_range(0.89).knots[3, 0] < 0.96
+
+
 @pytest.mark.parametrize("n_knots", [2, 3, 5])
 def test_spline_evaluate_gives_the_floats_of_each_derivative_call(n_knots):
     """``ClampedCubicSpline.evaluate`` (one compiled pass) against ``spline(t, d)`` (numpy), bit for bit: inside,

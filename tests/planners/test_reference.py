@@ -242,10 +242,16 @@ def test_the_first_flat_cycle_stays_inside_the_joint_ranges(name):
     assert _flat_first_cycle(name).joint_range_excess()[0] < 0.0
 
 
-def test_hyq_swing_is_planned_past_its_hfe_range():
-    """The limitation docs/robots.md describes: the planners bound HyQ's reach, not its HFE range (-1.22 rad for
-    the hind legs), and its hind swing is planned ~0.2 rad past it on flat ground. A planner that learns the joint
-    ranges makes this test fail: update it and docs/robots.md then."""
+def test_hyq_swing_knots_are_kept_near_its_hfe_range(monkeypatch):
+    """HyQ's HFE range (-1.22 rad forward for the hind legs) binds on flat ground: without the swing knots'
+    joint-range test its hind swing is planned ~0.2 rad past it; with it the descent point is moved toward the
+    middle of the step, and what remains (between that point and the touch-down) is less than 0.1 rad."""
+    import planners.swing
+
     excess, joint, _ = _flat_first_cycle("hyq").joint_range_excess()
-    assert 0.1 < excess < 0.4
+    assert 0.0 < excess < 0.1
+    assert C.JOINT_NAMES[joint] in ("LH_HFE", "RH_HFE")
+    monkeypatch.setattr(planners.swing, "_fit_joint_ranges", lambda *args: None)
+    untested, joint, _ = _flat_first_cycle("hyq").joint_range_excess()
+    assert 0.15 < untested < 0.4
     assert C.JOINT_NAMES[joint] in ("LH_HFE", "RH_HFE")
