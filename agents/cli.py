@@ -573,6 +573,27 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
     )
     p.add_argument("--workers", type=int, default=1, help="rollout processes (default 1; the same result)")
     p.add_argument(
+        "--focus-episodes",
+        type=int,
+        default=0,
+        help="in each DAgger round, N more episodes of every suite entry that had an episode short of the goal in "
+        "the previous round (default 0)",
+    )
+    p.add_argument(
+        "--validation-episodes",
+        type=int,
+        default=0,
+        help="after each round, N episodes per suite entry of the student alone; the round with the most goals "
+        "(then the longest mean distance) is kept (default 0: no validation, the last round is kept)",
+    )
+    p.add_argument(
+        "--validation-seed-offset",
+        type=int,
+        default=2000,
+        help="added to the suite's seeds in the validation episodes (default 2000; must differ from the suite's "
+        "and the rollouts' seeds)",
+    )
+    p.add_argument(
         "--no-course-frame",
         dest="course_frame",
         action="store_false",
@@ -596,7 +617,10 @@ def run_distill_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven distill``: 0 on success, 2 on an invalid option, suite or DIR."""
     for name, value, low in (("--dagger-rounds", args.dagger_rounds, 0), ("--episodes", args.episodes, 1),
                              ("--epochs", args.epochs, 1), ("--workers", args.workers, 1),
-                             ("--seed", args.seed, 0), ("--seed-offset", args.seed_offset, 0)):  # fmt: skip
+                             ("--seed", args.seed, 0), ("--seed-offset", args.seed_offset, 0),
+                             ("--focus-episodes", args.focus_episodes, 0),
+                             ("--validation-episodes", args.validation_episodes, 0),
+                             ("--validation-seed-offset", args.validation_seed_offset, 0)):  # fmt: skip
         if value < low:
             raise ValueError(f"{name} must be an integer >= {low}, got {value}")
     if not args.budget_min > 0:  # also refuses nan
@@ -610,7 +634,8 @@ def run_distill_command(args: argparse.Namespace) -> int:
     cfg = DistillConfig(
         dagger_rounds=args.dagger_rounds, beta_decay=args.beta_decay, episodes=args.episodes, epochs=args.epochs,
         seed=args.seed, seed_offset=args.seed_offset, workers=args.workers, budget_min=args.budget_min, expert=expert,
-        course_frame=args.course_frame,
+        course_frame=args.course_frame, focus_episodes=args.focus_episodes,
+        validation_episodes=args.validation_episodes, validation_seed_offset=args.validation_seed_offset,
     )  # fmt: skip
     try:
         cfg.expert_config()
