@@ -101,6 +101,9 @@ class DistillConfig:
     """s, the observation's gait clock (None: the teacher expert's cycle, the sum of its ``durations``)."""
     course_frame: bool = True
     """the student observes its heading and sideways offset on the course (the env's ``course_frame``)."""
+    height_scan: dict[str, float] | None = None
+    """the student env's ``height_scan`` grid (``size_x``, ``size_y``, ``resolution``, m; None: the env's default,
+    1.0 x 0.6 m at 0.1 m)."""
     expert: dict[str, Any] = dataclasses.field(default_factory=lambda: {"recovery": False})
     """the teacher's :class:`agents.expert.ExpertConfig` fields."""
     seed: int = 0
@@ -142,6 +145,11 @@ class DistillConfig:
         for name, ok, allowed in checks:
             if not ok:
                 raise ValueError(f"distill.{name} must be {allowed}, got {getattr(self, name)!r}")
+        if self.height_scan is not None:
+            from quad_uneven_env.config import HeightScanConfig
+            from quad_uneven_env.fields import from_mapping
+
+            from_mapping(HeightScanConfig, self.height_scan, "distill.height_scan")  # its errors name the field
 
     def expert_config(self) -> ExpertConfig:
         """The teacher's :class:`ExpertConfig` (its fields checked, the error naming the field)."""
@@ -160,6 +168,7 @@ class DistillConfig:
             "pd_action_scale": self.pd_action_scale,
             "gait_period": self.clock_period(),
             **({"course_frame": True} if self.course_frame else {}),
+            **({"height_scan": dict(self.height_scan)} if self.height_scan is not None else {}),
         }
 
 

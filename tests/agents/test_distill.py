@@ -264,6 +264,9 @@ def policy_weights(path):
         (["--episodes", "0"], "--episodes"),
         (["--workers", "0"], "--workers"),
         (["--focus-episodes", "-1"], "--focus-episodes"),
+        (["--height-scan", "{bad"], "--height-scan"),
+        (["--height-scan", '{"resolution": 0}'], "distill.height_scan.resolution"),
+        (["--height-scan", '{"nope": 1}'], "nope"),
         (["--validation-episodes", "-1"], "--validation-episodes"),
         (["--validation-episodes", "1", "--validation-seed-offset", "1000"], "--validation-seed-offset"),
         (["--expert-config", "{bad"], "--expert-config"),
@@ -352,14 +355,21 @@ def test_a_run_keeps_the_round_with_the_best_validation_score(monkeypatch, tmp_p
     assert not np.array_equal(kept["action_net.weight"], last["action_net.weight"])
 
 
-def test_validation_and_focus_episodes_in_a_tiny_run(tmp_path, capsys):
+def test_validation_focus_episodes_and_height_scan_in_a_tiny_run(tmp_path, capsys):
     """Through the CLI: every TINY episode falls short of the 5 m goal in 1 s, so round 1 adds 2 focus episodes
     of each entry (2 + 2 x 2 = 6 episodes); each round records its validation (one student-alone episode per
-    entry)."""
+    entry); a 0.4 x 0.2 m height scan at 0.05 m (9 x 5 = 45 points instead of 77) is the student's observation
+    (137 - 77 + 45 = 105 inputs) and is recorded for evaluate."""
+    from agents.rl.model_io import read_metadata
+
+    scan = {"size_x": 0.4, "size_y": 0.2, "resolution": 0.05}
     assert main([
         "distill", "--suite", _tiny_suite_file(tmp_path), "--out", str(tmp_path / "o"), "--dagger-rounds", "1",
         "--episodes", "1", "--epochs", "1", "--focus-episodes", "2", "--validation-episodes", "1",
+        "--height-scan", json.dumps(scan),
     ]) == 0  # fmt: skip
+    assert policy_obs_size(tmp_path / "o" / "model.zip") == 105
+    assert read_metadata(tmp_path / "o" / "model.zip")["env_kwargs"]["height_scan"] == scan
     summary = json.loads((tmp_path / "o" / "distill_summary.json").read_text())
     r0, r1 = summary["rounds"]
     assert (r0["episodes"], r0["focus_entries"]) == (2, [])
