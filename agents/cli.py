@@ -580,20 +580,6 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
         "the previous round (default 0)",
     )
     p.add_argument(
-        "--validation-episodes",
-        type=int,
-        default=0,
-        help="after each round, N episodes per suite entry of the student alone; the round with the most goals "
-        "(then the longest mean distance) is kept (default 0: no validation, the last round is kept)",
-    )
-    p.add_argument(
-        "--validation-seed-offset",
-        type=int,
-        default=2000,
-        help="added to the suite's seeds in the validation episodes (default 2000; must differ from the suite's "
-        "and the rollouts' seeds)",
-    )
-    p.add_argument(
         "--no-course-frame",
         dest="course_frame",
         action="store_false",
@@ -624,9 +610,7 @@ def run_distill_command(args: argparse.Namespace) -> int:
     for name, value, low in (("--dagger-rounds", args.dagger_rounds, 0), ("--episodes", args.episodes, 1),
                              ("--epochs", args.epochs, 1), ("--workers", args.workers, 1),
                              ("--seed", args.seed, 0), ("--seed-offset", args.seed_offset, 0),
-                             ("--focus-episodes", args.focus_episodes, 0),
-                             ("--validation-episodes", args.validation_episodes, 0),
-                             ("--validation-seed-offset", args.validation_seed_offset, 0)):  # fmt: skip
+                             ("--focus-episodes", args.focus_episodes, 0)):  # fmt: skip
         if value < low:
             raise ValueError(f"{name} must be an integer >= {low}, got {value}")
     if not args.budget_min > 0:  # also refuses nan
@@ -642,7 +626,6 @@ def run_distill_command(args: argparse.Namespace) -> int:
         dagger_rounds=args.dagger_rounds, beta_decay=args.beta_decay, episodes=args.episodes, epochs=args.epochs,
         seed=args.seed, seed_offset=args.seed_offset, workers=args.workers, budget_min=args.budget_min, expert=expert,
         course_frame=args.course_frame, focus_episodes=args.focus_episodes,
-        validation_episodes=args.validation_episodes, validation_seed_offset=args.validation_seed_offset,
         height_scan=height_scan,
     )  # fmt: skip
     try:

@@ -115,11 +115,6 @@ class DistillConfig:
     focus_episodes: int = 0
     """in each DAgger round, this many more episodes of every suite entry with an episode of the previous round
     that did not reach the goal (seeds: the entry's next seeds + ``seed_offset``; 0: none)."""
-    validation_episodes: int = 0
-    """after each round, episodes per suite entry of the student alone (0: none, the last round's student is kept;
-    > 0: the round with the most validation successes, then the longest mean distance, is kept)."""
-    validation_seed_offset: int = 2000
-    """added to the suite's seeds in the validation episodes (disjoint from the rollouts' and the suite's seeds)."""
 
     def __post_init__(self) -> None:
         checks = (
@@ -139,8 +134,6 @@ class DistillConfig:
             ("budget_min", self.budget_min > 0, "a number > 0 (min)"),
             ("workers", self.workers >= 1, "an integer >= 1"),
             ("focus_episodes", self.focus_episodes >= 0, "an integer >= 0"),
-            ("validation_episodes", self.validation_episodes >= 0, "an integer >= 0"),
-            ("validation_seed_offset", self.validation_seed_offset >= 0, "an integer >= 0"),
         )
         for name, ok, allowed in checks:
             if not ok:
@@ -462,7 +455,6 @@ def distill(
 
     _check_suite(suite)
     cfg.expert_config()  # its errors before any work
-    val_tasks = validation_tasks(suite, cfg)  # its seed check before any work
     out = prepare_output_dir(out, DISTILL_OUTPUTS, overwrite=overwrite, field="--out")
     tasks = episode_tasks(suite, cfg.episodes, cfg.seed_offset)
     start = time.perf_counter()
@@ -520,8 +512,6 @@ def distill(
             t0 = time.perf_counter()
             losses = fit_student(model, norm, all_obs, all_labels, cfg, cfg.seed + k)
             row.update(train_s=time.perf_counter() - t0, dataset=len(all_obs), loss_first=losses[0], loss=losses[-1])
-            if val_tasks:
-                row.update(validate(model, norm, val_tasks, suite, cfg, k, log))
             rounds.append(row)
             log(
                 f"round {k} (beta {beta:.3f}): {row['steps']} steps ({row['student_steps']} by the student), "
@@ -530,14 +520,10 @@ def distill(
                 + (f", on-policy label rmse {row['label_rmse_on_policy']:.3f}" if "label_rmse_on_policy" in row else "")
                 + f"; loss {losses[-1]:.4f} on {len(all_obs)} samples"
             )
-            if kept_round(rounds) == k:  # the model on disk is the kept round's
-                save_student(model, norm, out, meta)
-                summary["selected_round"] = k
+            save_student(model, norm, out, meta)
             summary["wall_time_s"] = time.perf_counter() - start
             (out / "distill_summary.json").write_text(json.dumps(summary, indent=2))
             manifest.add_new()
-        if val_tasks:
-            log(f"kept the student of round {summary['selected_round']} (the best validation score)")
         plot_distill_curve(rounds, out / "distill_curve.png", title=f"distillation on {suite.name}")
         summary["model"] = str(out / "model.zip")
         summary["wall_time_s"] = time.perf_counter() - start
@@ -564,76 +550,6 @@ def focus_tasks(suite: Suite, cfg: DistillConfig, entries: Sequence[int], first_
     return tasks
 
 
-def validation_tasks(suite: Suite, cfg: DistillConfig) -> list[EpisodeTask]:
-    """The validation episodes: each entry's first ``cfg.validation_episodes`` seeds + ``validation_seed_offset``.
-
-    :raises ValueError: if a validation seed is one of the entry's own seeds (held out for ``evaluate``) or one of
-        its rollout seeds.
-    """
-    if cfg.validation_episodes == 0:
-        return []
-    val = episode_tasks(suite, cfg.validation_episodes, cfg.validation_seed_offset)
-    for e, entry in enumerate(suite.terrains):
-        taken = set(entry.seeds) | {s + cfg.seed_offset for s in entry.seeds[: cfg.episodes]}
-        taken |= set(focus_seeds(entry.seeds, cfg))
-        clash = sorted({t.seed for t in val if t.entry == e} & taken)
-        if clash:
-            raise ValueError(
-                f"validation_seed_offset (--validation-seed-offset) {cfg.validation_seed_offset} makes "
-                f"terrains[{e}] ({entry.label}) validation seeds {clash} equal to its own or its rollout seeds; "
-                "choose an offset that keeps them disjoint"
-            )
-    return val
-
-
-def validate(
-    model: Any,
-    norm: ObsNormalization,
-    tasks: list[EpisodeTask],
-    suite: Suite,
-    cfg: DistillConfig,
-    k: int,
-    log: Callable[[str], None] = print,
-) -> dict[str, Any]:
-    """Roll out the student alone (no expert action) on the validation ``tasks`` after round ``k``.
-
-    :return: ``validation_successes``, ``validation_episodes``, ``validation_mean_distance`` (m) and
-        ``validation_by_entry`` (successes per suite entry, in the suite's order).
-    """
-    student = (policy_params(model), norm)
-    jobs = [
-        RolloutJob(t, suite.goal_distance, suite.time_limit, cfg, 0.0, student, (cfg.seed, k, t.index, 1))
-        for t in tasks
-    ]
-    t0 = time.perf_counter()
-    results = run_rollouts(jobs, cfg.workers)
-    by_entry = [0] * len(suite.terrains)
-    for r in results:
-        by_entry[r["entry"]] += int(r["success"])
-    row = {
-        "validation_successes": sum(by_entry),
-        "validation_episodes": len(results),
-        "validation_mean_distance": float(np.mean([r["distance"] for r in results])),
-        "validation_by_entry": by_entry,
-        "validation_s": time.perf_counter() - t0,
-    }
-    log(
-        f"round {k} validation: {row['validation_successes']}/{row['validation_episodes']} reached the goal "
-        f"(per entry {by_entry}), mean distance {row['validation_mean_distance']:.2f} m"
-    )
-    return row
-
-
-def kept_round(rounds: Sequence[dict[str, Any]]) -> int:
-    """The round whose student is kept: the last one without validation scores; else the most
-    ``validation_successes``, then the longest ``validation_mean_distance``, the earliest round on a tie."""
-    if not rounds or "validation_successes" not in rounds[-1]:
-        return len(rounds) - 1
-    best = max(range(len(rounds)), key=lambda i: (rounds[i]["validation_successes"],
-                                                  rounds[i]["validation_mean_distance"], -i))  # fmt: skip
-    return rounds[best]["round"]
-
-
 def _config_dict(cfg: DistillConfig) -> dict[str, Any]:
     d = dataclasses.asdict(cfg)
     d["net_arch"] = list(cfg.net_arch)
@@ -651,9 +567,6 @@ def plot_distill_curve(rounds: list[dict[str, Any]], path: Path, title: str) -> 
     a1.plot(k, [r["successes"] / r["episodes"] for r in rounds], "o-", label="reached the goal")
     a1.plot(k, [r["falls"] / r["episodes"] for r in rounds], "s-", label="fell")
     a1.plot(k, [r["student_steps"] / max(1, r["steps"]) for r in rounds], "^--", label="steps the student acted")
-    if "validation_successes" in rounds[0]:
-        val = [r["validation_successes"] / r["validation_episodes"] for r in rounds]
-        a1.plot(k, val, "D-", label="validation: the student alone reached the goal")
     a1.set_xlabel("round (0: behaviour cloning)")
     a1.set_ylabel("fraction of the round's episodes / steps")
     a1.set_ylim(-0.05, 1.05)
@@ -674,10 +587,7 @@ __all__ = [
     "distill",
     "expert_label",
     "fit_normalization",
-    "kept_round",
     "mlp_forward",
     "policy_params",
     "rollout",
-    "validate",
-    "validation_tasks",
 ]
