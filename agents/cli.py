@@ -573,13 +573,6 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
     )
     p.add_argument("--workers", type=int, default=1, help="rollout processes (default 1; the same result)")
     p.add_argument(
-        "--focus-episodes",
-        type=int,
-        default=0,
-        help="in each DAgger round, N more episodes of every suite entry that had an episode short of the goal in "
-        "the previous round (default 0)",
-    )
-    p.add_argument(
         "--no-course-frame",
         dest="course_frame",
         action="store_false",
@@ -609,8 +602,7 @@ def run_distill_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven distill``: 0 on success, 2 on an invalid option, suite or DIR."""
     for name, value, low in (("--dagger-rounds", args.dagger_rounds, 0), ("--episodes", args.episodes, 1),
                              ("--epochs", args.epochs, 1), ("--workers", args.workers, 1),
-                             ("--seed", args.seed, 0), ("--seed-offset", args.seed_offset, 0),
-                             ("--focus-episodes", args.focus_episodes, 0)):  # fmt: skip
+                             ("--seed", args.seed, 0), ("--seed-offset", args.seed_offset, 0)):  # fmt: skip
         if value < low:
             raise ValueError(f"{name} must be an integer >= {low}, got {value}")
     if not args.budget_min > 0:  # also refuses nan
@@ -625,8 +617,7 @@ def run_distill_command(args: argparse.Namespace) -> int:
     cfg = DistillConfig(
         dagger_rounds=args.dagger_rounds, beta_decay=args.beta_decay, episodes=args.episodes, epochs=args.epochs,
         seed=args.seed, seed_offset=args.seed_offset, workers=args.workers, budget_min=args.budget_min, expert=expert,
-        course_frame=args.course_frame, focus_episodes=args.focus_episodes,
-        height_scan=height_scan,
+        course_frame=args.course_frame, height_scan=height_scan,
     )  # fmt: skip
     try:
         cfg.expert_config()

@@ -112,9 +112,6 @@ class DistillConfig:
     """minutes of wall-clock time: no round starts after it (the model of the last finished round is kept)."""
     workers: int = 1
     """rollout processes (the result does not depend on it)."""
-    focus_episodes: int = 0
-    """in each DAgger round, this many more episodes of every suite entry with an episode of the previous round
-    that did not reach the goal (seeds: the entry's next seeds + ``seed_offset``; 0: none)."""
 
     def __post_init__(self) -> None:
         checks = (
@@ -133,7 +130,6 @@ class DistillConfig:
             ("course_frame", isinstance(self.course_frame, bool), "True or False"),
             ("budget_min", self.budget_min > 0, "a number > 0 (min)"),
             ("workers", self.workers >= 1, "an integer >= 1"),
-            ("focus_episodes", self.focus_episodes >= 0, "an integer >= 0"),
         )
         for name, ok, allowed in checks:
             if not ok:
@@ -466,7 +462,6 @@ def distill(
         data_labels: list[np.ndarray] = []
         norm: ObsNormalization | None = None
         rounds: list[dict[str, Any]] = []
-        results: list[dict[str, Any]] = []
         summary: dict[str, Any] = {"config": _config_dict(cfg), "suite": suite.name, "rounds": rounds}
         for k in range(cfg.dagger_rounds + 1):
             elapsed = (time.perf_counter() - start) / 60.0
@@ -476,11 +471,9 @@ def distill(
                 break
             beta = 1.0 if k == 0 else cfg.beta_decay**k
             student = None if k == 0 else (policy_params(model), norm)
-            focus = sorted({r["entry"] for r in results if not r["success"]}) if k > 0 else []
-            round_tasks = tasks + focus_tasks(suite, cfg, focus, first_index=len(tasks))
             jobs = [
                 RolloutJob(t, suite.goal_distance, suite.time_limit, cfg, beta, student, (cfg.seed, k, t.index))
-                for t in round_tasks
+                for t in tasks
             ]
             t0 = time.perf_counter()
             results = run_rollouts(jobs, cfg.workers)
@@ -499,8 +492,6 @@ def distill(
                 "mean_distance": float(np.mean([r["distance"] for r in results])),
                 "rollout_s": rollout_s,
             }
-            if cfg.focus_episodes:
-                row["focus_entries"] = focus
             if student is not None:  # the student's error on the states this round visited, before training on them
                 err = np.concatenate([r["student_action"] for r in results]) - labels
                 row["label_rmse_on_policy"] = float(np.sqrt(np.mean(err**2)))
@@ -529,25 +520,6 @@ def distill(
         summary["wall_time_s"] = time.perf_counter() - start
         (out / "distill_summary.json").write_text(json.dumps(summary, indent=2))
     return summary
-
-
-def focus_seeds(seeds: Sequence[int], cfg: DistillConfig) -> list[int]:
-    """The seeds of an entry's ``cfg.focus_episodes`` extra episodes: its seeds after the rollouts' first
-    ``cfg.episodes``, then ``max(seeds) + 1``, ``+ 2``, ...; all plus ``cfg.seed_offset``."""
-    rest = list(seeds[cfg.episodes :]) if cfg.episodes is not None else []
-    rest += [max(seeds) + 1 + i for i in range(max(0, cfg.focus_episodes - len(rest)))]
-    return [s + cfg.seed_offset for s in rest[: cfg.focus_episodes]]
-
-
-def focus_tasks(suite: Suite, cfg: DistillConfig, entries: Sequence[int], first_index: int) -> list[EpisodeTask]:
-    """The extra episodes (:func:`focus_seeds`) of the suite ``entries``, indexed from ``first_index`` on."""
-    tasks: list[EpisodeTask] = []
-    for e in entries:
-        entry = suite.terrains[e]
-        for k, seed in enumerate(focus_seeds(entry.seeds, cfg)):
-            index = first_index + len(tasks)
-            tasks.append(EpisodeTask(index, e, entry.kind, dict(entry.params), seed, k == 0, entry.randomization))
-    return tasks
 
 
 def _config_dict(cfg: DistillConfig) -> dict[str, Any]:
