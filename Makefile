@@ -93,14 +93,15 @@ rl-scratch: venv
 	$(PY) -m agents.cli compare --baseline runs/eval_rough_expert --candidate runs/eval_rough_scratch \
 	  --out runs/compare_rough_scratch
 
-# Retrains models/distilled (models/distilled/README.md): the expert distilled into a joint_pd network policy on the
-# targets suite (behaviour cloning and 6 DAgger rounds, about 6 min on 2 cores, seeded; the 22 min budget is a
-# guard), then it on the held-out targets and smoke suites, and it and the expert on 3 seeds of robust_hard with
-# their paired comparison (runs/compare_robust_hard_3_distilled). About 15 min in all.
+# Retrains models/distilled (models/distilled/README.md): the expert distilled into a joint_pd network policy with a
+# 0.05 m height scan on the targets suite (behaviour cloning and 6 DAgger rounds, 10.5 min with one rollout process
+# on a shared core, seeded; the 22 min budget is a guard), then it on the held-out targets and smoke suites, and it
+# and the expert on 3 seeds of robust_hard with their paired comparison (runs/compare_robust_hard_3_distilled).
+# About 20 min in all.
 DISTILL_FILES := model.zip model_obs_norm.npz rl_meta.json distill_summary.json distill_curve.png
 distilled: venv
 	$(PY) -m agents.cli distill --suite targets --out runs/distilled --episodes 2 --dagger-rounds 6 \
-	  --beta-decay 0.7 --epochs 15 --workers 2 --budget-min 22 --overwrite
+	  --beta-decay 0.7 --epochs 15 --height-scan '{"resolution": 0.05}' --workers 2 --budget-min 22 --overwrite
 	mkdir -p models/distilled && for f in $(DISTILL_FILES); do cp runs/distilled/$$f models/distilled/$$f; done
 	$(EVAL) --policy models/distilled/model.zip --suite targets --out runs/eval_targets_0_distilled
 	$(EVAL) --policy models/distilled/model.zip --suite smoke --out runs/eval_smoke_0_distilled

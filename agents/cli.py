@@ -579,6 +579,12 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
         help="the student does not observe its heading and sideways offset on the course (env course_frame=False)",
     )
     p.add_argument(
+        "--height-scan",
+        default=None,
+        help="JSON object of the student env's height_scan grid, e.g. '{\"resolution\": 0.05}' (size_x, size_y, "
+        "resolution in m; default: the env's 1.0 x 0.6 m grid at 0.1 m)",
+    )
+    p.add_argument(
         "--expert-config",
         default='{"recovery": false}',
         help="JSON object of agents.expert.ExpertConfig fields of the teacher (default '{\"recovery\": false}')",
@@ -604,13 +610,14 @@ def run_distill_command(args: argparse.Namespace) -> int:
     if not 0.0 <= args.beta_decay <= 1.0:
         raise ValueError(f"--beta-decay must be in [0, 1], got {args.beta_decay}")
     expert = _json_object(args.expert_config, "--expert-config")
+    height_scan = None if args.height_scan is None else _json_object(args.height_scan, "--height-scan")
     suite = _suite_option(args.suite)
     from agents.rl.distill import DistillConfig, distill  # deferred: SB3 and torch
 
     cfg = DistillConfig(
         dagger_rounds=args.dagger_rounds, beta_decay=args.beta_decay, episodes=args.episodes, epochs=args.epochs,
         seed=args.seed, seed_offset=args.seed_offset, workers=args.workers, budget_min=args.budget_min, expert=expert,
-        course_frame=args.course_frame,
+        course_frame=args.course_frame, height_scan=height_scan,
     )  # fmt: skip
     try:
         cfg.expert_config()

@@ -101,6 +101,9 @@ class DistillConfig:
     """s, the observation's gait clock (None: the teacher expert's cycle, the sum of its ``durations``)."""
     course_frame: bool = True
     """the student observes its heading and sideways offset on the course (the env's ``course_frame``)."""
+    height_scan: dict[str, float] | None = None
+    """the student env's ``height_scan`` grid (``size_x``, ``size_y``, ``resolution``, m; None: the env's default,
+    1.0 x 0.6 m at 0.1 m)."""
     expert: dict[str, Any] = dataclasses.field(default_factory=lambda: {"recovery": False})
     """the teacher's :class:`agents.expert.ExpertConfig` fields."""
     seed: int = 0
@@ -131,6 +134,11 @@ class DistillConfig:
         for name, ok, allowed in checks:
             if not ok:
                 raise ValueError(f"distill.{name} must be {allowed}, got {getattr(self, name)!r}")
+        if self.height_scan is not None:
+            from quad_uneven_env.config import HeightScanConfig
+            from quad_uneven_env.fields import from_mapping
+
+            from_mapping(HeightScanConfig, self.height_scan, "distill.height_scan")  # its errors name the field
 
     def expert_config(self) -> ExpertConfig:
         """The teacher's :class:`ExpertConfig` (its fields checked, the error naming the field)."""
@@ -149,6 +157,7 @@ class DistillConfig:
             "pd_action_scale": self.pd_action_scale,
             "gait_period": self.clock_period(),
             **({"course_frame": True} if self.course_frame else {}),
+            **({"height_scan": dict(self.height_scan)} if self.height_scan is not None else {}),
         }
 
 
@@ -495,7 +504,6 @@ def distill(
             losses = fit_student(model, norm, all_obs, all_labels, cfg, cfg.seed + k)
             row.update(train_s=time.perf_counter() - t0, dataset=len(all_obs), loss_first=losses[0], loss=losses[-1])
             rounds.append(row)
-            save_student(model, norm, out, meta)
             log(
                 f"round {k} (beta {beta:.3f}): {row['steps']} steps ({row['student_steps']} by the student), "
                 f"{row['successes']}/{row['episodes']} reached the goal, {row['falls']} fell, mean distance "
@@ -503,6 +511,7 @@ def distill(
                 + (f", on-policy label rmse {row['label_rmse_on_policy']:.3f}" if "label_rmse_on_policy" in row else "")
                 + f"; loss {losses[-1]:.4f} on {len(all_obs)} samples"
             )
+            save_student(model, norm, out, meta)
             summary["wall_time_s"] = time.perf_counter() - start
             (out / "distill_summary.json").write_text(json.dumps(summary, indent=2))
             manifest.add_new()

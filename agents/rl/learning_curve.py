@@ -71,7 +71,7 @@ def plot_learning_curve(monitor_dir: Path, eval_file: Path | None, out_png: Path
     :return: a summary of the last ``ROLLING`` training episodes (``episodes``, ``mean_return``,
         ``mean_stability_index``, ``mean_distance``, ``fall_rate``); NaN where there is no episode.
     """
-    from agents.plotting import pyplot, save
+    from agents.plotting import pyplot
 
     plt = pyplot()
 
@@ -84,22 +84,14 @@ def plot_learning_curve(monitor_dir: Path, eval_file: Path | None, out_png: Path
         ("ep_distance", "distance (m)", "training episodes"),
     ]
     fig, axes = plt.subplots(len(panels), 1, figsize=(7, 8), sharex=True)
-    for ax, (key, label, legend) in zip(axes, panels, strict=True):
+    for ax, (key, _, legend) in zip(axes, panels, strict=True):
         y = mon.get(key, np.full(len(ts), np.nan))
         ax.plot(ts, y, ".", ms=3, alpha=0.35, color="tab:blue", label=legend)
         if len(ts):
             ax.plot(ts, rolling_mean(y), "-", color="tab:blue", label=f"rolling mean ({ROLLING} episodes)")
         if key == "r" and ev is not None and len(ev["timesteps"]):
             ax.plot(ev["timesteps"], ev["returns"], "o-", color="tab:orange", label="evaluation (deterministic)")
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="best")
-    axes[-1].set_xlabel("environment steps")
-    if title:
-        axes[0].set_title(textwrap.fill(title, 70), fontsize=10)
-    fig.tight_layout()
-    out_png.parent.mkdir(parents=True, exist_ok=True)
-    save(fig, out_png, dpi=110, tight=False)
+    _finish(fig, axes, [label for _, label, _ in panels], title, out_png, legend_size=8)
 
     last = slice(-ROLLING, None)
 
@@ -129,7 +121,7 @@ def plot_learning_curves(runs: list[tuple[str, Path]], out_png: Path, title: str
     :param out_png: the figure (PNG) written.
     :raises ValueError: ``RUN: ...`` naming a folder without a finished training episode.
     """
-    from agents.plotting import pyplot, save
+    from agents.plotting import pyplot
 
     curves = []
     for label, folder in runs:
@@ -156,10 +148,17 @@ def plot_learning_curves(runs: list[tuple[str, Path]], out_png: Path, title: str
             )
             if key == "r" and ev is not None and len(ev["timesteps"]):
                 ax.plot(ev["timesteps"], ev["returns"], "o--", ms=4, color=colour, label=f"{label} (evaluation)")
-    for ax, (_, name) in zip(axes, panels, strict=True):
+    return _finish(fig, axes, [name for _, name in panels], title, out_png, legend_size=7)
+
+
+def _finish(fig: Any, axes: Any, ylabels: list[str], title: str | None, out_png: Path, legend_size: int) -> Path:
+    """Label, grid and legend every panel, title the first, save the figure to ``out_png``; :return: its path."""
+    from agents.plotting import save
+
+    for ax, name in zip(axes, ylabels, strict=True):
         ax.set_ylabel(name)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=legend_size, loc="best")
     axes[-1].set_xlabel("environment steps")
     if title:
         axes[0].set_title(textwrap.fill(title, 70), fontsize=10)

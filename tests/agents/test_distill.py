@@ -263,6 +263,9 @@ def policy_weights(path):
         (["--beta-decay", "1.5"], "--beta-decay"),
         (["--episodes", "0"], "--episodes"),
         (["--workers", "0"], "--workers"),
+        (["--height-scan", "{bad"], "--height-scan"),
+        (["--height-scan", '{"resolution": 0}'], "distill.height_scan.resolution"),
+        (["--height-scan", '{"nope": 1}'], "nope"),
         (["--expert-config", "{bad"], "--expert-config"),
         (["--expert-config", '{"nope": 1}'], "nope"),
         (["--expert-config", '{"stride": -1}'], "stride"),
@@ -284,3 +287,29 @@ def test_a_non_empty_out_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "not empty" in err and err.count("\n") == 1
     assert json.dumps(sorted(p.name for p in (tmp_path / "o").iterdir())) == '["x.txt"]'
+
+
+# ------------------------------------------------------------------------------------------ height scan
+def test_the_height_scan_option_in_a_tiny_run(tmp_path):
+    """Through the CLI: a 0.4 x 0.2 m height scan at 0.05 m (9 x 5 = 45 points instead of 77)
+    is the student's observation (137 - 77 + 45 = 105 inputs) and is recorded for evaluate."""
+    from agents.rl.model_io import read_metadata
+
+    scan = {"size_x": 0.4, "size_y": 0.2, "resolution": 0.05}
+    assert main([
+        "distill", "--suite", _tiny_suite_file(tmp_path), "--out", str(tmp_path / "o"), "--dagger-rounds", "1",
+        "--episodes", "1", "--epochs", "1",
+        "--height-scan", json.dumps(scan),
+    ]) == 0  # fmt: skip
+    assert policy_obs_size(tmp_path / "o" / "model.zip") == 105
+    assert read_metadata(tmp_path / "o" / "model.zip")["env_kwargs"]["height_scan"] == scan
+    summary = json.loads((tmp_path / "o" / "distill_summary.json").read_text())
+    assert summary["config"]["height_scan"] == scan and len(summary["rounds"]) == 2
+
+
+def _tiny_suite_file(tmp_path):
+    import yaml
+
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(TINY))
+    return str(path)

@@ -139,15 +139,17 @@ DISTILLED_MODEL = ROOT / "models" / "distilled" / "model.zip"
 
 
 def test_the_distilled_model_walks_the_plain_env_straight():
-    """models/distilled: a joint_pd policy with the expert's gait clock and the course frame, without the expert;
-    on flat ground it walks forward for 6 s (0.3-0.9 m at its 0.1 m/s) and keeps to the centre line."""
+    """models/distilled: a joint_pd policy with the expert's gait clock, the course frame and a 21 x 13 height scan
+    (0.05 m: 137 - 77 + 273 = 333 inputs), without the expert; on flat ground it walks forward for 6 s (0.3-0.9 m at
+    its 0.1 m/s) and keeps to the centre line."""
     meta = read_metadata(DISTILLED_MODEL)
     assert meta["residual"] is False and meta["env_kwargs"]["course_frame"] is True
     assert meta["env_kwargs"]["action_mode"] == "joint_pd" and meta["env_kwargs"]["gait_period"] == pytest.approx(3.1)
     env = gym.make("QuadUneven-v0", terrain="flat", **policy_env_kwargs(str(DISTILLED_MODEL)))
     policy = make_policy(str(DISTILLED_MODEL), env)  # the safe loader: nothing unpickled
     assert isinstance(policy, SB3Policy) and env.unwrapped.controller is None
-    assert policy.model.observation_space.shape == (137,)
+    assert meta["env_kwargs"]["height_scan"] == {"resolution": 0.05}
+    assert policy.model.observation_space.shape == (333,)
     obs, _ = env.reset(seed=7)
     x0 = env.unwrapped.data.qpos[0]
     for _ in range(300):
