@@ -218,7 +218,8 @@ class DaggerTeacher:
             self._first = False
         if not self.student_acts:
             return self._tau.copy()
-        target = np.clip(u._home_joints + self.scale * np.asarray(action), u._joint_lo, u._joint_hi)
+        target = np.empty(C.N_JOINTS)
+        u.actions.joint_targets_into(np.asarray(action), self.scale, target)
         return self.kp * (target - data.qpos[7:]) - self.kd * data.qvel[6:]
 
 
@@ -303,7 +304,7 @@ def rollout(job: RolloutJob) -> dict[str, Any]:
         student_acts = job.student is not None and rng.random() >= job.beta
         teacher.begin_step(student_acts)
         obs_next, _, terminated, truncated, info = env.step(student_action)
-        label = expert_label(ref.q_joints, teacher.first_tau, u._home_joints, cfg.pd_kp, cfg.pd_action_scale)
+        label = expert_label(ref.q_joints, teacher.first_tau, u.actions.home_joints, cfg.pd_kp, cfg.pd_action_scale)
         rows_obs.append(obs)
         rows_label.append(label)
         rows_student.append(student_action)
