@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
-import logging
 import math
 from collections.abc import Callable
 from typing import Any
@@ -41,10 +40,11 @@ from quad_uneven_env.randomization import EpisodeDraw, ModelRandomizer, Push, Ra
 from quad_uneven_env.rendering import RENDER_MODES, SceneRenderer
 from quad_uneven_env.rewards import COMMAND_REWARD_TERMS, REWARD_TERMS, command_reward_terms, reward_terms
 from quad_uneven_env.robot.description import RobotDescription
-from quad_uneven_env.robot.description_model import description_scene_mjcf, standing_feet_B
+from quad_uneven_env.robot.description_model import standing_feet_B
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
 from quad_uneven_env.robot.leg_chain import feet_ik_B
-from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT, PhysicsOptions, scene_mjcf
+from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT
+from quad_uneven_env.scene import compile_scene
 from quad_uneven_env.spatial import yaw_of_quat
 from quad_uneven_env.stepper import PhysicsController, PhysicsStepper, check_controller
 from quad_uneven_env.termination import FallCheck
@@ -54,54 +54,43 @@ from quad_uneven_env.world import SimulatedWorld
 _INF_MOMENTS = np.full(C.N_LEGS, np.inf)
 """the padding of ``info["edge_moments"]`` (copied, never written)."""
 
-_ARGUMENTS = frozenset(f.name for f in dataclasses.fields(EnvConfig))
-"""The env's keyword arguments besides ``controller``."""
-
-MUJOCO_LOGGER = logging.getLogger("mujoco")
-"""Where MuJoCo's warnings go (level INFO) instead of ``MUJOCO_LOG.TXT`` in the working directory: the env
-installs :func:`route_mujoco_warnings` unless a warning handler is already set. The env reports what they mean
-(``info["diverged"]``, ``info["termination_reason"]``)."""
-
-
-def _log_mujoco_warning(message: str) -> None:
-    MUJOCO_LOGGER.info(message)
-
-
-def route_mujoco_warnings() -> None:
-    """Send MuJoCo's warnings to :data:`MUJOCO_LOGGER` (process-wide; a handler set before, by the user or another
-    library, is kept). Without a handler MuJoCo prints them and appends them to ``MUJOCO_LOG.TXT`` in the current
-    directory."""
-    if mujoco.get_mju_user_warning() is None:
-        mujoco.set_mju_user_warning(_log_mujoco_warning)
+def _argument(name: str, doc: str) -> Any:
+    """A read-only attribute of the env: its argument ``name`` as checked, ``env.config.<name>``."""
+    return property(lambda self: getattr(self.config, name), doc=doc)
 
 
 # ---------------------------------------------------------------------------------------------- the robot's facts
-def _scene_xml(robot: RobotDescription, terrain: Terrain, timestep: float) -> str:
-    """The scene's MJCF: ``robot`` over ``terrain``'s height field, MuJoCo's ``timestep`` (s)."""
-    if robot.config is not None:  # the paper's robot: its own MJCF generator (Table 1)
-        return scene_mjcf(
-            robot.config,
-            terrain.hfield_asset_xml(),
-            terrain.hfield_geom_xml(robot.config.friction),
-            PhysicsOptions(timestep=float(timestep)),
-        )
-    return description_scene_mjcf(
-        robot,
-        terrain.hfield_asset_xml(),
-        terrain.hfield_geom_xml(robot.friction),
-        PhysicsOptions(timestep=float(timestep)),
-    )
-
-
 def _feet_home_B(robot: RobotDescription) -> np.ndarray:
     """(4, 3) m, trunk frame: where each foot stands at reset: below its hip (the paper's robot), or where the
     standing pose puts it (a URDF robot)."""
     return hip_positions_B(robot.config) if robot.config is not None else standing_feet_B(robot)
 
 
-def _argument(name: str, doc: str) -> Any:
-    """A read-only attribute of the env: its argument ``name`` as checked, ``env.config.<name>``."""
-    return property(lambda self: getattr(self.config, name), doc=doc)
+def _spawn_qpos(
+    robot: RobotDescription, terrain: Terrain, feet_home_B: np.ndarray, action_map: ActionMap
+) -> np.ndarray:
+    """(19,) standing pose over the terrain's spawn point: each foot on the terrain below its home point
+    (:func:`_feet_home_B`), the joints within their ranges."""
+    cfg = robot.config
+    x0, y0 = terrain.spawn_xy
+    feet_xy = feet_home_B[:, :2] + np.array([x0, y0])
+    ground = np.asarray(terrain.height(feet_xy[:, 0], feet_xy[:, 1]), dtype=float)
+    qpos = np.zeros(C.NQ)
+    qpos[3] = 1.0
+    if cfg is None:  # a URDF robot: the standing pose's feet, each moved to the terrain under it
+        r = robot.foot_radius
+        base_z = float(np.mean(ground - feet_home_B[:, 2])) + r
+        targets = feet_home_B.copy()
+        targets[:, 2] = ground + r - base_z
+        qpos[7:] = feet_ik_B(robot, targets)
+    else:
+        base_z = float(np.mean(ground)) + NOMINAL_HIP_HEIGHT + cfg.foot_radius
+        for i, leg in enumerate(C.LEG_NAMES):
+            target_H = np.array([0.0, 0.0, ground[i] + cfg.foot_radius - base_z])
+            qpos[7 + 3 * i : 10 + 3 * i] = leg_ik_hip(target_H, cfg.thigh.length, cfg.shank.length, C.KNEE_SIGN[leg])
+    qpos[:3] = (x0, y0, base_z)
+    qpos[7:] = np.clip(qpos[7:], action_map.joint_lo, action_map.joint_hi)
+    return qpos
 
 
 class QuadUnevenEnv(gym.Env):
@@ -238,28 +227,25 @@ class QuadUnevenEnv(gym.Env):
     def __init__(
         self, *, controller: PhysicsController | Callable[..., np.ndarray] | None = None, **arguments: Any
     ) -> None:
-        unknown = sorted(set(arguments) - _ARGUMENTS)
-        if unknown:
-            raise TypeError(f"QuadUneven-v0 got an unexpected argument {unknown[0]!r}; allowed: {sorted(_ARGUMENTS)}")
         self.config = config = EnvConfig(**arguments)
         """the arguments, checked (see **Arguments**)."""
         check_controller(controller, config.action_mode)
         self.terrain = Terrain(config.terrain)
         self._command = None if config.command is None else CommandSchedule(config.command)
-        route_mujoco_warnings()
-        self.model = mujoco.MjModel.from_xml_string(_scene_xml(config.robot, self.terrain, config.timestep))
-        # Divergence must end the episode visibly, not be hidden by MuJoCo's automatic reset.
-        self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
+        self.model = compile_scene(config.robot, self.terrain, config.timestep)
         self.data = mujoco.MjData(self.model)
         self.idx = RobotIndex.from_model(self.model)
         self._dt = float(self.model.opt.timestep) * config.frame_skip
         self._g = float(-self.model.opt.gravity[2])
         joint_lo, joint_hi = self.model.jnt_range[1:, 0].copy(), self.model.jnt_range[1:, 1].copy()
-        self._actions = ActionMap(config.action_mode, self.idx.torque_limit, joint_lo, joint_hi, config.pd_action_scale)
+        self.action_map = ActionMap(
+            config.action_mode, self.idx.torque_limit, joint_lo, joint_hi, config.pd_action_scale
+        )
+        """the map from an action to the actuators' command (``home_joints``: the episode's standing pose)."""
         if config.action_mode == "joint_pd":
             make_servos(self.model, config.pd_kp, config.pd_kd, joint_lo, joint_hi)
         self._stepper = PhysicsStepper(
-            self.model, self.data, self.idx, config.frame_skip, self._actions, config.randomization
+            self.model, self.data, self.idx, config.frame_skip, self.action_map, config.randomization
         )
         self._stepper.controller = controller
         self._fall = FallCheck(config.termination)
@@ -344,11 +330,6 @@ class QuadUnevenEnv(gym.Env):
         self._stepper.controller = controller
 
     @property
-    def actions(self) -> ActionMap:
-        """The map from an action to the actuators' command (its ``home_joints``: the episode's standing pose)."""
-        return self._actions
-
-    @property
     def total_mass(self) -> float:
         """kg, the simulated whole-robot mass of this episode (the nominal one unless masses are randomized)."""
         return self._world.total_mass
@@ -411,13 +392,13 @@ class QuadUnevenEnv(gym.Env):
         self._world.restore_model()
         self._new_terrain()
         mujoco.mj_resetData(m, d)
-        d.qpos[:] = self._spawn_qpos()
+        d.qpos[:] = _spawn_qpos(self.robot, self.terrain, self._feet_home_B, self.action_map)
         noise = self.reset_noise_scale
         if noise > 0:
-            lo, hi = self._actions.joint_lo, self._actions.joint_hi
+            lo, hi = self.action_map.joint_lo, self.action_map.joint_hi
             d.qpos[7:] = np.clip(d.qpos[7:] + self.np_random.uniform(-noise, noise, C.N_JOINTS), lo, hi)
             d.qvel[6:] = self.np_random.uniform(-noise, noise, C.N_JOINTS)
-        self._actions.stand(d)
+        self.action_map.stand(d)
         # One child of np_random per reset, for the randomized world and (through its own child) the command:
         # spawning draws nothing from np_random, and the world keeps the child it has without a command.
         child = self.np_random.spawn(1)[0] if self.randomization is not None or self._command is not None else None
@@ -450,31 +431,6 @@ class QuadUnevenEnv(gym.Env):
         margin = 0.3  # m: the robot has left the terrain before its trunk reaches the edge
         self._fall.inside_xy = (xmin + margin, xmax - margin, ymin + margin, ymax - margin)
         self._view.upload_terrain()
-
-    def _spawn_qpos(self) -> np.ndarray:
-        """Standing pose over the spawn point: each foot on the terrain below its hip."""
-        cfg = self.robot_cfg
-        x0, y0 = self.terrain.spawn_xy
-        feet_xy = self._feet_home_B[:, :2] + np.array([x0, y0])
-        ground = np.asarray(self.terrain.height(feet_xy[:, 0], feet_xy[:, 1]), dtype=float)
-        qpos = np.zeros(C.NQ)
-        qpos[3] = 1.0
-        if cfg is None:  # a URDF robot: the standing pose's feet, each moved to the terrain under it
-            r = self.robot.foot_radius
-            base_z = float(np.mean(ground - self._feet_home_B[:, 2])) + r
-            targets = self._feet_home_B.copy()
-            targets[:, 2] = ground + r - base_z
-            qpos[7:] = feet_ik_B(self.robot, targets)
-        else:
-            base_z = float(np.mean(ground)) + NOMINAL_HIP_HEIGHT + cfg.foot_radius
-            for i, leg in enumerate(C.LEG_NAMES):
-                target_H = np.array([0.0, 0.0, ground[i] + cfg.foot_radius - base_z])
-                qpos[7 + 3 * i : 10 + 3 * i] = leg_ik_hip(
-                    target_H, cfg.thigh.length, cfg.shank.length, C.KNEE_SIGN[leg]
-                )
-        qpos[:3] = (x0, y0, base_z)
-        qpos[7:] = np.clip(qpos[7:], self._actions.joint_lo, self._actions.joint_hi)
-        return qpos
 
     # ------------------------------------------------------------------ step
     def step(self, action: np.ndarray):

@@ -219,7 +219,7 @@ class DaggerTeacher:
         if not self.student_acts:
             return self._tau.copy()
         target = np.empty(C.N_JOINTS)
-        u.actions.joint_targets_into(np.asarray(action), self.scale, target)
+        u.action_map.joint_targets_into(np.asarray(action), self.scale, target)
         return self.kp * (target - data.qpos[7:]) - self.kd * data.qvel[6:]
 
 
@@ -304,7 +304,7 @@ def rollout(job: RolloutJob) -> dict[str, Any]:
         student_acts = job.student is not None and rng.random() >= job.beta
         teacher.begin_step(student_acts)
         obs_next, _, terminated, truncated, info = env.step(student_action)
-        label = expert_label(ref.q_joints, teacher.first_tau, u.actions.home_joints, cfg.pd_kp, cfg.pd_action_scale)
+        label = expert_label(ref.q_joints, teacher.first_tau, u.action_map.home_joints, cfg.pd_kp, cfg.pd_action_scale)
         rows_obs.append(obs)
         rows_label.append(label)
         rows_student.append(student_action)
