@@ -54,6 +54,7 @@ from quad_uneven_env.world import SimulatedWorld
 _INF_MOMENTS = np.full(C.N_LEGS, np.inf)
 """the padding of ``info["edge_moments"]`` (copied, never written)."""
 
+
 def _argument(name: str, doc: str) -> Any:
     """A read-only attribute of the env: its argument ``name`` as checked, ``env.config.<name>``."""
     return property(lambda self: getattr(self.config, name), doc=doc)
@@ -305,7 +306,7 @@ class QuadUnevenEnv(gym.Env):
         """The paper robot's Table-1 config (None for a URDF robot)."""
         return self.robot.config
 
-    # ------------------------------------------------------------------ properties
+    # ------------------------------------------------------------------ the episode: controller, drawn world, command
     @property
     def dt(self) -> float:
         """Control period (s) = frame_skip x physics timestep."""
