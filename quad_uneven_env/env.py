@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import math
+import operator
 from collections.abc import Callable
 from typing import Any
 
@@ -57,7 +58,7 @@ _INF_MOMENTS = np.full(C.N_LEGS, np.inf)
 
 def _argument(name: str, doc: str) -> Any:
     """A read-only attribute of the env: its argument ``name`` as checked, ``env.config.<name>``."""
-    return property(lambda self: getattr(self.config, name), doc=doc)
+    return property(operator.attrgetter(f"config.{name}"), doc=doc)
 
 
 # ---------------------------------------------------------------------------------------------- the robot's facts
@@ -278,7 +279,7 @@ class QuadUnevenEnv(gym.Env):
         self._joint_power = np.zeros(C.N_JOINTS)
         self._prev_action = np.zeros(C.N_JOINTS)
         self._last_obs = np.zeros(space.shape, dtype=np.float32)
-        self._last_index_norm = self._start_x = 0.0
+        self._last_index_norm = self._start_x = self._mg = 0.0
         self._episode_steps = 0
         self._needs_reset = True
 
@@ -405,6 +406,7 @@ class QuadUnevenEnv(gym.Env):
         child = self.np_random.spawn(1)[0] if self.randomization is not None or self._command is not None else None
         self._world.draw(child)
         self._meas.mass = self.total_mass
+        self._mg = self.total_mass * self._g  # N, the episode's weight: the stability index's normaliser
         if self._command is not None:
             self._command.reset(child.spawn(1)[0])
             self._command.steer(yaw_of_quat(d.qpos[3:7]))
@@ -418,7 +420,7 @@ class QuadUnevenEnv(gym.Env):
         self._needs_reset = False
         meas = self._measure()
         self._start_x = float(meas.cog[0])
-        self._last_index_norm = meas.index / (self.total_mass * self._g)
+        self._last_index_norm = meas.index / self._mg
         self._last_obs = self._world.observe(meas.obs)
         names = REWARD_TERMS if self._command is None else REWARD_TERMS + COMMAND_REWARD_TERMS
         info = self._info(meas, terms=dict.fromkeys(names, 0.0), diverged=False, reason=None)
@@ -453,7 +455,7 @@ class QuadUnevenEnv(gym.Env):
             index_norm = self._last_index_norm  # the buffers still hold the last good measurement
         else:
             reason = self._fall.reason(meas.base, meas.ground, meas.R, meas.trunk_contact)
-            index_norm = meas.index / (self.total_mass * self._g)
+            index_norm = meas.index / self._mg
         fell = reason is not None
         self._episode_steps += 1
         truncated = not fell and self._episode_steps >= self.episode_step_cap
@@ -519,8 +521,7 @@ class QuadUnevenEnv(gym.Env):
             np.divide(torque, self.idx.torque_limit, out=tau_frac)
             joint_power = np.multiply(torque, d.qvel[6:], out=self._joint_power)
             power = float(np.abs(joint_power, out=joint_power).sum())
-        mg = self.total_mass * self._g
-        terms = reward_terms(self.reward_weights, cog_vel_x, index_norm, tau_frac, power, mg, fell)
+        terms = reward_terms(self.reward_weights, cog_vel_x, index_norm, tau_frac, power, self._mg, fell)
         if command is not None:
             terms.update(self._command_terms(meas, command, diverged))
         return terms
@@ -542,7 +543,7 @@ class QuadUnevenEnv(gym.Env):
         index = meas.index
         return {
             "stability_index": index,
-            "stability_index_normalized": index / (self.total_mass * self._g),
+            "stability_index_normalized": index / self._mg,
             "edge_moments": self._padded_moments(meas),
             "contact_forces": meas.foot_forces.copy(),
             "foot_contact": meas.foot_contact.copy(),
