@@ -41,7 +41,8 @@ def robot_base_height_limits(robot: RobotDescription) -> tuple[float, float]:
 
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
-    """The env's arguments, validated and loaded: ``EnvConfig(**kwargs)`` checks what ``gym.make`` was given.
+    """The env's arguments, validated and loaded: ``EnvConfig(**kwargs)`` checks what ``gym.make`` was given (all
+    but ``controller``, a live object that the env's physics loop holds).
 
     Each structured argument is given as a name, a path or a mapping and held as its config object; an object
     given already is taken as it is.
