@@ -357,7 +357,8 @@ class InverseDynamics:
             F0, low = result.contact_forces, self.cone_lower
             if normals_W is None:
                 return IK.qp_fill(J_feet, lay.mask, r, F0, self._cone_up[:p], low, *qp.problem)
-            return IK.qp_fill_with_cones(normals_W, self.mu, J_feet, lay.mask, r, F0, self.cone_buffer, low, *qp.problem)
+            cones = self.cone_buffer
+            return IK.qp_fill_with_cones(normals_W, self.mu, J_feet, lay.mask, r, F0, cones, low, *qp.problem)
 
         try:
             inside = fill(J_feet, r, normals_W)

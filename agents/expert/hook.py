@@ -44,6 +44,7 @@ NOT_ATTACHED = (
 )
 """The message of the RuntimeError an expert that is not its env's controller raises instead of acting."""
 
+
 class PhysicsHook:
     """The expert's physics-rate controller (:class:`quad_uneven_env.env.PhysicsController`), around its parts.
 
