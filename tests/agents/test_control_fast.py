@@ -248,6 +248,36 @@ def test_the_expert_walks_exactly_as_with_the_readable_step(distribution, terrai
     assert len(readable_ref) == n and not tries_ref
 
 
+@pytest.mark.parametrize("share", [True, False])
+def test_the_lane_and_the_call_are_one_path(share, monkeypatch):
+    """The expert through the env's fast lane (``torques_into``) and with the lane removed (the env's call at every
+    physics step): the same motor commands, trajectory, log and recoveries bit for bit, pushed off its plan, in the
+    simulator's data and in the nominal model's copy; both count one step per physics step."""
+    runs = []
+    for lane in (True, False):
+        env = gym.make("QuadUneven-v0", terrain="rough")
+        policy = attach_expert(env, ExpertConfig(share_nominal_world=share))
+        if not lane:
+            monkeypatch.setattr(policy, "torques_into", lambda *args: False, raising=False)
+        obs, _ = env.reset(seed=4)
+        d = env.unwrapped.data
+        trace = []
+        for i in range(200):
+            if i == 120:
+                d.qvel[1] += 0.3
+            obs, _, fell, *_ = env.step(policy.predict(obs)[0])
+            trace.append((d.qpos.copy(), d.ctrl.copy()))
+            assert not fell
+        assert policy._steps == 200 * env.unwrapped.frame_skip
+        runs.append((trace, list(policy.failure_log), policy.recoveries))
+        monkeypatch.undo()
+    (with_lane, log_lane, rec_lane), (without, log_call, rec_call) = runs
+    for (q1, u1), (q2, u2) in zip(with_lane, without, strict=True):
+        np.testing.assert_array_equal(u1, u2)
+        np.testing.assert_array_equal(q1, q2)
+    assert log_lane == log_call and rec_lane == rec_call >= 1
+
+
 def test_the_contact_pairs_have_one_numba_type_whatever_the_contact_count():
     """``contact_pairs`` hands the compiled kernels one array type with no contact and with several, where
     MuJoCo's own view changes layout (so each kernel would compile again at the first airborne step); the
