@@ -36,6 +36,7 @@ import numpy as np
 from quad_uneven_env import constants as C
 from quad_uneven_env.config import RobotConfig, load_robot_config
 from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.robot.description import PAPER_LEG_LENGTH, RobotDescription
 from quad_uneven_env.robot.kinematics import hip_positions_B, leg_fk_hip, leg_ik_hip, standing_joint_angles
 
@@ -293,7 +294,7 @@ def robot_geometry(robot: RobotConfig | RobotDescription | RobotGeometry | None 
     if isinstance(robot, RobotDescription) and robot.config is not None:
         robot = robot.config
     if not isinstance(robot, RobotConfig | RobotDescription):
-        raise ValueError(f"robot must be a RobotConfig, a RobotDescription or a RobotGeometry, got {robot!r}")
+        raise ValueError(f"robot must be a RobotConfig, a RobotDescription or a RobotGeometry, got {excerpt(robot)}")
     hit = _CACHE.get(id(robot))
     if hit is None or hit[0] is not robot:
         if len(_CACHE) >= 64:

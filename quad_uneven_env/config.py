@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from quad_uneven_env.fields import Param, check_fields, param
+from quad_uneven_env.fields import Param, check_fields, clip, excerpt, param
 
 
 def shipped_config_dir() -> Path:
@@ -117,7 +117,7 @@ def _triple(value: Any, field: str, allow_zero: bool = False) -> tuple[float, fl
     arr = np.asarray(value, dtype=float)
     if arr.shape != (3,) or not np.all(np.isfinite(arr)) or np.any(arr < 0) or (not allow_zero and np.any(arr == 0)):
         need = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{field} must be 3 finite numbers {need}, got {value!r}")
+        raise ValueError(f"{field} must be 3 finite numbers {need}, got {excerpt(value)}")
     return tuple(float(x) for x in arr)  # type: ignore[return-value]
 
 
@@ -133,21 +133,21 @@ def _range_pair(value: Any, field: str) -> tuple[float, float]:
     try:
         lo, hi = (float(x) for x in value)
     except (TypeError, ValueError):
-        raise ValueError(f"{field} must be [low, high] (two numbers, rad), got {value!r}") from None
+        raise ValueError(f"{field} must be [low, high] (two numbers, rad), got {excerpt(value)}") from None
     if not (np.isfinite(lo) and np.isfinite(hi)):
-        raise ValueError(f"{field} must be [low, high] (two finite numbers, rad), got {value!r}")
+        raise ValueError(f"{field} must be [low, high] (two finite numbers, rad), got {excerpt(value)}")
     return lo, hi
 
 
 def _require(raw: Mapping[str, Any], keys: set[str], where: str) -> None:
     if not isinstance(raw, Mapping):
-        raise ValueError(f"{where} must be a mapping with fields {sorted(keys)}, got {raw!r}")
+        raise ValueError(f"{where} must be a mapping with fields {sorted(keys)}, got {excerpt(raw)}")
     missing = keys - set(raw)
     unknown = set(raw) - keys
     if missing:
         raise ValueError(f"{where}: missing field(s) {sorted(missing)}")
     if unknown:
-        raise ValueError(f"{where}: unknown field(s) {sorted(unknown)}; allowed: {sorted(keys)}")
+        raise ValueError(f"{where}: unknown field(s) {excerpt(sorted(unknown, key=str))}; allowed: {sorted(keys)}")
 
 
 def _link(raw: Mapping[str, Any], where: str) -> LinkParams:
@@ -200,12 +200,80 @@ def robot_config_from_dict(raw: Mapping[str, Any]) -> RobotConfig:
     )
 
 
+MAX_YAML_BYTES = 16 * 2**20
+"""Largest YAML file :func:`read_yaml` reads (bytes): a config is a few kB; large arrays go in .npy files."""
+
+MAX_YAML_DEPTH = 64
+"""Deepest nesting of sequences and mappings a YAML document may have (levels)."""
+
+MAX_ALIAS_VALUES = 10_000
+"""Most values the aliases (``*name``, ``<<: *name``) of one YAML document may repeat in all: each alias counts
+the values of its anchor, aliases inside it included, so a few hundred bytes of nested aliases cannot stand for
+billions of values."""
+
+
 class DuplicateKeyError(yaml.constructor.ConstructorError):
     """A mapping of a YAML file that gives one key twice (YAML says keys are unique; PyYAML keeps the last)."""
 
 
+class YamlLimitError(yaml.composer.ComposerError):
+    """A YAML document beyond this reader's bounds: nested too deep, an alias inside its own anchor, or aliases
+    repeating more than :data:`MAX_ALIAS_VALUES` values."""
+
+
+def _node_count(node: yaml.Node, counts: dict[int, int]) -> int:
+    """Values of the complete ``node`` with its aliases expanded (``counts`` memoises them by node id)."""
+    key = id(node)
+    if key not in counts:
+        if isinstance(node, yaml.SequenceNode):
+            counts[key] = 1 + sum(_node_count(child, counts) for child in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            counts[key] = 1 + sum(_node_count(k, counts) + _node_count(v, counts) for k, v in node.value)
+        else:
+            counts[key] = 1
+    return counts[key]
+
+
 class UniqueKeyLoader(yaml.SafeLoader):
-    """PyYAML's safe loader that refuses a mapping giving one key twice, naming the key and both lines."""
+    """PyYAML's safe loader that refuses a mapping giving one key twice, naming the key and both lines, and a
+    document nested deeper than :data:`MAX_YAML_DEPTH`, whose aliases repeat more than :data:`MAX_ALIAS_VALUES`
+    values, or with an alias inside its own anchor (a value containing itself)."""
+
+    def __init__(self, stream: Any) -> None:
+        super().__init__(stream)
+        self._depth = 0
+        self._open_anchors: set[str] = set()
+        self._counts: dict[int, int] = {}
+        self._repeated = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:
+        """The node at the parser's position, within the bounds above; :raises YamlLimitError: beyond them."""
+        event = self.peek_event()
+        if isinstance(event, yaml.AliasEvent):
+            if event.anchor in self._open_anchors:
+                problem = f"the alias *{clip(event.anchor, 40)} lies inside its own anchor (a value containing itself)"
+                raise YamlLimitError(None, None, problem, event.start_mark)
+            target = self.anchors.get(event.anchor)
+            if target is not None:  # else PyYAML's own error names the undefined alias
+                self._repeated += _node_count(target, self._counts)
+                if self._repeated > MAX_ALIAS_VALUES:
+                    problem = (
+                        f"its aliases repeat more than {MAX_ALIAS_VALUES} values (here *{clip(event.anchor, 40)}); "
+                        "write the values out"
+                    )
+                    raise YamlLimitError(None, None, problem, event.start_mark)
+            return super().compose_node(parent, index)
+        if self._depth >= MAX_YAML_DEPTH:
+            raise YamlLimitError(None, None, f"values nest deeper than {MAX_YAML_DEPTH} levels", event.start_mark)
+        anchor = getattr(event, "anchor", None)
+        if anchor is not None:
+            self._open_anchors.add(anchor)
+        self._depth += 1
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+            self._open_anchors.discard(anchor)
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
         """The mapping of ``node``; :raises DuplicateKeyError: on a key given twice (at its second line)."""
@@ -223,7 +291,7 @@ class UniqueKeyLoader(yaml.SafeLoader):
                     raise DuplicateKeyError(
                         "while constructing a mapping",
                         node.start_mark,
-                        f"duplicate key {key!r} (first given at line {first + 1})",
+                        f"duplicate key {excerpt(key)} (first given at line {first + 1})",
                         key_node.start_mark,
                     )
                 seen[key] = key_node.start_mark.line
@@ -231,9 +299,11 @@ class UniqueKeyLoader(yaml.SafeLoader):
 
 
 def load_yaml_text(text: str) -> Any:
-    """Parse YAML ``text`` safely (no Python objects), refusing duplicate keys (:class:`UniqueKeyLoader`).
+    """Parse YAML ``text`` safely (no Python objects), refusing duplicate keys and unbounded documents
+    (:class:`UniqueKeyLoader`).
 
-    :raises yaml.YAMLError: on invalid YAML or a duplicate key (its ``problem_mark`` gives the line).
+    :raises yaml.YAMLError: on invalid YAML, a duplicate key or a document beyond the reader's bounds
+        (:class:`YamlLimitError`); its ``problem_mark`` gives the line.
     """
     return yaml.load(text, Loader=UniqueKeyLoader)  # a SafeLoader subclass: no Python objects
 
@@ -241,22 +311,32 @@ def load_yaml_text(text: str) -> Any:
 def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read one YAML file into a dict (the only YAML reader of the project).
 
-    :raises ValueError: naming the file if it is missing, unreadable, not valid YAML, gives a key twice in one
-        mapping (the key and its line are named) or does not hold a mapping at the top level.
+    :raises ValueError: naming the file if it is missing, unreadable, larger than :data:`MAX_YAML_BYTES`, not
+        valid YAML, gives a key twice in one mapping (the key and its line are named), nests deeper than
+        :data:`MAX_YAML_DEPTH`, has aliases that repeat more than :data:`MAX_ALIAS_VALUES` values or refer to
+        a value containing them, or does not hold a mapping at the top level.
     """
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"config file {str(p)!r} does not exist")
     try:
-        with p.open() as f:
-            data = load_yaml_text(f.read())
+        with p.open("rb") as f:
+            raw = f.read(MAX_YAML_BYTES + 1)
+        if len(raw) > MAX_YAML_BYTES:
+            raise ValueError(
+                f"config file {str(p)!r} is larger than {MAX_YAML_BYTES // 2**20} MB (give large arrays as .npy files)"
+            )
+        data = load_yaml_text(raw.decode("utf-8"))
     except DuplicateKeyError as err:
         line = err.problem_mark.line + 1
         raise ValueError(f"config file {str(p)!r} gives a key twice at line {line}: {err.problem}") from None
+    except YamlLimitError as err:
+        line = err.problem_mark.line + 1
+        raise ValueError(f"config file {str(p)!r} is refused at line {line}: {err.problem}") from None
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(err, "problem", None) or type(err).__name__
+        problem = clip(getattr(err, "problem", None) or type(err).__name__)
         raise ValueError(f"config file {str(p)!r} is not valid YAML{where}: {problem}") from None
     except (OSError, UnicodeDecodeError) as err:
         raise ValueError(f"config file {str(p)!r} cannot be read: {err}") from None

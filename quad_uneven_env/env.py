@@ -7,7 +7,6 @@ import dataclasses
 import logging
 import math
 import os
-import reprlib
 import sys
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
@@ -25,7 +24,7 @@ from quad_uneven_env.config import (
     RobotConfig,
     TerminationLimits,
 )
-from quad_uneven_env.fields import Param, from_mapping
+from quad_uneven_env.fields import Param, excerpt, from_mapping
 from quad_uneven_env.measurement import StepMeasurement
 from quad_uneven_env.measurement_kernels import clip_finite_into
 from quad_uneven_env.observations import (
@@ -389,7 +388,7 @@ class QuadUnevenEnv(gym.Env):
                 if getattr(self.reward_weights, name) != 0.0:
                     raise ValueError(
                         f"reward_weights.{name} must be 0 without a command (command=None), got "
-                        f"{getattr(self.reward_weights, name)!r}; pass command=... to make()"
+                        f"{excerpt(getattr(self.reward_weights, name))}; pass command=... to make()"
                     )
         self.frame_skip = int(frame_skip)
         self.gait_period = args["gait_period"]
@@ -550,18 +549,18 @@ class QuadUnevenEnv(gym.Env):
         if not callable(controller):
             raise ValueError(
                 f"controller must be None or a callable (model, data, action) -> 12 torques (N m), "
-                f"got {reprlib.repr(controller)} of type {type(controller).__name__}"
+                f"got {excerpt(controller)} of type {type(controller).__name__}"
             )
         for hook in ("reset", "torques_into"):
             if hasattr(controller, hook) and not callable(getattr(controller, hook)):
                 raise ValueError(
                     f"controller.{hook} must be a method (see PhysicsController), got "
-                    f"{reprlib.repr(getattr(controller, hook))} of type {type(getattr(controller, hook)).__name__}"
+                    f"{excerpt(getattr(controller, hook))} of type {type(getattr(controller, hook)).__name__}"
                 )
         if self.action_mode != "torque":
             raise ValueError(
-                f"controller must be None with action_mode={self.action_mode!r}: a physics-rate controller returns "
-                "torques, which would drive the position servos as targets; use action_mode='torque'"
+                f"controller must be None with action_mode={excerpt(self.action_mode)}: a physics-rate controller "
+                "returns torques, which would drive the position servos as targets; use action_mode='torque'"
             )
 
     # ------------------------------------------------------------------ reset
@@ -573,7 +572,7 @@ class QuadUnevenEnv(gym.Env):
         if seed is not None and (
             isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer) or seed < 0
         ):
-            raise ValueError(f"seed must be None or an integer >= 0, got {seed!r} of type {type(seed).__name__}")
+            raise ValueError(f"seed must be None or an integer >= 0, got {excerpt(seed)} of type {type(seed).__name__}")
         super().reset(seed=None if seed is None else int(seed))
         if options:
             raise ValueError(f"reset options are not supported (got keys {sorted(options)}); pass terrain to make()")
@@ -1115,7 +1114,7 @@ def _describe(raw: Any) -> str:
     """A short description of a malformed controller return, for ``termination_reason``."""
     if isinstance(raw, np.ndarray):
         return f"an array of shape {raw.shape} and dtype {raw.dtype}"
-    return f"{reprlib.repr(raw)} of type {type(raw).__name__}"
+    return f"{excerpt(raw)} of type {type(raw).__name__}"
 
 
 if QuadUnevenEnv.__doc__:

@@ -33,7 +33,7 @@ import numpy as np
 
 from quad_uneven_env import constants as C
 from quad_uneven_env.config import read_yaml, resolve_config_path
-from quad_uneven_env.fields import check_fields, from_mapping, param, params_of
+from quad_uneven_env.fields import check_fields, excerpt, from_mapping, param, params_of
 from quad_uneven_env.physics import RobotIndex
 from quad_uneven_env.robot.description import PAPER_LEG_LENGTH, PAPER_MASS, RobotDescription
 
@@ -277,7 +277,7 @@ def load_randomization(
     elif isinstance(spec, Mapping):
         raw = spec
     else:
-        raise ValueError(f"{where} must be None, a preset name, a YAML path or a mapping, got {spec!r}")
+        raise ValueError(f"{where} must be None, a preset name, a YAML path or a mapping, got {excerpt(spec)}")
     return from_mapping(RandomizationConfig, raw, where)
 
 

@@ -52,6 +52,7 @@ from agents.evaluation.run import EvaluationInterrupted, preflight, run_tasks
 from agents.evaluation.store import IDENTITY_KEYS, RUN_FILE, check_resume, open_output_dir, run_identity
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite
 from agents.outputs import OutputError, OutputManifest, write_json_atomic
+from quad_uneven_env.fields import excerpt
 
 __all__ = ["COLLECT_FORMAT", "COLLECT_OUTPUTS", "CollectInterrupted", "CollectedEpisode", "collect", "collect_task"]
 
@@ -265,19 +266,19 @@ def collect(
     import_minari()
     if policy not in POLICIES:
         raise PolicyError(
-            f"policy must be one of {list(POLICIES)} (collect records the scripted expert), got {policy!r}"
+            f"policy must be one of {list(POLICIES)} (collect records the scripted expert), got {excerpt(policy)}"
         )
     if not isinstance(suite, Suite):
         suite = load_suite(suite)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+        raise ValueError(f"workers must be an integer >= 1, got {excerpt(workers)}")
     if isinstance(wall_time_limit, bool) or not (isinstance(wall_time_limit, int | float) and wall_time_limit > 0):
-        raise ValueError(f"wall_time_limit must be a number > 0 (s), got {wall_time_limit!r}")
+        raise ValueError(f"wall_time_limit must be a number > 0 (s), got {excerpt(wall_time_limit)}")
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
     if env_kwargs.get("action_mode", "torque") != "torque":
         raise EnvArgumentError(
             f"env_kwargs.action_mode must be 'torque' (the expert's torques are the recorded actions), "
-            f"got {env_kwargs['action_mode']!r}"
+            f"got {excerpt(env_kwargs['action_mode'])}"
         )
     tasks = episode_tasks(suite, episodes, seed)
     out = open_output_dir(Path(out), resume=resume, overwrite=overwrite, outputs=COLLECT_OUTPUTS, what="collect")

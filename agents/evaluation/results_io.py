@@ -17,6 +17,8 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from quad_uneven_env.fields import excerpt
+
 __all__ = [
     "END_REASONS",
     "EPISODE_FIELDS",
@@ -153,14 +155,9 @@ OVERALL_FIELDS: dict[str, Kind] = {
 """Fields of results.json's ``summary.overall`` that ``select --reference`` reads (required when asked for)."""
 
 
-def _show(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
 def _check(where: str, field: str, value: Any, kind: Kind) -> None:
     if not kind[1](value):
-        raise ResultsError(f"{where}: {field} must be {kind[0]}, got {_show(value)}")
+        raise ResultsError(f"{where}: {field} must be {kind[0]}, got {excerpt(value)}")
 
 
 def _check_fields(
@@ -190,7 +187,7 @@ def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     keys = [k for k, _ in pairs]
     repeated = sorted({k for k in keys if keys.count(k) > 1})
     if repeated:
-        raise ValueError(f"key {repeated[0]!r} given more than once in one object")
+        raise ValueError(f"key {excerpt(repeated[0])} given more than once in one object")
     return dict(pairs)
 
 

@@ -48,6 +48,7 @@ from agents.evaluation.store import (
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite, scale_suite
 from agents.evaluation.targets import check_command_targets, check_targets
 from agents.outputs import OutputError, OutputManifest, write_json_atomic
+from quad_uneven_env.fields import excerpt
 
 __all__ = ["EvaluationInterrupted", "evaluate", "make_policy", "preflight", "run_tasks", "write_results"]
 
@@ -209,17 +210,17 @@ def evaluate(
     if kind == "sb3":
         algo = model_algo(policy, algo)
     elif algo is not None and algo not in SB3_ALGOS:
-        raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {algo!r}")
+        raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {excerpt(algo)}")
     else:
         algo = "ppo"  # unused by a named policy
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+        raise ValueError(f"workers must be an integer >= 1, got {excerpt(workers)}")
     if isinstance(wall_time_limit, bool) or not (isinstance(wall_time_limit, int | float) and wall_time_limit > 0):
-        raise ValueError(f"wall_time_limit must be a number > 0 (s), got {wall_time_limit!r}")
+        raise ValueError(f"wall_time_limit must be a number > 0 (s), got {excerpt(wall_time_limit)}")
     if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
+        raise ValueError(f"backend must be one of {list(BACKENDS)}, got {excerpt(backend)}")
     if (address is not None or ship_code) and backend != "ray":
-        raise ValueError(f"address and ship_code are for backend 'ray' only, got backend {backend!r}")
+        raise ValueError(f"address and ship_code are for backend 'ray' only, got backend {excerpt(backend)}")
     if backend == "ray":
         import_ray()  # without the extra, fail before anything is written
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})

@@ -27,6 +27,7 @@ from agents.evaluation.episode import EpisodeResult
 from agents.evaluation.results_io import ResultsError, load_record, read_json
 from agents.evaluation.suites import EpisodeTask, Suite
 from agents.outputs import OutputError, prepare_output_dir, write_json_atomic
+from quad_uneven_env.fields import excerpt
 
 __all__ = [
     "EVAL_OUTPUTS",
@@ -157,8 +158,8 @@ def check_resume(
     for key in keys:
         if recorded.get(key, {} if key == "expert_config" else None) != identity.get(key):
             raise OutputError(
-                f"--resume: {key} differs from the run recorded in {path} (recorded {recorded.get(key)!r}, "
-                f"now {identity.get(key)!r}); pass --overwrite to start over or choose another --out"
+                f"--resume: {key} differs from the run recorded in {path} (recorded {excerpt(recorded.get(key))}, "
+                f"now {excerpt(identity.get(key))}); pass --overwrite to start over or choose another --out"
             )
     return True
 
@@ -245,8 +246,8 @@ def load_records(out: Path, tasks: Sequence[EpisodeTask]) -> dict[int, dict[str,
         for field, expected in (("index", t.index), ("entry", t.entry), ("terrain", t.kind), ("seed", t.seed)):
             if record[field] != expected:
                 raise ResultsError(
-                    f"--resume: {path}: {field} must be {expected!r} (episode {t.index} of the run), got "
-                    f"{record[field]!r}; {RESUME_HINT}"
+                    f"--resume: {path}: {field} must be {excerpt(expected)} (episode {t.index} of the run), got "
+                    f"{excerpt(record[field])}; {RESUME_HINT}"
                 )
         done[t.index] = record
     return done

@@ -13,7 +13,7 @@ from agents.control.controller import Gains
 from agents.control.inverse_dynamics import DISTRIBUTIONS
 from planners.gait import validate_durations
 from planners.scenario import BODY_PITCH_MODES
-from quad_uneven_env.fields import check_fields, from_mapping, param
+from quad_uneven_env.fields import check_fields, excerpt, from_mapping, param
 from quad_uneven_env.robot.description import PAPER_MASS, RobotDescription
 from quad_uneven_env.robot.dynamics import BACKENDS
 
@@ -140,13 +140,13 @@ class ExpertConfig:
         check_fields(self)
         validate_durations(self.durations)
         if not isinstance(self.gains, Gains):
-            raise ValueError(f"ExpertConfig.gains must be a Gains, got {self.gains!r}")
+            raise ValueError(f"ExpertConfig.gains must be a Gains, got {excerpt(self.gains)}")
         for name in ("recovery", "friction_adapt"):
             if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"ExpertConfig.{name} must be True or False, got {getattr(self, name)!r}")
+                raise ValueError(f"ExpertConfig.{name} must be True or False, got {excerpt(getattr(self, name))}")
         if not isinstance(self.share_nominal_world, bool):
             raise ValueError(
-                f"ExpertConfig.share_nominal_world must be True or False, got {self.share_nominal_world!r}"
+                f"ExpertConfig.share_nominal_world must be True or False, got {excerpt(self.share_nominal_world)}"
             )
 
 

@@ -36,7 +36,7 @@ from quad_uneven_env.config import (
     read_yaml,
     resolve_config_path,
 )
-from quad_uneven_env.fields import check_fields, from_mapping, param
+from quad_uneven_env.fields import check_fields, excerpt, from_mapping, param
 
 if TYPE_CHECKING:
     import pinocchio as pin
@@ -204,7 +204,7 @@ class RobotDescription:
             raise ValueError(f"{where}.friction must be a finite number > 0, got {self.friction}")
         q = np.asarray(self.standing_joints, dtype=float)
         if q.shape != (C.N_JOINTS,) or not np.all(np.isfinite(q)):
-            raise ValueError(f"{where}.standing_joints must be {C.N_JOINTS} finite angles (rad), got {q.tolist()}")
+            raise ValueError(f"{where}.standing_joints must be {C.N_JOINTS} finite angles (rad), got {excerpt(q)}")
         lo, hi = self.joint_ranges[:, 0], self.joint_ranges[:, 1]
         bad = np.flatnonzero((q < lo - 1e-9) | (q > hi + 1e-9))
         if bad.size:
@@ -365,13 +365,14 @@ URDF_OPTIONAL = frozenset(
 
 def _require_keys(raw: Any, required: frozenset[str], optional: frozenset[str], where: str) -> None:
     if not isinstance(raw, Mapping):
-        raise ValueError(f"{where} must be a mapping, got {raw!r}")
+        raise ValueError(f"{where} must be a mapping, got {excerpt(raw)}")
     missing = required - set(raw)
     unknown = set(raw) - required - optional
     if missing:
         raise ValueError(f"{where}: missing field(s) {sorted(missing)}")
     if unknown:
-        raise ValueError(f"{where}: unknown field(s) {sorted(unknown)}; allowed: {sorted(required | optional)}")
+        allowed = sorted(required | optional)
+        raise ValueError(f"{where}: unknown field(s) {excerpt(sorted(unknown, key=str))}; allowed: {allowed}")
 
 
 def _check_inertia(link: LinkInertia, where: str, allow_massless: bool) -> None:
@@ -431,7 +432,8 @@ def _resolve_model_file(spec: Any, base_dir: Path, where: str) -> Path:
         p = robot_data_dir() / str(spec["path"])
     else:
         raise ValueError(
-            f"{where} must be a path (relative to the YAML) or {{package: {DATA_PACKAGE}, path: ...}}, got {spec!r}"
+            f"{where} must be a path (relative to the YAML) or {{package: {DATA_PACKAGE}, path: ...}}, "
+            f"got {excerpt(spec)}"
         )
     if not p.is_file():
         raise ValueError(f"{where}: file {str(p)!r} does not exist")
@@ -456,7 +458,7 @@ def _float(value: Any, where: str, lo: float = 0.0, lo_open: bool = True) -> flo
     except (TypeError, ValueError):
         v = float("nan")
     if not np.isfinite(v) or v < lo or (lo_open and v == lo):
-        raise ValueError(f"{where} must be a finite number {'>' if lo_open else '>='} {lo:g}, got {value!r}")
+        raise ValueError(f"{where} must be a finite number {'>' if lo_open else '>='} {lo:g}, got {excerpt(value)}")
     return v
 
 
@@ -465,7 +467,8 @@ def _per_kind(value: Any, where: str, lo_open: bool) -> dict[str, float]:
     if isinstance(value, Mapping):
         unknown = set(value) - set(C.JOINT_KINDS)
         if unknown:
-            raise ValueError(f"{where}: unknown joint(s) {sorted(unknown)}; allowed: {list(C.JOINT_KINDS)}")
+            names = excerpt(sorted(unknown, key=str))
+            raise ValueError(f"{where}: unknown joint(s) {names}; allowed: {list(C.JOINT_KINDS)}")
         return {k: _float(v, f"{where}.{k}", lo_open=lo_open) for k, v in value.items()}
     v = _float(value, where, lo_open=lo_open)
     return dict.fromkeys(C.JOINT_KINDS, v)
@@ -479,7 +482,7 @@ def _range_override(ranges: Any, leg: str, kind: str, where: str) -> tuple[float
     if not ranges:
         return None
     if not isinstance(ranges, Mapping) or set(ranges) - set(RANGE_KEYS):
-        raise ValueError(f"{where} must be a mapping with keys among {list(RANGE_KEYS)}, got {ranges!r}")
+        raise ValueError(f"{where} must be a mapping with keys among {list(RANGE_KEYS)}, got {excerpt(ranges)}")
     side = "left" if C.LEG_SIGN_Y[leg] > 0 else "right"
     end = "front" if leg[1] == "F" else "hind"
     for key in (f"{kind}_{side}", f"{kind}_{end}", kind):
@@ -487,7 +490,7 @@ def _range_override(ranges: Any, leg: str, kind: str, where: str) -> tuple[float
             try:
                 lo, hi = (float(v) for v in ranges[key])
             except (TypeError, ValueError):
-                raise ValueError(f"{where}.{key} must be [low, high] (rad), got {ranges[key]!r}") from None
+                raise ValueError(f"{where}.{key} must be [low, high] (rad), got {excerpt(ranges[key])}") from None
             if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
                 raise ValueError(f"{where}.{key} must be [low, high] with low < high (rad), got {[lo, hi]}")
             return lo, hi
@@ -574,7 +577,7 @@ def from_urdf(
         )
     if not isinstance(legs, Mapping) or set(legs) != set(C.LEG_NAMES):
         got = sorted(legs) if isinstance(legs, Mapping) else legs
-        raise ValueError(f"{where}.legs must map each of {list(C.LEG_NAMES)} to {{joints, foot}}, got {got!r}")
+        raise ValueError(f"{where}.legs must map each of {list(C.LEG_NAMES)} to {{joints, foot}}, got {excerpt(got)}")
     tau_over = _per_kind(torque_limit, f"{where}.torque_limit", lo_open=True) if torque_limit is not None else {}
     arm = _per_kind(armature, f"{where}.armature", lo_open=False)
     damp = _per_kind(damping, f"{where}.damping", lo_open=False)
@@ -591,11 +594,11 @@ def from_urdf(
         _require_keys(spec, frozenset({"joints", "foot"}), frozenset(), w)
         names = spec["joints"]
         if not isinstance(names, list | tuple) or len(names) != 3:
-            raise ValueError(f"{w}.joints must be the URDF names of [HAA, HFE, KFE], got {names!r}")
+            raise ValueError(f"{w}.joints must be the URDF names of [HAA, HFE, KFE], got {excerpt(names)}")
         jids = []
         for kind, jn in zip(C.JOINT_KINDS, names, strict=True):
             if not model.existJointName(str(jn)):
-                raise ValueError(f"{w}.joints: {kind} joint {jn!r} is not in {urdf.name}")
+                raise ValueError(f"{w}.joints: {kind} joint {excerpt(jn)} is not in {urdf.name}")
             jids.append(model.getJointId(str(jn)))
         parents = [model.parents[j] for j in jids]
         if parents != [1, jids[0], jids[1]]:
@@ -629,11 +632,11 @@ def from_urdf(
             q_index.append(iq)
         foot = str(spec["foot"])
         if not model.existFrame(foot):
-            raise ValueError(f"{w}.foot: frame {foot!r} is not in {urdf.name}")
+            raise ValueError(f"{w}.foot: frame {excerpt(foot)} is not in {urdf.name}")
         frame = model.frames[model.getFrameId(foot)]
         if frame.parentJoint != jids[2]:
             raise ValueError(
-                f"{w}.foot: frame {foot!r} must be fixed to the shank (moved by {names[2]}), "
+                f"{w}.foot: frame {excerpt(foot)} must be fixed to the shank (moved by {names[2]}), "
                 f"got {model.names[frame.parentJoint]}"
             )
         leg_descs.append(LegDescription(leg, *joints, np.array(frame.placement.translation, dtype=float), foot))
@@ -661,16 +664,18 @@ def _standing_pose(model, srdf, state: str, joints: Any, q_index: list[int], whe
             raise ValueError(f"{where}.standing_joints must map each of {list(C.LEG_NAMES)} to 3 angles (rad)")
         q = np.array([joints[leg] for leg in C.LEG_NAMES], dtype=float).reshape(-1)
         if q.shape != (C.N_JOINTS,):
-            raise ValueError(f"{where}.standing_joints must give 3 angles (rad) per leg, got {joints!r}")
+            raise ValueError(f"{where}.standing_joints must give 3 angles (rad) per leg, got {excerpt(joints)}")
         return q
     if srdf is None:
-        raise ValueError(f"{where}: a standing pose is needed: give srdf (with a {state!r} state) or standing_joints")
+        raise ValueError(
+            f"{where}: a standing pose is needed: give srdf (with a {excerpt(state)} state) or standing_joints"
+        )
     import pinocchio as pin
 
     pin.loadReferenceConfigurations(model, str(srdf), False)
     if state not in model.referenceConfigurations:
         raise ValueError(
-            f"{where}.standing_state {state!r} is not in {Path(srdf).name}; it has "
+            f"{where}.standing_state {excerpt(state)} is not in {Path(srdf).name}; it has "
             f"{sorted(model.referenceConfigurations.keys())}"
         )
     return np.array(model.referenceConfigurations[state], dtype=float)[q_index]
