@@ -1,7 +1,9 @@
 """The one reader of an evaluation's results: ``DIR/results.json`` and the episode records ``DIR/episodes/epNNN.json``.
 
 ``quad-uneven compare`` and ``select --reference`` read results.json, ``evaluate --resume`` reads the records
-of the finished episodes (and builds results.json and the report from them). Every field they use is checked
+of the finished episodes (and builds results.json and the report from them), ``collect --resume`` the episode
+files of a collection (a record with the episode's env arguments and step count, :func:`load_collected_episode`)
+and its summary. Every field they use is checked
 on the way in: a bool is a JSON bool (``"success": "yes"`` is refused, not counted), a number a finite number,
 a list a list, a required key present; the file is strict JSON (no NaN or Infinity, no key given twice).
 Anything else raises :class:`ResultsError`, whose message names the file and the field
@@ -26,6 +28,8 @@ __all__ = [
     "RESULTS_FILE",
     "ResultsError",
     "check_episode",
+    "check_object",
+    "load_collected_episode",
     "load_record",
     "load_results",
     "read_json",
@@ -249,6 +253,35 @@ def load_results(folder: str | Path, summary: bool = False) -> dict[str, Any]:
         _check_fields(where, "", data, {"summary": OBJECT}, ("summary",))
         _check_fields(where, "summary.", data["summary"], {"overall": OBJECT}, ("overall",))
         _check_fields(where, "summary.overall.", data["summary"]["overall"], OVERALL_FIELDS, OVERALL_FIELDS)
+    return data
+
+
+COLLECTED_EPISODE_FIELDS: dict[str, Kind] = {"record": OBJECT, "env_kwargs": OBJECT, "steps": COUNT}
+"""Fields of a collection's episode file ``DIR/episodes/epNNN.json`` (all required; ``record`` as
+:func:`load_record` checks it)."""
+
+
+def check_object(data: Any, where: str, fields: Mapping[str, Kind], required: Iterable[str], prefix: str = "") -> dict:
+    """``data`` if it is a JSON object whose ``fields`` have their kinds and which has the ``required`` ones.
+
+    :param where: the file, for the message.
+    :param prefix: the object's name in that file followed by a dot (``"summary."``), or "" at the top level.
+    :raises ResultsError: naming ``where`` and the field.
+    """
+    _check(where, prefix[:-1] or "the top level", data, OBJECT)
+    _check_fields(where, prefix, data, fields, required)
+    return data
+
+
+def load_collected_episode(path: Path) -> dict[str, Any]:
+    """The checked episode file of a collection (``DIR/episodes/epNNN.json``): ``record`` (every field an episode
+    record read back needs, of its type), ``env_kwargs`` (an object) and ``steps`` (an integer >= 0).
+
+    :raises ResultsError: naming the file and the field.
+    """
+    where = str(path)
+    data = check_object(read_json(path), where, COLLECTED_EPISODE_FIELDS, COLLECTED_EPISODE_FIELDS)
+    check_episode(data["record"], where, "record")
     return data
 
 

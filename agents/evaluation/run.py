@@ -50,7 +50,15 @@ from agents.evaluation.targets import check_command_targets, check_targets
 from agents.outputs import OutputError, OutputManifest, write_json_atomic
 from quad_uneven_env.fields import excerpt
 
-__all__ = ["EvaluationInterrupted", "evaluate", "make_policy", "preflight", "run_tasks", "write_results"]
+__all__ = [
+    "EvaluationInterrupted",
+    "evaluate",
+    "make_policy",
+    "preflight",
+    "run_tasks",
+    "suite_episodes",
+    "write_results",
+]
 
 
 def _ignore_sigint() -> None:
@@ -224,10 +232,7 @@ def evaluate(
     if backend == "ray":
         import_ray()  # without the extra, fail before anything is written
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
-    if suite.scale == "leg_length":
-        factor = robot_scale(env_kwargs.get("robot", "paper"))
-        suite = dataclasses.replace(suite, scale="none") if factor == 1.0 else scale_suite(suite, factor)
-    tasks = episode_tasks(suite, episodes, seed)
+    suite, tasks = suite_episodes(suite, env_kwargs, episodes, seed)
     out = open_output_dir(Path(out), resume=resume, overwrite=overwrite)
     identity = run_identity(
         suite, str(policy), algo if kind == "sb3" else None, env_kwargs, episodes, seed, len(tasks), expert_config
@@ -318,6 +323,24 @@ class EvaluationInterrupted(KeyboardInterrupt):
 def write_results(out: Path, results: Mapping[str, Any]) -> Path:
     """Write ``out/results.json`` (strict JSON, atomically: a reader never sees half a file)."""
     return write_json_atomic(out / "results.json", dict(results))
+
+
+def suite_episodes(
+    suite: Suite, env_kwargs: Mapping[str, Any], episodes: int | None, seed: int
+) -> tuple[Suite, list[EpisodeTask]]:
+    """The suite as run on the robot of ``env_kwargs`` and its episodes: what ``evaluate`` and ``collect`` run.
+
+    A suite with ``scale: leg_length`` is magnified by :func:`robot_scale` (:func:`scale_suite`; the result says
+    ``scale: none``); then :func:`~agents.evaluation.suites.episode_tasks` lists its episodes.
+
+    :param episodes: at most this many seeds per terrain entry (None: all).
+    :param seed: offset added to every seed of the suite.
+    :raises SuiteError: if the scaled suite is invalid; ``EnvArgumentError`` if the robot cannot be loaded.
+    """
+    if suite.scale == "leg_length":
+        factor = robot_scale(env_kwargs.get("robot", "paper"))
+        suite = dataclasses.replace(suite, scale="none") if factor == 1.0 else scale_suite(suite, factor)
+    return suite, episode_tasks(suite, episodes, seed)
 
 
 def robot_scale(robot: Any) -> float:
