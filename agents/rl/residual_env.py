@@ -334,9 +334,8 @@ def install_residual_controller(
         raise ValueError(
             f"action_mode must be 'torque' for the residual env (expert torques), got {base.action_mode!r}"
         )
-    settings = config.expert
-    if base.robot.config is None:  # a URDF robot: the given settings over the robot's scaled ones (docs/robots.md)
-        settings = ExpertConfig.for_robot(base.robot, expert_overrides(settings))
+    # the given settings over the robot's scaled ones (docs/robots.md; the paper robot's are the defaults)
+    settings = ExpertConfig.for_robot(base.robot, expert_overrides(config.expert))
     expert = ExpertPolicy(env, settings)
     controller = ResidualController(
         expert,
