@@ -308,7 +308,11 @@ class RobotDescription:
 
     @functools.cached_property
     def standing_height(self) -> float:
-        """m, trunk origin above flat ground in the standing pose with the lowest foot sphere touching it."""
+        """m, trunk origin above flat ground in the standing pose with the lowest foot sphere touching it (two-link
+        legs: hip height plus foot radius, summed as the decimal numbers they are: 0.34 + 0.02 = 0.36 m, where the
+        binary sum is 0.36000000000000004 m)."""
+        if self.two_link is not None:
+            return round(self.two_link.hip_height + self.foot_radius, 12)
         return float(-np.min(feet_positions_B(self, self.standing_joints)[:, 2]) + self.foot_radius)
 
     @property

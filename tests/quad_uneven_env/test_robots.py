@@ -19,10 +19,8 @@ import pytest
 
 import quad_uneven_env
 from quad_uneven_env import constants as C
-from quad_uneven_env.config import load_robot_config
 from quad_uneven_env.robot import conventions as cv
 from quad_uneven_env.robot.description import RobotDescription, load_robot, robot_data_dir
-from quad_uneven_env.robot.description_model import description_robot_mjcf
 from quad_uneven_env.robot.kinematics import leg_fk_hip
 from quad_uneven_env.robot.leg_chain import feet_ik_B, feet_positions_B, leg_fk_B
 from quad_uneven_env.robot.model import PhysicsOptions, robot_mjcf, scene_mjcf
@@ -83,7 +81,7 @@ def test_solo12_torque_limits_come_from_its_yaml_not_the_urdf():
 
 
 def test_paper_description_matches_table_1():
-    cfg = load_robot_config("paper")
+    cfg = load_robot("paper")
     desc = load_robot("paper")
     assert desc.config is cfg
     assert desc.total_mass == pytest.approx(cfg.total_mass)
@@ -92,7 +90,7 @@ def test_paper_description_matches_table_1():
     q = rng.uniform(-1.5, 1.5, (50, 3))
     for i, leg in enumerate(desc.legs):
         hip = desc.hip_positions_B[i]
-        assert np.allclose(leg_fk_B(leg, q), hip + leg_fk_hip(q, cfg.thigh.length, cfg.shank.length), atol=1e-12)
+        assert np.allclose(leg_fk_B(leg, q), hip + leg_fk_hip(q, cfg.two_link.thigh, cfg.two_link.shank), atol=1e-12)
 
 
 @pytest.mark.parametrize("name", URDF_ROBOTS)
@@ -128,7 +126,7 @@ def test_inverse_kinematics_round_trip(name):
 def test_generated_mjcf_has_the_urdf_dynamics(name):
     """Total mass, mj_fullM vs pin.crba and qfrc_bias vs pin.rnea (MuJoCo's coordinates, conventions.py)."""
     desc = load_robot(name)
-    mm = mujoco.MjModel.from_xml_string(description_robot_mjcf(desc))
+    mm = mujoco.MjModel.from_xml_string(robot_mjcf(desc))
     md = mujoco.MjData(mm)
     model, iq, iv = _pin_model(desc)
     data = model.createData()
@@ -163,7 +161,7 @@ def test_paper_description_mjcf_matches_the_paper_model():
     """The generic generator on the paper's description gives the paper model's masses and mass matrix."""
     desc = load_robot("paper")
     ref = mujoco.MjModel.from_xml_string(robot_mjcf(desc.config))
-    gen = mujoco.MjModel.from_xml_string(description_robot_mjcf(desc))
+    gen = mujoco.MjModel.from_xml_string(robot_mjcf(desc))
     assert gen.nq == ref.nq and gen.nv == ref.nv
     dr, dg = mujoco.MjData(ref), mujoco.MjData(gen)
     rng = np.random.default_rng(4)
@@ -184,7 +182,7 @@ def test_paper_description_mjcf_matches_the_paper_model():
 def test_paper_scene_mjcf_is_unchanged():
     """The default env's MJCF, byte for byte (SHA-256 of the document the paper robot's generator wrote before
     URDF robots existed): the paper's robot keeps its own generator."""
-    cfg = load_robot_config("paper")
+    cfg = load_robot("paper")
     terrain = Terrain(parse_terrain_spec("rough"))
     xml = scene_mjcf(cfg, terrain.hfield_asset_xml(), terrain.hfield_geom_xml(cfg.friction), PhysicsOptions())
     assert hashlib.sha256(xml.encode()).hexdigest() == (
