@@ -26,10 +26,8 @@ FIELDS = ("M", "h", "G", "J_feet", "Jdot_qdot_feet")
 
 
 def simulated_model(name: str) -> mujoco.MjModel:
-    """The robot alone as the env simulates it (the paper's own generator, else the description's MJCF)."""
-    desc = load_robot(name)
-    xml = robot_mjcf(desc.config) if desc.config is not None else robot_mjcf(desc)
-    return mujoco.MjModel.from_xml_string(xml)
+    """The robot alone as the env simulates it."""
+    return mujoco.MjModel.from_xml_string(robot_mjcf(load_robot(name)))
 
 
 def random_states(model: mujoco.MjModel, rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -165,7 +163,7 @@ def test_paper_robot_reduces_to_appendix_a():
     ``u = -l1 sin q2 - l2 sin(q2 + q3)``, ``s = -l1 cos q2 - l2 cos(q2 + q3)``, so its leg Jacobian columns are
     ``e_x x R_x [u, 0, s]``, ``R_x [s, 0, -u]`` and ``R_x [-l2 cos(q2 + q3), 0, l2 sin(q2 + q3)]`` (trunk frame)."""
     desc = load_robot("paper")
-    l1, l2 = desc.config.two_link.thigh, desc.config.two_link.shank
+    l1, l2 = desc.two_link.thigh, desc.two_link.shank
     model = simulated_model("paper")
     qpos, qvel = random_states(model, np.random.default_rng(4), 20)
     t = make_dynamics("explicit", desc).terms(qpos, qvel)

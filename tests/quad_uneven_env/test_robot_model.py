@@ -8,10 +8,12 @@ import pinocchio as pin
 import pytest
 
 from quad_uneven_env import constants as C
-from quad_uneven_env.config import load_robot_config, read_yaml, resolve_config_path, robot_config_from_dict
+from quad_uneven_env.config import read_yaml, resolve_config_path
 from quad_uneven_env.robot import conventions as conv
+from quad_uneven_env.robot.description import MIN_INERTIA, load_robot
 from quad_uneven_env.robot.kinematics import leg_fk_hip, leg_ik_hip
-from quad_uneven_env.robot.model import MIN_INERTIA, robot_mjcf
+from quad_uneven_env.robot.model import robot_mjcf
+from quad_uneven_env.robot.table1 import from_table1
 
 
 @pytest.fixture(scope="module")
@@ -158,17 +160,17 @@ def test_bad_robot_config_names_field():
     raw = read_yaml(resolve_config_path("paper", "robot"))
     raw["thigh"] = dict(raw["thigh"], mass=-1.0)
     with pytest.raises(ValueError, match=r"robot\.thigh\.mass"):
-        robot_config_from_dict(raw)
+        from_table1(raw)
     raw = read_yaml(resolve_config_path("paper", "robot"))
     raw["joint_range"] = dict(raw["joint_range"], KFE_front=[-2.0, 0.1])
     with pytest.raises(ValueError, match="KFE_front"):
-        robot_config_from_dict(raw)
+        from_table1(raw)
     raw = read_yaml(resolve_config_path("paper", "robot"))
     raw["colour"] = "red"
     with pytest.raises(ValueError, match="colour"):
-        robot_config_from_dict(raw)
+        from_table1(raw)
     with pytest.raises(ValueError, match="unknown robot config"):
-        load_robot_config("nonexistent")
+        load_robot("nonexistent")
 
 
 def test_yaw_of_quat_and_wrap_angle_against_scipy(rng):
