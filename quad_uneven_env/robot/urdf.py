@@ -378,17 +378,25 @@ def _trunk_box(model: pin.Model, urdf: Path, where: str) -> tuple[np.ndarray, np
     """
     import pinocchio as pin
 
+    boxes = 0
     try:
         tree = ET.fromstring(urdf.read_text())
         for link in tree.iter("link"):
             for element in [*link.findall("visual"), *link.findall("collision")]:
                 if element.tag == "visual" or element.find("geometry/box") is None:
                     link.remove(element)
+                else:
+                    boxes += 1
         geometry = pin.buildGeomFromUrdfString(model, ET.tostring(tree, encoding="unicode"), pin.GeometryType.COLLISION)
     except (ET.ParseError, RuntimeError, ValueError, OSError, UnicodeDecodeError) as err:
         raise ValueError(
             f"{where}.urdf: the collision boxes of {str(urdf)!r} cannot be read by Pinocchio: {_first_line(err)}"
         ) from None
+    if len(geometry.geometryObjects) != boxes:  # urdfdom drops a collision it cannot parse, with a message only
+        raise ValueError(
+            f"{where}.urdf: {boxes - len(geometry.geometryObjects)} of the {boxes} collision boxes of {str(urdf)!r} "
+            'cannot be read by Pinocchio (a box needs size="x y z", m)'
+        )
     best = None
     for obj in geometry.geometryObjects:
         placement = obj.placement
