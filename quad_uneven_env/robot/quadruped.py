@@ -303,8 +303,10 @@ class RobotDescription:
         if self.two_link is not None:
             feet = self.hip_positions_B
             feet[:, 2] -= self.two_link.hip_height
-            return feet
-        return feet_positions_B(self, self.standing_joints)
+        else:
+            feet = feet_positions_B(self, self.standing_joints)
+        feet.setflags(write=False)
+        return feet
 
     @functools.cached_property
     def standing_height(self) -> float:
