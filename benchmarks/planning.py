@@ -74,6 +74,7 @@ def robot_setting(name: str) -> Setting:
     """The paper robot's :class:`Setting` scaled to robot ``name`` by the expert's rules (the paper's: unchanged)."""
     from agents.expert.config import ExpertConfig
     from planners.robot_geometry import robot_geometry
+
     desc = load_robot(name)
     paper, mine = ExpertConfig(), ExpertConfig.for_robot(desc)
     geometry = robot_geometry(desc)

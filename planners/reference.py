@@ -45,9 +45,7 @@ class Reference:
         lookup, other times are computed exactly on the spot (Newton warm-started from the grid).
     """
 
-    def __init__(
-        self, plan, cfg: RobotDescription | RobotGeometry | None = None, grid_dt: float = 0.002
-    ) -> None:
+    def __init__(self, plan, cfg: RobotDescription | RobotGeometry | None = None, grid_dt: float = 0.002) -> None:
         self.plan = plan
         self.geometry = robot_geometry(cfg)
         """the planners' view of the robot."""

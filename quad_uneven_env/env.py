@@ -79,6 +79,7 @@ def default_pd_gains(robot: RobotDescription) -> tuple[float, float]:
     m, s = robot.mass_ratio, robot.length_ratio
     return PAPER_PD_GAINS[0] * m * s, PAPER_PD_GAINS[1] * m * s**1.5
 
+
 ENV_ARGS: tuple[Param, ...] = (
     Param("frame_skip", 10, "-", "physics steps per control step", kind="int", lo=1, hi=1000),
     Param("timestep", 0.002, "s", "physics timestep", lo=0.0, hi=0.002, lo_open=True),
