@@ -334,8 +334,11 @@ def install_residual_controller(
         raise ValueError(
             f"action_mode must be 'torque' for the residual env (expert torques), got {base.action_mode!r}"
         )
-    # the given settings over the robot's scaled ones (docs/robots.md; the paper robot's are the defaults)
-    settings = ExpertConfig.for_robot(base.robot, expert_overrides(config.expert))
+    # the given settings over the robot's scaled ones (docs/robots.md); where those are the defaults (the paper
+    # robot's), the given settings as they are
+    settings = config.expert
+    if ExpertConfig.for_robot(base.robot) != ExpertConfig():
+        settings = ExpertConfig.for_robot(base.robot, expert_overrides(settings))
     expert = ExpertPolicy(env, settings)
     controller = ResidualController(
         expert,
