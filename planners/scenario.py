@@ -12,7 +12,6 @@ from planners.footholds import FootholdLimits
 from planners.gait import PAPER_DURATIONS, SWING_ORDERS, validate_durations
 from planners.robot_geometry import RobotGeometry, robot_geometry
 from planners.types import HeightMap
-from quad_uneven_env.config import RobotConfig, load_robot_config
 from quad_uneven_env.fields import excerpt
 from quad_uneven_env.robot.description import RobotDescription
 
@@ -87,8 +86,8 @@ class Scenario:
     """COG cost weights W (x, y, z) (1/m^2)."""
     smoothing: float = 1e-2
     """weight of the integrated squared COG acceleration (s^3/m^2)."""
-    robot: RobotConfig | RobotDescription | RobotGeometry | None = None
-    """the robot: Table-1 parameters, any robot description, or its planning view; None: the paper's Table 1
+    robot: RobotDescription | RobotGeometry | None = None
+    """the robot: its description or its planning view; None: the paper's Table-1 robot
     (configs/robot/paper.yaml)."""
     method: str = "sqp"
     """COG solver: 'sqp', 'slsqp' or 'slsqp-fd'."""
@@ -138,13 +137,10 @@ class Scenario:
         if self.foothold_limits is not None and not isinstance(self.foothold_limits, FootholdLimits):
             raise ValueError(f"foothold_limits must be a FootholdLimits or None, got {excerpt(self.foothold_limits)}")
 
-    def robot_config(self) -> RobotConfig | RobotDescription | RobotGeometry:
-        """The robot (Table 1 unless given)."""
-        return self.robot or load_robot_config("paper")
-
     def robot_geometry(self) -> RobotGeometry:
-        """The planners' view of the robot (:mod:`planners.robot_geometry`)."""
-        return robot_geometry(self.robot_config())
+        """The planners' view of the robot (:mod:`planners.robot_geometry`; the paper's Table-1 robot unless
+        given)."""
+        return robot_geometry(self.robot)
 
     def height_map(self) -> HeightMap:
         """The terrain as a height map (generated from the spec with ``terrain_seed``)."""

@@ -8,17 +8,14 @@ is named (``"paper"`` -> ``configs/robot/paper.yaml``) or given as a path.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import importlib.resources
 import os
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
-from quad_uneven_env.fields import Param, check_fields, clip, excerpt, param
+from quad_uneven_env.fields import check_fields, clip, excerpt, param
 
 
 def shipped_config_dir() -> Path:
@@ -35,169 +32,6 @@ def shipped_config_dir() -> Path:
 
 CONFIG_DIR = shipped_config_dir()
 """Directory of the shipped YAML configs (:func:`shipped_config_dir`)."""
-
-
-@dataclasses.dataclass(frozen=True)
-class BodyParams:
-    """The trunk: a rigid box with its COM at the geometric centre."""
-
-    mass: float
-    """kg"""
-    size: tuple[float, float, float]
-    """length, width, height (m), along body x, y, z."""
-    inertia: tuple[float, float, float]
-    """principal inertia about the COM (kg m^2) along body x, y, z."""
-
-
-@dataclasses.dataclass(frozen=True)
-class LinkParams:
-    """A leg link (thigh or shank), a rod hanging along -z of its joint frame at zero angles."""
-
-    length: float
-    """joint-to-joint (or joint-to-foot) length (m)."""
-    mass: float
-    """kg"""
-    com: float
-    """distance from the proximal joint to the COM along the link (m)."""
-    inertia: tuple[float, float, float]
-    """principal inertia about the COM (kg m^2): about the long axis first, then the two others."""
-
-
-@dataclasses.dataclass(frozen=True)
-class RobotConfig:
-    """Paper Table 1 plus the simulation details the paper leaves open."""
-
-    name: str
-    """config name."""
-    body: BodyParams
-    """trunk parameters."""
-    thigh: LinkParams
-    """upper leg (hip to knee)."""
-    shank: LinkParams
-    """lower leg (knee to foot point)."""
-    foot_radius: float
-    """collision sphere radius centred on the foot point (m)."""
-    link_radius: float
-    """collision capsule radius of the leg links (m); massless."""
-    joint_range: Mapping[str, tuple[float, float]]
-    """joint ranges (rad) keyed HAA, HFE, KFE_front, KFE_hind."""
-    torque_limit: Mapping[str, float]
-    """symmetric motor torque limits (N m) keyed HAA, HFE, KFE."""
-    joint_damping: float
-    """viscous joint damping (N m s / rad)."""
-    joint_armature: float
-    """rotor inertia reflected through the gearbox, added to each joint's diagonal of M (kg m^2)."""
-    friction: float
-    """Coulomb friction coefficient between feet and terrain."""
-
-    @property
-    def total_mass(self) -> float:
-        """Whole-robot mass (kg): trunk plus four legs."""
-        return self.body.mass + 4.0 * (self.thigh.mass + self.shank.mass)
-
-    @property
-    def leg_length(self) -> float:
-        """Thigh plus shank length (m): the stretched-leg reach."""
-        return self.thigh.length + self.shank.length
-
-    def knee_range(self, leg: str) -> tuple[float, float]:
-        """KFE range (rad) of ``leg`` (front and hind knees bend in opposite directions)."""
-        return tuple(self.joint_range["KFE_front" if leg[1] == "F" else "KFE_hind"])  # type: ignore[return-value]
-
-
-def _positive(value: Any, field: str) -> float:
-    return Param(field, None, "", "", lo=0.0, lo_open=True).check(value, "")
-
-
-def _non_negative(value: Any, field: str) -> float:
-    return Param(field, None, "", "", lo=0.0).check(value, "")
-
-
-def _triple(value: Any, field: str, allow_zero: bool = False) -> tuple[float, float, float]:
-    arr = np.asarray(value, dtype=float)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)) or np.any(arr < 0) or (not allow_zero and np.any(arr == 0)):
-        need = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{field} must be 3 finite numbers {need}, got {excerpt(value)}")
-    return tuple(float(x) for x in arr)  # type: ignore[return-value]
-
-
-JOINT_RANGE_KEYS = ("HAA", "HFE", "KFE_front", "KFE_hind")
-"""Joints of ``robot.joint_range`` (the knee's range differs between front and hind legs)."""
-
-TORQUE_LIMIT_KEYS = ("HAA", "HFE", "KFE")
-"""Joints of ``robot.torque_limit``."""
-
-
-def _range_pair(value: Any, field: str) -> tuple[float, float]:
-    """``[low, high]`` as two finite floats (the order is checked by the caller)."""
-    try:
-        lo, hi = (float(x) for x in value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{field} must be [low, high] (two numbers, rad), got {excerpt(value)}") from None
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        raise ValueError(f"{field} must be [low, high] (two finite numbers, rad), got {excerpt(value)}")
-    return lo, hi
-
-
-def _require(raw: Mapping[str, Any], keys: set[str], where: str) -> None:
-    if not isinstance(raw, Mapping):
-        raise ValueError(f"{where} must be a mapping with fields {sorted(keys)}, got {excerpt(raw)}")
-    missing = keys - set(raw)
-    unknown = set(raw) - keys
-    if missing:
-        raise ValueError(f"{where}: missing field(s) {sorted(missing)}")
-    if unknown:
-        raise ValueError(f"{where}: unknown field(s) {excerpt(sorted(unknown, key=str))}; allowed: {sorted(keys)}")
-
-
-def _link(raw: Mapping[str, Any], where: str) -> LinkParams:
-    _require(raw, {"length", "mass", "com", "inertia"}, where)
-    length = _positive(raw["length"], f"{where}.length")
-    com = float(raw["com"])
-    if not 0.0 <= com <= length:
-        raise ValueError(f"{where}.com must lie in [0, {where}.length={length}], got {com}")
-    return LinkParams(
-        length, _positive(raw["mass"], f"{where}.mass"), com, _triple(raw["inertia"], f"{where}.inertia", True)
-    )
-
-
-def robot_config_from_dict(raw: Mapping[str, Any]) -> RobotConfig:
-    """Validate a raw mapping (as read from YAML) into a :class:`RobotConfig`.
-
-    :raises ValueError: naming the offending field and its allowed values.
-    """
-    keys = {f.name for f in dataclasses.fields(RobotConfig)}
-    _require(raw, keys, "robot")
-    body = raw["body"]
-    _require(body, {"mass", "size", "inertia"}, "robot.body")
-    _require(raw["joint_range"], set(JOINT_RANGE_KEYS), "robot.joint_range")
-    _require(raw["torque_limit"], set(TORQUE_LIMIT_KEYS), "robot.torque_limit")
-    ranges = {}
-    for k in JOINT_RANGE_KEYS:
-        lo, hi = _range_pair(raw["joint_range"][k], f"robot.joint_range.{k}")
-        if not lo < hi:
-            raise ValueError(f"robot.joint_range.{k} must be [low, high] with low < high, got {[lo, hi]}")
-        ranges[k] = (lo, hi)
-    if ranges["KFE_front"][1] >= 0.0 or ranges["KFE_hind"][0] <= 0.0:
-        raise ValueError("robot.joint_range: KFE_front must stay < 0 and KFE_hind > 0 (no stretched knee)")
-    limits = {k: _positive(raw["torque_limit"][k], f"robot.torque_limit.{k}") for k in TORQUE_LIMIT_KEYS}
-    return RobotConfig(
-        name=str(raw["name"]),
-        body=BodyParams(
-            _positive(body["mass"], "robot.body.mass"),
-            _triple(body["size"], "robot.body.size"),
-            _triple(body["inertia"], "robot.body.inertia"),
-        ),
-        thigh=_link(raw["thigh"], "robot.thigh"),
-        shank=_link(raw["shank"], "robot.shank"),
-        foot_radius=_positive(raw["foot_radius"], "robot.foot_radius"),
-        link_radius=_positive(raw["link_radius"], "robot.link_radius"),
-        joint_range=ranges,
-        torque_limit=limits,
-        joint_damping=_non_negative(raw["joint_damping"], "robot.joint_damping"),
-        joint_armature=_non_negative(raw["joint_armature"], "robot.joint_armature"),
-        friction=_positive(raw["friction"], "robot.friction"),
-    )
 
 
 MAX_YAML_BYTES = 16 * 2**20
@@ -355,16 +189,6 @@ def resolve_config_path(name_or_path: str | os.PathLike[str], group: str) -> Pat
         names = sorted(x.stem for x in (CONFIG_DIR / group).glob("*.yaml"))
         raise ValueError(f"unknown {group} config {str(name_or_path)!r}; shipped: {names} (or give a .yaml path)")
     return candidate
-
-
-def load_robot_config(name_or_path: str | os.PathLike[str] = "paper") -> RobotConfig:
-    """Load a robot config by name (``configs/robot/NAME.yaml``) or path (cached: planners ask often)."""
-    return _load_robot_config(str(name_or_path))
-
-
-@functools.lru_cache(maxsize=16)
-def _load_robot_config(name_or_path: str) -> RobotConfig:
-    return robot_config_from_dict(read_yaml(resolve_config_path(name_or_path, "robot")))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -242,3 +242,38 @@ def from_mapping(cls: type[T], raw: Mapping[str, Any] | T | None, where: str) ->
         return cls(**values)
     except ValueError as err:  # cross-field checks of __post_init__ name the class: name ``where`` instead
         raise ValueError(str(err).replace(f"{cls.__name__}.", f"{where}.", 1)) from None
+
+
+def check_mapping(raw: Any, params: tuple[Param, ...], where: str) -> dict[str, Any]:
+    """``raw`` (a user's mapping) checked against ``params``: no unknown key, every ``REQUIRED`` one given, each
+    value checked by its :class:`Param`, the defaults of the others filled in.
+
+    :raises ValueError: ``where must be a mapping ...``, ``where: unknown field(s) ...``, ``where.field is
+        required (<allowed>)`` or the field's own message.
+    """
+    allowed = {p.name: p for p in params}
+    if not isinstance(raw, Mapping):
+        raise ValueError(f"{where} must be a mapping with keys from {sorted(allowed)}, got {excerpt(raw)}")
+    unknown = sorted((k for k in raw if k not in allowed), key=str)
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {excerpt(unknown)}; allowed: {sorted(allowed)}")
+    out: dict[str, Any] = {}
+    for name, p in allowed.items():
+        if name in raw:
+            out[name] = p.check(raw[name], where)
+        elif p.default is REQUIRED:
+            raise ValueError(f"{where}.{name} is required ({p.allowed()})")
+        else:
+            out[name] = p.default
+    return out
+
+
+def check_vector(value: Any, p: Param, where: str, n: int = 3) -> tuple[float, ...]:
+    """``n`` numbers, each checked by ``p`` (as ``where.name[i]``).
+
+    :raises ValueError: ``where.name must be n numbers ...`` or the element's own message.
+    """
+    field = f"{where}.{p.name}" if where else p.name
+    if isinstance(value, str | bytes | Mapping) or not hasattr(value, "__len__") or len(value) != n:
+        raise ValueError(f"{field} must be {n} numbers, each {p._a()}{p._unit()}, got {excerpt(value)}")
+    return tuple(dataclasses.replace(p, name=f"{p.name}[{i}]").check(v, where) for i, v in enumerate(value))

@@ -348,10 +348,10 @@ def robot_scale(robot: Any) -> float:
 
     :raises EnvArgumentError: naming ``env_kwargs.robot`` if it cannot be loaded.
     """
-    from quad_uneven_env.robot.description import PAPER_LEG_LENGTH, load_robot
+    from quad_uneven_env.robot.description import load_robot
 
     try:
         desc = load_robot(robot)
     except (ValueError, TypeError) as err:
         raise EnvArgumentError(f"env_kwargs.robot: {err}") from None
-    return 1.0 if desc.config is not None else desc.leg_length / PAPER_LEG_LENGTH
+    return desc.length_ratio

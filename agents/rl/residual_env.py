@@ -336,8 +336,10 @@ def install_residual_controller(
         raise ValueError(
             f"action_mode must be 'torque' for the residual env (expert torques), got {excerpt(base.action_mode)}"
         )
+    # the given settings over the robot's scaled ones (docs/robots.md); where those are the defaults (the paper
+    # robot's), the given settings as they are
     settings = config.expert
-    if base.robot.config is None:  # a URDF robot: the given settings over the robot's scaled ones (docs/robots.md)
+    if ExpertConfig.for_robot(base.robot) != ExpertConfig():
         settings = ExpertConfig.for_robot(base.robot, expert_overrides(settings))
     expert = ExpertPolicy(env, settings)
     controller = ResidualController(
