@@ -25,8 +25,9 @@ from gymnasium import spaces
 from quad_uneven_env import constants as C
 from quad_uneven_env.actuation import ActionMap, make_servos
 from quad_uneven_env.command import CommandConfig, CommandSchedule, command_arguments_table
-from quad_uneven_env.config import HeightScanConfig, RewardWeights, RobotConfig, TerminationLimits
+from quad_uneven_env.config import HeightScanConfig, RewardWeights, TerminationLimits
 from quad_uneven_env.env_config import EnvConfig, arguments_table
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.measurement import StepMeasurement
 from quad_uneven_env.measurement_kernels import clip_finite_into
 from quad_uneven_env.observations import (
@@ -41,10 +42,6 @@ from quad_uneven_env.randomization import EpisodeDraw, ModelRandomizer, Push, Ra
 from quad_uneven_env.rendering import RENDER_MODES, SceneRenderer
 from quad_uneven_env.rewards import COMMAND_REWARD_TERMS, REWARD_TERMS, command_reward_terms, reward_terms
 from quad_uneven_env.robot.description import RobotDescription
-from quad_uneven_env.robot.description_model import standing_feet_B
-from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
-from quad_uneven_env.robot.leg_chain import feet_ik_B
-from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT
 from quad_uneven_env.scene import compile_scene
 from quad_uneven_env.spatial import yaw_of_quat
 from quad_uneven_env.stepper import PhysicsController, PhysicsStepper, check_controller
@@ -59,40 +56,6 @@ _INF_MOMENTS = np.full(C.N_LEGS, np.inf)
 def _argument(name: str, doc: str) -> Any:
     """A read-only attribute of the env: its argument ``name`` as checked, ``env.config.<name>``."""
     return property(operator.attrgetter(f"config.{name}"), doc=doc)
-
-
-# ---------------------------------------------------------------------------------------------- the robot's facts
-def _feet_home_B(robot: RobotDescription) -> np.ndarray:
-    """(4, 3) m, trunk frame: where each foot stands at reset: below its hip (the paper's robot), or where the
-    standing pose puts it (a URDF robot)."""
-    return hip_positions_B(robot.config) if robot.config is not None else standing_feet_B(robot)
-
-
-def _spawn_qpos(
-    robot: RobotDescription, terrain: Terrain, feet_home_B: np.ndarray, action_map: ActionMap
-) -> np.ndarray:
-    """(19,) standing pose over the terrain's spawn point: each foot on the terrain below its home point
-    (:func:`_feet_home_B`), the joints within their ranges."""
-    cfg = robot.config
-    x0, y0 = terrain.spawn_xy
-    feet_xy = feet_home_B[:, :2] + np.array([x0, y0])
-    ground = np.asarray(terrain.height(feet_xy[:, 0], feet_xy[:, 1]), dtype=float)
-    qpos = np.zeros(C.NQ)
-    qpos[3] = 1.0
-    if cfg is None:  # a URDF robot: the standing pose's feet, each moved to the terrain under it
-        r = robot.foot_radius
-        base_z = float(np.mean(ground - feet_home_B[:, 2])) + r
-        targets = feet_home_B.copy()
-        targets[:, 2] = ground + r - base_z
-        qpos[7:] = feet_ik_B(robot, targets)
-    else:
-        base_z = float(np.mean(ground)) + NOMINAL_HIP_HEIGHT + cfg.foot_radius
-        for i, leg in enumerate(C.LEG_NAMES):
-            target_H = np.array([0.0, 0.0, ground[i] + cfg.foot_radius - base_z])
-            qpos[7 + 3 * i : 10 + 3 * i] = leg_ik_hip(target_H, cfg.thigh.length, cfg.shank.length, C.KNEE_SIGN[leg])
-    qpos[:3] = (x0, y0, base_z)
-    qpos[7:] = np.clip(qpos[7:], action_map.joint_lo, action_map.joint_hi)
-    return qpos
 
 
 class QuadUnevenEnv(gym.Env):
@@ -251,7 +214,6 @@ class QuadUnevenEnv(gym.Env):
         )
         self._stepper.controller = controller
         self._fall = FallCheck(config.termination)
-        self._feet_home_B = _feet_home_B(config.robot)
 
         self.action_space = spaces.Box(-1.0, 1.0, (C.N_JOINTS,), dtype=np.float32)
         self._fields = observation_fields(
@@ -301,11 +263,6 @@ class QuadUnevenEnv(gym.Env):
     randomization: RandomizationConfig | None = _argument(
         "randomization", "the randomization in SI units for this robot (a preset's ``scale: robot`` ranges scaled)."
     )
-
-    @property
-    def robot_cfg(self) -> RobotConfig | None:
-        """The paper robot's Table-1 config (None for a URDF robot)."""
-        return self.robot.config
 
     # ------------------------------------------------------------------ the episode: controller, drawn world, command
     @property
@@ -386,7 +343,7 @@ class QuadUnevenEnv(gym.Env):
         if seed is not None and (
             isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer) or seed < 0
         ):
-            raise ValueError(f"seed must be None or an integer >= 0, got {seed!r} of type {type(seed).__name__}")
+            raise ValueError(f"seed must be None or an integer >= 0, got {excerpt(seed)} of type {type(seed).__name__}")
         super().reset(seed=None if seed is None else int(seed))
         if options:
             raise ValueError(f"reset options are not supported (got keys {sorted(options)}); pass terrain to make()")
@@ -394,7 +351,7 @@ class QuadUnevenEnv(gym.Env):
         self._world.restore_model()
         self._new_terrain()
         mujoco.mj_resetData(m, d)
-        d.qpos[:] = _spawn_qpos(self.robot, self.terrain, self._feet_home_B, self.action_map)
+        d.qpos[:] = self._spawn_qpos()
         noise = self.reset_noise_scale
         if noise > 0:
             lo, hi = self.action_map.joint_lo, self.action_map.joint_hi
@@ -425,6 +382,17 @@ class QuadUnevenEnv(gym.Env):
         names = REWARD_TERMS if self._command is None else REWARD_TERMS + COMMAND_REWARD_TERMS
         info = self._info(meas, terms=dict.fromkeys(names, 0.0), diverged=False, reason=None)
         return self._last_obs.copy(), info
+
+    def _spawn_qpos(self) -> np.ndarray:
+        """Standing pose over the spawn point: each foot on the terrain below its standing point."""
+        x0, y0 = self.terrain.spawn_xy
+        feet_xy = self.robot.standing_feet_B[:, :2] + np.array([x0, y0])
+        ground = np.asarray(self.terrain.height(feet_xy[:, 0], feet_xy[:, 1]), dtype=float)
+        base_z, joints = self.robot.stand_on(ground)
+        qpos = np.zeros(C.NQ)
+        qpos[:4] = (x0, y0, base_z, 1.0)
+        qpos[7:] = np.clip(joints, self.action_map.joint_lo, self.action_map.joint_hi)
+        return qpos
 
     def _new_terrain(self) -> None:
         """This episode's terrain from ``np_random``, in the model and the renderer; the fall check's edges."""

@@ -3,8 +3,8 @@
 Each field is declared once, with its default; a scalar's check, error message and row of the env docstring's
 Arguments table (:func:`arguments_table`) come from its :func:`~quad_uneven_env.fields.param` declaration, the
 structured arguments (terrain, robot, reward weights, ...) are loaded and checked by their own modules. Defaults
-that depend on the robot are taken from it in one place each (:func:`robot_pd_gains`,
-:func:`robot_base_height_limits`).
+that depend on the robot are derived from it in one place each (:func:`default_pd_gains`,
+:func:`default_base_height_limits`).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from quad_uneven_env.actuation import ACTION_MODES
 from quad_uneven_env.command import CommandConfig, load_command
 from quad_uneven_env.config import HeightScanConfig, RewardWeights, TerminationLimits
-from quad_uneven_env.fields import check_fields, from_mapping, param, params_of
+from quad_uneven_env.fields import check_fields, excerpt, from_mapping, param, params_of
 from quad_uneven_env.randomization import RandomizationConfig, load_randomization, randomization_for_robot
 from quad_uneven_env.rendering import RENDER_MODES
 from quad_uneven_env.rewards import COMMAND_REWARD_TERMS
@@ -28,15 +28,26 @@ MAX_EPISODE_STEPS = 10**9
 """Upper bound of ``episode_step_cap`` (control steps)."""
 
 
-def robot_pd_gains(robot: RobotDescription) -> tuple[float, float]:
-    """(N m/rad, N m s/rad): ``pd_kp`` and ``pd_kd`` when not given, the robot's ``joint_pd`` gains."""
-    return robot.joint_pd_gains
+PAPER_BASE_HEIGHT_LIMITS = (0.12, 1.0)
+"""m: the paper robot's fall rule: a base height below the first or above the second ends an episode (a third of
+its 0.36 m stand, and 2.78 times it)."""
+PAPER_PD_GAINS = (100.0, 3.0)
+"""(N m/rad, N m s/rad): the paper robot's ``joint_pd`` servo gains."""
 
 
-def robot_base_height_limits(robot: RobotDescription) -> tuple[float, float]:
-    """m: ``termination.min_base_height`` and ``max_base_height`` when not given, the robot's (0.12 and 1 m for the
-    paper's robot)."""
-    return robot.base_height_limits
+def default_base_height_limits(robot: RobotDescription) -> tuple[float, float]:
+    """m, the default ``termination.min_base_height`` and ``max_base_height`` on ``robot``: the paper robot's
+    :data:`PAPER_BASE_HEIGHT_LIMITS` in units of its standing height (a third of it, and 2.78 times it)."""
+    k = robot.height_ratio
+    return PAPER_BASE_HEIGHT_LIMITS[0] * k, PAPER_BASE_HEIGHT_LIMITS[1] * k
+
+
+def default_pd_gains(robot: RobotDescription) -> tuple[float, float]:
+    """(N m/rad, N m s/rad), the default ``joint_pd`` gains on ``robot``: the paper robot's :data:`PAPER_PD_GAINS`
+    scaled with its weight times leg length (stiffness) and with the same damping ratio at a natural frequency
+    ~ 1 / sqrt(leg length) (damping ~ mass x leg length^1.5)."""
+    m, s = robot.mass_ratio, robot.length_ratio
+    return PAPER_PD_GAINS[0] * m * s, PAPER_PD_GAINS[1] * m * s**1.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,7 +73,7 @@ class EnvConfig:
     """a mapping of :class:`~quad_uneven_env.config.RewardWeights` fields (None: the defaults)."""
     termination: TerminationLimits = None
     """a mapping of :class:`~quad_uneven_env.config.TerminationLimits` fields; ``min_base_height`` and
-    ``max_base_height`` not given are the robot's (:func:`robot_base_height_limits`)."""
+    ``max_base_height`` not given are the robot's (:func:`default_base_height_limits`)."""
     height_scan: HeightScanConfig = None
     """a mapping of :class:`~quad_uneven_env.config.HeightScanConfig` fields (None: the defaults)."""
     gait_period: float = param(
@@ -118,10 +129,10 @@ class EnvConfig:
                     f"robot must be a config name or a .yaml path, got {robot!r} of type {type(robot).__name__}"
                 )
             robot = load_robot(robot)
-        kp, kd = robot_pd_gains(robot)
+        kp, kd = default_pd_gains(robot)
         termination = self.termination
         if termination is None or isinstance(termination, Mapping):
-            lo, hi = robot_base_height_limits(robot)
+            lo, hi = default_base_height_limits(robot)
             termination = {"min_base_height": lo, "max_base_height": hi, **(termination or {})}
         loaded = {
             "robot": robot,
@@ -156,7 +167,7 @@ class EnvConfig:
                 if getattr(self.reward_weights, name) != 0.0:
                     raise ValueError(
                         f"reward_weights.{name} must be 0 without a command (command=None), got "
-                        f"{getattr(self.reward_weights, name)!r}; pass command=... to make()"
+                        f"{excerpt(getattr(self.reward_weights, name))}; pass command=... to make()"
                     )
 
 

@@ -12,7 +12,6 @@ import logging
 import mujoco
 
 from quad_uneven_env.robot.description import RobotDescription
-from quad_uneven_env.robot.description_model import description_scene_mjcf
 from quad_uneven_env.robot.model import PhysicsOptions, scene_mjcf
 from quad_uneven_env.terrain import Terrain
 
@@ -36,14 +35,7 @@ def route_mujoco_warnings() -> None:
 
 def scene_xml(robot: RobotDescription, terrain: Terrain, timestep: float) -> str:
     """The scene's MJCF: ``robot`` over ``terrain``'s height field, MuJoCo's ``timestep`` (s)."""
-    if robot.config is not None:  # the paper's robot: its own MJCF generator (Table 1)
-        return scene_mjcf(
-            robot.config,
-            terrain.hfield_asset_xml(),
-            terrain.hfield_geom_xml(robot.config.friction),
-            PhysicsOptions(timestep=float(timestep)),
-        )
-    return description_scene_mjcf(
+    return scene_mjcf(
         robot,
         terrain.hfield_asset_xml(),
         terrain.hfield_geom_xml(robot.friction),

@@ -11,7 +11,6 @@ returned as a reason string, never raised.
 
 from __future__ import annotations
 
-import reprlib
 from typing import Any, Protocol
 
 import mujoco
@@ -19,6 +18,7 @@ import numpy as np
 
 from quad_uneven_env import constants as C
 from quad_uneven_env.actuation import ActionMap
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.measurement_kernels import clip_finite_into
 from quad_uneven_env.physics import BAD_WARNINGS, RobotIndex, instability_warnings
 from quad_uneven_env.randomization import Push, PushSchedule, RandomizationConfig
@@ -53,18 +53,18 @@ def check_controller(controller: Any, action_mode: str) -> None:
     if not callable(controller):
         raise ValueError(
             f"controller must be None or a callable (model, data, action) -> 12 torques (N m), "
-            f"got {reprlib.repr(controller)} of type {type(controller).__name__}"
+            f"got {excerpt(controller)} of type {type(controller).__name__}"
         )
     for hook in ("reset", "torques_into"):
         if hasattr(controller, hook) and not callable(getattr(controller, hook)):
             raise ValueError(
                 f"controller.{hook} must be a method (see PhysicsController), got "
-                f"{reprlib.repr(getattr(controller, hook))} of type {type(getattr(controller, hook)).__name__}"
+                f"{excerpt(getattr(controller, hook))} of type {type(getattr(controller, hook)).__name__}"
             )
     if action_mode != "torque":
         raise ValueError(
-            f"controller must be None with action_mode={action_mode!r}: a physics-rate controller returns "
-            "torques, which would drive the position servos as targets; use action_mode='torque'"
+            f"controller must be None with action_mode={excerpt(action_mode)}: a physics-rate controller "
+            "returns torques, which would drive the position servos as targets; use action_mode='torque'"
         )
 
 
@@ -309,4 +309,4 @@ def _describe(raw: Any) -> str:
     """A short description of a malformed controller return, for the failure reason."""
     if isinstance(raw, np.ndarray):
         return f"an array of shape {raw.shape} and dtype {raw.dtype}"
-    return f"{reprlib.repr(raw)} of type {type(raw).__name__}"
+    return f"{excerpt(raw)} of type {type(raw).__name__}"

@@ -53,7 +53,7 @@ from agents.rl import residual_kernels as RK
 from agents.rl.config import RESIDUAL_BASES, RESIDUAL_LEGS
 from agents.rl.expert_features import augmented_space, expert_features
 from quad_uneven_env.env import QuadUnevenEnv
-from quad_uneven_env.fields import check_fields, from_mapping, param
+from quad_uneven_env.fields import check_fields, excerpt, from_mapping, param
 from quad_uneven_env.measurement_kernels import clip_finite_into
 
 RESIDUAL_ENV_ID = "QuadUnevenResidual-v0"
@@ -72,7 +72,7 @@ def check_residual_legs(residual_legs: Any) -> str:
     :raises ValueError: naming ``residual_legs`` and its allowed values otherwise.
     """
     if not isinstance(residual_legs, str) or residual_legs not in RESIDUAL_LEGS:
-        raise ValueError(f"residual_legs must be one of {list(RESIDUAL_LEGS)}, got {residual_legs!r}")
+        raise ValueError(f"residual_legs must be one of {list(RESIDUAL_LEGS)}, got {excerpt(residual_legs)}")
     return residual_legs
 
 
@@ -82,7 +82,7 @@ def check_residual_basis(residual_basis: Any) -> str:
     :raises ValueError: naming ``residual_basis`` and its allowed values otherwise.
     """
     if not isinstance(residual_basis, str) or residual_basis not in RESIDUAL_BASES:
-        raise ValueError(f"residual_basis must be one of {list(RESIDUAL_BASES)}, got {residual_basis!r}")
+        raise ValueError(f"residual_basis must be one of {list(RESIDUAL_BASES)}, got {excerpt(residual_basis)}")
     return residual_basis
 
 
@@ -96,7 +96,9 @@ def check_residual_scale(residual_scale: Any) -> float:
     except (TypeError, ValueError):
         value = float("nan")
     if isinstance(residual_scale, bool) or not (0.0 < value <= 1.0):
-        raise ValueError(f"residual_scale must be a number in (0, 1] (of the torque limit), got {residual_scale!r}")
+        raise ValueError(
+            f"residual_scale must be a number in (0, 1] (of the torque limit), got {excerpt(residual_scale)}"
+        )
     return value
 
 
@@ -158,7 +160,7 @@ class ResidualConfig:
     def __post_init__(self) -> None:
         check_fields(self)
         if not isinstance(self.expert, ExpertConfig):
-            raise ValueError(f"ResidualConfig.expert must be an ExpertConfig, got {self.expert!r}")
+            raise ValueError(f"ResidualConfig.expert must be an ExpertConfig, got {excerpt(self.expert)}")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON values of every field; ``expert`` as its fields that differ from the defaults
@@ -174,7 +176,7 @@ class ResidualConfig:
         :raises ValueError: naming ``where.field`` (or ``where.expert.field``) and its allowed values.
         """
         if not isinstance(raw, Mapping):
-            raise ValueError(f"{where} must be a mapping of ResidualConfig fields, got {raw!r}")
+            raise ValueError(f"{where} must be a mapping of ResidualConfig fields, got {excerpt(raw)}")
         values = dict(raw)
         if "expert" in values:
             values["expert"] = expert_config(values["expert"], f"{where}.expert" if where else "expert")
@@ -326,16 +328,18 @@ def install_residual_controller(
     """
     config = ResidualConfig() if config is None else config
     if not isinstance(config, ResidualConfig):
-        raise ValueError(f"config must be a ResidualConfig, got {config!r}")
+        raise ValueError(f"config must be a ResidualConfig, got {excerpt(config)}")
     base = env.unwrapped
     if not isinstance(base, QuadUnevenEnv):
         raise ValueError(f"the residual controller needs a QuadUneven-v0 env, got {type(base).__name__}")
     if base.action_mode != "torque":
         raise ValueError(
-            f"action_mode must be 'torque' for the residual env (expert torques), got {base.action_mode!r}"
+            f"action_mode must be 'torque' for the residual env (expert torques), got {excerpt(base.action_mode)}"
         )
+    # the given settings over the robot's scaled ones (docs/robots.md); where those are the defaults (the paper
+    # robot's), the given settings as they are
     settings = config.expert
-    if base.robot.config is None:  # a URDF robot: the given settings over the robot's scaled ones (docs/robots.md)
+    if ExpertConfig.for_robot(base.robot) != ExpertConfig():
         settings = ExpertConfig.for_robot(base.robot, expert_overrides(settings))
     expert = ExpertPolicy(env, settings)
     controller = ResidualController(

@@ -34,6 +34,7 @@ from agents.rl.normalization import ObsNormalization, norm_path
 from agents.rl.residual_env import RESIDUAL_ENV_ID
 from agents.rl.vec_env import EVAL_SEED_OFFSET, SCRATCH_ENV_KWARGS, build_vec_env, make_train_env, normalize
 from agents.rl.warm_start import check_init_model, warm_start
+from quad_uneven_env.fields import excerpt
 
 __all__ = [
     "TRAIN_OUTPUTS",
@@ -353,7 +354,7 @@ def _preflight_env(cfg: TrainConfig) -> None:
             cfg.residual_config() if cfg.residual else None,
         )  # fmt: skip
     except (ValueError, TypeError) as err:
-        raise TrainConfigError(f"env_kwargs {cfg.env_kwargs!r}: {err}") from None
+        raise TrainConfigError(f"env_kwargs {excerpt(cfg.env_kwargs)}: {err}") from None
     env.close()
 
 
