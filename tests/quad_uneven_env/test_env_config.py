@@ -13,7 +13,7 @@ import quad_uneven_env  # noqa: F401
 from quad_uneven_env.actuation import ActionMap
 from quad_uneven_env.config import RewardWeights, TerminationLimits
 from quad_uneven_env.env import QuadUnevenEnv
-from quad_uneven_env.env_config import EnvConfig, arguments_table
+from quad_uneven_env.env_config import EnvConfig, arguments_table, default_base_height_limits, default_pd_gains
 from quad_uneven_env.fields import params_of
 from quad_uneven_env.robot.description import load_robot
 
@@ -37,15 +37,19 @@ def test_the_config_holds_the_arguments_checked_and_loaded():
 
 
 def test_robot_dependent_defaults_come_from_the_robot():
-    """None for the PD gains and unset base-height limits are the robot's; given values win."""
-    robot = load_robot("paper")
+    """None for the PD gains and unset base-height limits are the robot's (the paper robot's: 100 N m/rad,
+    3 N m s/rad, 0.12 and 1 m; another robot's scaled from them); given values win."""
     cfg = EnvConfig()
-    assert (cfg.pd_kp, cfg.pd_kd) == robot.joint_pd_gains == (100.0, 3.0)
-    lo, hi = robot.base_height_limits
-    assert cfg.termination == TerminationLimits(min_base_height=lo, max_base_height=hi)
+    assert (cfg.pd_kp, cfg.pd_kd) == default_pd_gains(cfg.robot) == (100.0, 3.0)
+    assert default_base_height_limits(cfg.robot) == (0.12, 1.0)
+    assert cfg.termination == TerminationLimits(min_base_height=0.12, max_base_height=1.0)
     given = EnvConfig(pd_kp=50, termination={"max_base_height": 0.8})
     assert given.pd_kp == 50.0 and given.pd_kd == 3.0
-    assert (given.termination.min_base_height, given.termination.max_base_height) == (lo, 0.8)
+    assert (given.termination.min_base_height, given.termination.max_base_height) == (0.12, 0.8)
+    other = EnvConfig(robot="go1")
+    lo, hi = default_base_height_limits(other.robot)
+    assert (other.pd_kp, other.pd_kd) == default_pd_gains(other.robot) != (100.0, 3.0)
+    assert (other.termination.min_base_height, other.termination.max_base_height) == (lo, hi) != (0.12, 1.0)
 
 
 def test_a_config_can_be_rebuilt_from_its_own_fields():
