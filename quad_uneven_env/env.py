@@ -264,7 +264,7 @@ class QuadUnevenEnv(gym.Env):
         "randomization", "the randomization in SI units for this robot (a preset's ``scale: robot`` ranges scaled)."
     )
 
-    # ------------------------------------------------------------------ timing, controller, the episode's world and command
+    # ------------------------------------------------------ timing, controller, the episode's world and command
     @property
     def dt(self) -> float:
         """Control period (s) = frame_skip x physics timestep."""
