@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from agents.rl.residual_config import RESIDUAL_BASES, RESIDUAL_LEGS, ResidualConfig, expert_config
 from quad_uneven_env.config import CONFIG_DIR, read_yaml
 from quad_uneven_env.fields import check_fields, param
 from quad_uneven_env.randomization import load_randomization
@@ -21,13 +22,6 @@ from quad_uneven_env.terrain import parse_terrain_spec
 
 RL_CONFIG_DIR = CONFIG_DIR / "rl"
 """Directory of the shipped training configs (``configs/rl/NAME.yaml``)."""
-
-RESIDUAL_LEGS = ("all", "stance")
-"""Which legs take the residual: every leg, or only those whose foot touches the ground (per physics step)."""
-
-RESIDUAL_BASES = ("torque_limit", "expert_torque")
-"""What one unit of residual action is: a fraction of the motor's torque limit (additive), or of the expert's
-own torque at that physics step (a gain on the expert: ``tau = tau_expert x (1 + residual_scale x action)``)."""
 
 ALGOS = ("ppo", "sac")
 """Stable-Baselines3 algorithms ``quad-uneven train`` supports."""
@@ -127,13 +121,11 @@ class TrainConfig:
         """A JSON-serialisable copy."""
         return dataclasses.asdict(self)
 
-    def residual_config(self) -> Any:
-        """The residual env's :class:`~agents.rl.residual_env.ResidualConfig` of this run (``residual: true``).
+    def residual_config(self) -> ResidualConfig:
+        """The residual env's :class:`~agents.rl.residual_config.ResidualConfig` of this run (``residual: true``).
 
         :raises ValueError: naming ``expert.field`` on a bad expert setting (:func:`validate` checks it first).
         """
-        from agents.rl.residual_env import ResidualConfig  # deferred: the expert's kernels
-
         fields = ("residual_scale", "residual_legs", "residual_basis", "expert_features", "residual_penalty", "expert")
         return ResidualConfig.from_dict({name: getattr(self, name) for name in fields}, where="")
 
@@ -202,8 +194,6 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         )
     expert = _mapping("expert", cfg.expert)
     if expert:
-        from agents.rl.residual_env import expert_config  # deferred: the expert's kernels
-
         try:
             expert_config(expert, "expert")
         except ValueError as err:

@@ -7,7 +7,7 @@ A training run writes ``DIR/rl_meta.json`` (and a copy in ``DIR/checkpoints/`` a
      "normalize_obs": true, ...}
 
 A residual model's ``residual_*``, ``expert_features`` and ``expert`` fields are its
-:class:`~agents.rl.residual_env.ResidualConfig` (``expert``: the :class:`~agents.expert.ExpertConfig` fields that
+:class:`~agents.rl.residual_config.ResidualConfig` (``expert``: the :class:`~agents.expert.ExpertConfig` fields that
 differ from the defaults; with ``adaptation: learned`` also ``strength_estimator_sha256``, the estimator it was
 made with). :func:`load_sb3_policy` reads it for a model ``.zip`` in the same folder: a residual model gets that
 expert plus residual installed as the env's physics-rate controller (so ``quad-uneven evaluate`` runs
@@ -52,7 +52,7 @@ META_DEFAULTS: dict[str, Any] = {
 """Values of the fields a model's metadata may leave out."""
 
 RESIDUAL_META_FIELDS = ("residual_scale", "residual_legs", "residual_basis", "expert_features", "expert")
-"""The metadata fields of a residual model that make its :class:`~agents.rl.residual_env.ResidualConfig`."""
+"""The metadata fields of a residual model that make its :class:`~agents.rl.residual_config.ResidualConfig`."""
 
 NOT_READ = {"gain_adaptation": "none", "adaptation_features": False}
 """Metadata fields this reader refuses unless they hold these values (which it can ignore): the adaptation is
@@ -180,12 +180,12 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
 
 
 def residual_config_of(meta: dict[str, Any], path: str | Path = META_FILE) -> Any:
-    """The :class:`~agents.rl.residual_env.ResidualConfig` a residual model's metadata records
+    """The :class:`~agents.rl.residual_config.ResidualConfig` a residual model's metadata records
     (:data:`RESIDUAL_META_FIELDS`, the absent ones from :data:`META_DEFAULTS`).
 
     :raises ModelError: naming ``path`` and the bad field (e.g. ``expert.adaptation``) with its allowed values.
     """
-    from agents.rl.residual_env import ResidualConfig
+    from agents.rl.residual_config import ResidualConfig
 
     raw = {name: meta.get(name, META_DEFAULTS.get(name)) for name in RESIDUAL_META_FIELDS}
     try:
