@@ -401,11 +401,13 @@ def fit_student(
     return losses
 
 
-def _metadata(cfg: DistillConfig, suite: Suite) -> dict[str, Any]:
+def _metadata(cfg: DistillConfig, suite: Suite, robot: str) -> dict[str, Any]:
+    """The student's ``rl_meta.json`` (:mod:`agents.rl.model_io`) on the robot named ``robot``."""
     import stable_baselines3
 
     return {
         "algo": "ppo",
+        "robot": robot,
         "residual": False,
         "env_id": "QuadUneven-v0",
         "env_kwargs": cfg.student_env_kwargs(),
@@ -457,7 +459,7 @@ def distill(
     with OutputManifest(out, "distill") as manifest:
         torch.set_num_threads(1)
         model = make_student(cfg, {"kind": tasks[0].kind, **tasks[0].params})
-        meta = _metadata(cfg, suite)
+        meta = _metadata(cfg, suite, model.get_env().envs[0].unwrapped.robot.name)
         data_obs: list[np.ndarray] = []
         data_labels: list[np.ndarray] = []
         norm: ObsNormalization | None = None

@@ -49,7 +49,7 @@ from gymnasium.envs.registration import register, registry
 
 from agents.expert import ExpertConfig, ExpertPolicy
 from agents.rl import residual_kernels as RK
-from agents.rl.expert_features import augmented_space, expert_features
+from agents.rl.expert_features import EXPERT_FEATURE_FIELDS, augmented_space, expert_features
 from agents.rl.residual_config import (
     DEFAULT_RESIDUAL_SCALE,
     ResidualConfig,
@@ -258,8 +258,14 @@ class ResidualExpertEnv(gym.Wrapper):
         self.residual_scale = self.controller.residual_scale
         self.residual_penalty = self.config.residual_penalty
         self.expert_features = self.config.expert_features
+        self.observation_structure: dict[str, slice] = dict(env.unwrapped.observation_structure)
+        """name -> slice of every part of the observation: the wrapped env's, then the expert features'."""
         if self.expert_features:
             self.observation_space = augmented_space(env.observation_space)
+            offset = int(env.observation_space.shape[0])
+            for f in EXPERT_FEATURE_FIELDS:
+                self.observation_structure[f.name] = slice(offset, offset + f.size)
+                offset += f.size
 
     def _observation(self, obs: np.ndarray) -> np.ndarray:
         if not self.expert_features:

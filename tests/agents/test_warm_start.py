@@ -62,7 +62,7 @@ def test_warm_start_takes_the_saved_weights_temperature_optimizer_and_statistics
     from agents.rl.warm_start import check_init_model, warm_start
 
     cfg = load_train_config(write_config(tmp_path / "c.yaml", init_from=str(saved_run), seed=3))
-    path, steps = check_init_model(cfg.init_from, _metadata(cfg))
+    path, steps = check_init_model(cfg.init_from, _metadata(cfg, "paper"))
     assert path == saved_run / "model.zip" and steps == 64
     _, params, variables = load_from_zip_file(path, device="cpu", load_data=False)
     saved_stats = ObsNormalization.load(saved_run / "model_obs_norm.npz")
@@ -341,6 +341,6 @@ def test_the_distilled_comparison_configs_differ_only_in_the_start():
     a, b = fine.to_dict(), scratch.to_dict()
     assert {k for k in a if a[k] != b[k]} == start
     assert scratch.init_from is None and fine.init_from == "models/distilled"
-    path, _ = check_init_model(fine.init_from, _metadata(fine))
+    path, _ = check_init_model(fine.init_from, _metadata(fine, "paper"))
     assert path == Path("models/distilled/model.zip")
     assert len(fine.terrain) == 6
