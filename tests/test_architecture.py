@@ -286,6 +286,16 @@ def test_every_package_has_a_front_door(mod):
     assert "__all__" in names or mod.count(".") >= 2, f"{mod} has no __all__"
 
 
+def test_the_cli_docstring_lists_every_command():
+    """The ``agents/cli.py`` docstring is the map of the command line: every subcommand appears in it."""
+    import agents.cli
+
+    parser = agents.cli.build_parser()
+    commands = next(a for a in parser._actions if a.dest == "command").choices  # argparse's subcommands
+    listed = set(re.findall(r"^- ``([a-z-]+)``:", agents.cli.__doc__, re.MULTILINE))
+    assert listed == set(commands)
+
+
 HISTORY = re.compile(r"\b[Ii]ssue \d+|\(issue|section \d+ of|the first version")
 
 

@@ -106,7 +106,7 @@ def _sb3(path: str, env: gym.Env, algo: str | None, allow_pickle: bool) -> Polic
     from agents.rl.model_io import ModelError, load_sb3_policy
 
     # One intra-op thread: the policy MLP is tiny, and with several threads each predict contends with the
-    # simulation (and with the other episode workers) for the cores: 22 ms instead of 1.3 ms a step on 2 cores.
+    # simulation (and with the other episode workers) for the cores.
     torch.set_num_threads(1)
     try:
         return load_sb3_policy(path, env, algo, allow_pickle)
