@@ -40,7 +40,7 @@ import numpy as np
 
 from agents.rl.normalization import ObsNormalization, norm_path, pickle_path
 from agents.rl.residual_config import ResidualConfig
-from agents.rl.residual_env import RESIDUAL_ENV_ID
+from agents.rl.residual_env import RESIDUAL_ENV_ID, ResidualExpertEnv
 from quad_uneven_env import ENV_ID as PLAIN_ENV_ID
 
 META_FILE = "rl_meta.json"
@@ -228,9 +228,8 @@ def write_metadata(folder: Path, meta: dict[str, Any]) -> Path:
 
 
 def model_robot(meta: dict[str, Any]) -> str:
-    """The name of the robot a model with metadata ``meta`` was trained on: its ``robot`` field; without one (a
-    model folder written before the field existed, as the shipped models'), the stem of its ``env_kwargs.robot``,
-    else ``"paper"`` (the env's default robot)."""
+    """The name of the robot a model with metadata ``meta`` was trained on: its ``robot`` field; without one (as in
+    the shipped models' metadata), the stem of its ``env_kwargs.robot``, else :data:`UNRECORDED_ROBOT`."""
     if "robot" in meta:
         return str(meta["robot"])
     return Path(str((meta.get("env_kwargs") or {}).get("robot", UNRECORDED_ROBOT))).stem
@@ -699,10 +698,8 @@ def check_spaces(model: Any, env: gym.Env, path: Path) -> None:
             )
 
 
-def _residual_wrapper(env: gym.Env) -> Any:
+def _residual_wrapper(env: gym.Env) -> ResidualExpertEnv | None:
     """The :class:`~agents.rl.residual_env.ResidualExpertEnv` among ``env``'s wrappers, or None."""
-    from agents.rl.residual_env import ResidualExpertEnv
-
     while isinstance(env, gym.Wrapper):
         if isinstance(env, ResidualExpertEnv):
             return env
@@ -710,7 +707,7 @@ def _residual_wrapper(env: gym.Env) -> Any:
     return None
 
 
-def check_model_env(meta: dict[str, Any], env: gym.Env, path: Path) -> Any:
+def check_model_env(meta: dict[str, Any], env: gym.Env, path: Path) -> ResidualExpertEnv | None:
     """Refuse an env the model (with metadata ``meta``) was not trained in; :return: a residual model's
     :class:`~agents.rl.residual_env.ResidualExpertEnv` (None for any other model).
 
