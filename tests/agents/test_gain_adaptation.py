@@ -132,9 +132,9 @@ def test_the_gains_update_at_each_control_steps_first_physics_step_and_scale_the
 
 @pytest.mark.parametrize("adaptation", ["knee", "learned"])
 def test_the_adaptive_expert_walks_the_same_in_its_call_and_its_fast_lane(adaptation, monkeypatch):
-    """An attached expert with ``adaptation``, in the extreme world: with its fast lane (``torques_into``: the lane
-    unclipped, the gains and the clip in Python) and with the lane removed (the call every physics step), the same
-    motor commands, trajectory and gains bit for bit; the gains moved, and the lane answered most steps."""
+    """An attached expert with ``adaptation``, in the extreme world: with its fast lane (``torques_into``, which
+    answers every physics step) and with the lane removed (the call every physics step), the same motor commands,
+    trajectory and gains bit for bit; the gains moved."""
     runs = []
     for lane in (True, False):
         env = gym.make("QuadUneven-v0", terrain="rough", randomization="extreme")
@@ -163,7 +163,7 @@ def test_the_adaptive_expert_walks_the_same_in_its_call_and_its_fast_lane(adapta
         np.testing.assert_array_equal(q1, q2)
         np.testing.assert_array_equal(g1, g2)
     assert np.abs(with_lane[-1][2] - 1.0).max() > 0.05
-    assert 0.8 * len(answers) < sum(answers) < len(answers)
+    assert all(answers) and len(answers) == 120 * env.unwrapped.frame_skip
 
 
 def test_the_gains_multiply_the_controllers_torques_before_the_motor_limit():

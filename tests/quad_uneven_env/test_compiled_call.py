@@ -75,8 +75,8 @@ def test_argument_type_is_the_dispatchers_type():
 
 def test_a_new_terrain_keeps_the_measurements_entry_point_and_its_outputs(monkeypatch):
     """A reset draws a new terrain (a new heights array): the measurement keeps its entry point (the array's type is
-    the same) instead of resolving it again (~0.2 ms: numba types all 36 arguments), and still measures what a fresh
-    dispatcher call measures there."""
+    the same) instead of resolving it again (~0.2 ms: numba types every array of its arguments), and still measures
+    what a fresh dispatcher call measures there."""
     import gymnasium as gym
 
     from quad_uneven_env import measurement

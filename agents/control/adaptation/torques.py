@@ -38,10 +38,6 @@ class AdaptiveGains:
     def __init__(self, law: Any, torque_limit: np.ndarray) -> None:
         self.law = law
         self.torque_limit = np.asarray(torque_limit, dtype=np.float64).copy()
-        self.raw = np.zeros_like(self.torque_limit)
-        """(12,) N m: where a compiled lane writes the controller's torques before the gains."""
-        self.no_limit = np.full_like(self.torque_limit, np.inf)
-        """(12,) N m: the limit a lane writing :attr:`raw` is given (the gains come before the motors' clip)."""
         self._t_reset = 0.0
         self._next_update = 0.0
 

@@ -18,7 +18,7 @@ import numpy as np
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot.description import RobotDescription
 from quad_uneven_env.robot.description_model import description_robot_mjcf
-from quad_uneven_env.robot.dynamics import mujoco_kernels as K
+from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
 from quad_uneven_env.robot.dynamics.base import DynamicsTerms
 
 
@@ -64,7 +64,7 @@ def _kernel_indices(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
         sites.append(site)
     idx = np.array([trunk, *sites, *jnts, *dofs, *bodies], dtype=np.int64)
     par = np.array([model.body_subtreemass[trunk], *model.opt.gravity, *msub], dtype=float)
-    assert len(idx) == K.IDX_LEN and len(par) == K.PAR_LEN
+    assert len(idx) == DK.IDX_LEN and len(par) == DK.PAR_LEN
     return idx, par
 
 
@@ -135,7 +135,7 @@ class MujocoDynamics:
         J_feet = np.empty((C.N_LEGS, 3, C.NV))
         Jdd = np.empty((C.N_LEGS, 3))
         G = np.empty(C.NV)
-        K.mujoco_terms(*self.data_views(data), M, J_feet, Jdd, G)
+        DK.mujoco_terms(*self.data_views(data), M, J_feet, Jdd, G)
         return DynamicsTerms(M, data.qfrc_bias.copy(), G, J_feet, Jdd)
 
     def terms_from_data_mjcalls(self, data: mujoco.MjData) -> DynamicsTerms:
