@@ -44,6 +44,7 @@ from agents.outputs import OutputManifest, prepare_output_dir
 from agents.paper.simulation import DISTRIBUTIONS as PAPER_DISTRIBUTIONS
 from agents.plotting import video_to_gif
 from agents.rl.config import ALGOS, load_train_config, validate
+from quad_uneven_env.fields import excerpt
 
 EXIT_USAGE = 2
 """Exit code of an invalid argument, file or output directory (argparse's own code for bad options)."""
@@ -266,9 +267,9 @@ def _json_object(text: str, option: str) -> dict:
     try:
         value = json.loads(text, object_pairs_hook=no_duplicates)
     except json.JSONDecodeError as err:
-        raise ValueError(f"{option} is not valid JSON ({err}), got {text!r}") from None
+        raise ValueError(f"{option} is not valid JSON ({err}), got {excerpt(text)}") from None
     if not isinstance(value, dict):
-        raise ValueError(f"{option} must be a JSON object, got {text!r}")
+        raise ValueError(f"{option} must be a JSON object, got {excerpt(text)}")
     return value
 
 
@@ -295,7 +296,9 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
     env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
     if args.robot is not None:
         if env_kwargs.get("robot", args.robot) != args.robot:
-            raise ValueError(f"--robot {args.robot!r} and --env-kwargs robot {env_kwargs['robot']!r} differ: give one")
+            raise ValueError(
+                f"--robot {excerpt(args.robot)} and --env-kwargs robot {excerpt(env_kwargs['robot'])} differ: give one"
+            )
         env_kwargs["robot"] = args.robot
     expert_config = _json_object(args.expert_config, "--expert-config")
     if expert_config and args.policy != "expert":
@@ -790,7 +793,8 @@ def _number_list(text: str, option: str) -> list[float]:
             value = math.nan
         if not math.isfinite(value):
             raise ValueError(
-                f"{option} must be comma-separated finite numbers (e.g. 0.8,0.6,0.4), got {text!r} ({item!r} is not)"
+                f"{option} must be comma-separated finite numbers (e.g. 0.8,0.6,0.4), got {excerpt(text)} "
+                f"({excerpt(item)} is not)"
             )
         values.append(value)
     return values

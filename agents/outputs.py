@@ -23,6 +23,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from quad_uneven_env.fields import excerpt
+
 __all__ = [
     "MANIFEST_FILE",
     "OutputError",
@@ -184,7 +186,7 @@ def read_manifest(out: Path, field: str = "out") -> dict[str, list[str]] | None:
         for x in items:
             parts = Path(x).parts
             if not x or Path(x).is_absolute() or ".." in parts or x == MANIFEST_FILE:
-                raise bad(f"{key} lists {x!r}, a path outside the directory")
+                raise bad(f"{key} lists {excerpt(x)}, a path outside the directory")
         lists[key] = list(items)
     return lists
 

@@ -56,7 +56,7 @@ from agents.control.verify import IDCheck, verify_inverse_dynamics
 from planners.types import PACKED_FIELDS, ReferenceGrid, ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env.compiled_call import entry_point
-from quad_uneven_env.fields import check_fields, param
+from quad_uneven_env.fields import check_fields, excerpt, param
 from quad_uneven_env.robot.dynamics import make_dynamics
 from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
 from quad_uneven_env.robot.dynamics.base import DynamicsTerms
@@ -181,9 +181,9 @@ class ComputedTorqueController:
         qp_solver: str = "compiled",
     ) -> None:
         if distribution not in DISTRIBUTIONS:
-            raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {distribution!r}")
+            raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {excerpt(distribution)}")
         if stance_mode not in STANCE_MODES:
-            raise ValueError(f"stance_mode must be one of {list(STANCE_MODES)}, got {stance_mode!r}")
+            raise ValueError(f"stance_mode must be one of {list(STANCE_MODES)}, got {excerpt(stance_mode)}")
         self.reference = reference
         self.backend = backend
         self.distribution = distribution
@@ -191,10 +191,10 @@ class ComputedTorqueController:
         self.stance_mode = stance_mode
         self.min_normal_force = float(min_normal_force)
         if mu is not None and not mu > 0:
-            raise ValueError(f"mu must be > 0 (friction coefficient of the cones), got {mu!r}")
+            raise ValueError(f"mu must be > 0 (friction coefficient of the cones), got {excerpt(mu)}")
         self.mu = mu
         if qp_solver not in QP_SOLVERS:
-            raise ValueError(f"qp_solver must be one of {list(QP_SOLVERS)}, got {qp_solver!r}")
+            raise ValueError(f"qp_solver must be one of {list(QP_SOLVERS)}, got {excerpt(qp_solver)}")
         self.qp_solver = qp_solver
         self.t0 = 0.0
         self.terrain: Any = None

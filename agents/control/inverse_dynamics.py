@@ -53,6 +53,7 @@ from agents.control.elimination import (
     layout_of,
 )
 from quad_uneven_env import constants as C
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.robot.dynamics.base import Dynamics, DynamicsTerms
 
 DISTRIBUTIONS: tuple[str, ...] = ("pinv", "qp")
@@ -168,9 +169,9 @@ class InverseDynamics:
         qp_solver: str = "compiled",
     ) -> None:
         if distribution not in DISTRIBUTIONS:
-            raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {distribution!r}")
+            raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {excerpt(distribution)}")
         if qp_solver not in QP_SOLVERS:
-            raise ValueError(f"qp_solver must be one of {list(QP_SOLVERS)}, got {qp_solver!r}")
+            raise ValueError(f"qp_solver must be one of {list(QP_SOLVERS)}, got {excerpt(qp_solver)}")
         self.qp_solver = qp_solver
         if min_normal_force < 0:
             raise ValueError(f"min_normal_force must be >= 0 N, got {min_normal_force}")

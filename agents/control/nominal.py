@@ -21,9 +21,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.robot.description import RobotDescription
-from quad_uneven_env.robot.description_model import description_scene_mjcf
 from quad_uneven_env.robot.model import PhysicsOptions, scene_mjcf
 
 ROBOT_PARAMETER_FIELDS: tuple[str, ...] = (
@@ -36,23 +34,17 @@ ROBOT_PARAMETER_FIELDS: tuple[str, ...] = (
 class NominalModel:
     """A nominal robot model and its data, fed with the measured state.
 
-    :param robot: the nominal robot (the expert's own description of itself): the paper's Table-1 configuration,
-        or a robot description (a URDF robot's model is generated as the env generates it,
-        :mod:`quad_uneven_env.robot.description_model`).
+    :param robot: the nominal robot (the expert's own description of itself); its model is generated as the env
+        generates its own (:func:`quad_uneven_env.robot.model.scene_mjcf`).
     :param terrain: an object with ``hfield_asset_xml()`` and ``hfield_geom_xml(friction)`` (the env's
         :class:`~quad_uneven_env.terrain.Terrain`): only the height field's size enters the model, so
         that its ids match the simulator's; its elevations are never uploaded (contacts are off).
     :param timestep: s, physics timestep (recorded in the model; the nominal model is never stepped).
     """
 
-    def __init__(self, robot: RobotConfig | RobotDescription, terrain: Any, timestep: float) -> None:
-        if isinstance(robot, RobotDescription) and robot.config is not None:
-            robot = robot.config
+    def __init__(self, robot: RobotDescription, terrain: Any, timestep: float) -> None:
         hfield = (terrain.hfield_asset_xml(), terrain.hfield_geom_xml(robot.friction))
-        if isinstance(robot, RobotConfig):
-            xml = scene_mjcf(robot, *hfield, PhysicsOptions(timestep=timestep))
-        else:
-            xml = description_scene_mjcf(robot, *hfield, PhysicsOptions(timestep=timestep))
+        xml = scene_mjcf(robot, *hfield, PhysicsOptions(timestep=timestep))
         self.model = mujoco.MjModel.from_xml_string(xml)
         """the nominal MjModel (contacts disabled)."""
         self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT

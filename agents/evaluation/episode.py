@@ -28,6 +28,7 @@ from agents.evaluation.policies import expert_model_of, make_policy, make_policy
 from agents.evaluation.suites import EpisodeTask
 from agents.waypoints import WaypointFollower, load_waypoints
 from quad_uneven_env.constants import LEG_NAMES
+from quad_uneven_env.fields import clip, excerpt
 from quad_uneven_env.randomization import factor_values
 from quad_uneven_env.spatial import wrap_angle, yaw_of_quat
 
@@ -68,14 +69,16 @@ def check_env_kwargs(env_kwargs: Any) -> dict[str, Any]:
     from quad_uneven_env.env import QuadUnevenEnv
 
     if not isinstance(env_kwargs, dict) or not all(isinstance(k, str) for k in env_kwargs):
-        raise EnvArgumentError(f"env_kwargs must be a JSON object of QuadUneven-v0 arguments, got {env_kwargs!r}")
+        raise EnvArgumentError(
+            f"env_kwargs must be a JSON object of QuadUneven-v0 arguments, got {excerpt(env_kwargs)}"
+        )
     allowed = [n for n in inspect.signature(QuadUnevenEnv.__init__).parameters if n != "self"]
     for key in env_kwargs:
         if key in EVALUATION_ENV_KWARGS:
             raise EnvArgumentError(f"env_kwargs.{key} is set by {EVALUATION_ENV_KWARGS[key]}; remove it")
         if key not in allowed:
             settable = [n for n in allowed if n not in EVALUATION_ENV_KWARGS]
-            raise EnvArgumentError(f"env_kwargs.{key}: unknown QuadUneven-v0 argument; allowed: {settable}")
+            raise EnvArgumentError(f"env_kwargs.{clip(key, 40)}: unknown QuadUneven-v0 argument; allowed: {settable}")
     return dict(env_kwargs)
 
 

@@ -10,6 +10,7 @@ import gymnasium as gym
 
 from agents.policy import Policy, ZeroActionPolicy
 from quad_uneven_env import ENV_ID
+from quad_uneven_env.fields import excerpt
 
 POLICY_ENV_KWARGS: dict[str, dict[str, Any]] = {
     # The zero action in joint_pd mode holds the standing pose.
@@ -40,7 +41,9 @@ def policy_kind(name: str) -> str:
         return name
     if str(name).endswith(".zip"):
         return "sb3"
-    raise PolicyError(f"policy must be one of {list(NAMED_POLICIES)} or the path of an SB3 model .zip, got {name!r}")
+    raise PolicyError(
+        f"policy must be one of {list(NAMED_POLICIES)} or the path of an SB3 model .zip, got {excerpt(name)}"
+    )
 
 
 def make_policy_env(name: str, **kwargs: Any) -> gym.Env:
@@ -93,7 +96,7 @@ def model_algo(path: str | Path, algo: str | None = None) -> str:
             raise PolicyError(str(err)) from None
         algo = (meta or {}).get("algo") or "ppo"
     if algo not in SB3_ALGOS:
-        raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {algo!r}")
+        raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {excerpt(algo)}")
     return algo
 
 

@@ -17,7 +17,7 @@ from typing import Any
 from agents.rl.hyperparams import HYPERPARAMS, check_hyperparams, check_policy_kwargs
 from agents.rl.residual_config import RESIDUAL_BASES, RESIDUAL_LEGS, ResidualConfig, expert_config
 from quad_uneven_env.config import CONFIG_DIR, read_yaml
-from quad_uneven_env.fields import check_fields, param
+from quad_uneven_env.fields import check_fields, clip, excerpt, param
 from quad_uneven_env.randomization import load_randomization
 from quad_uneven_env.terrain import parse_terrain_spec
 
@@ -137,7 +137,7 @@ def _mapping(name: str, value: Any) -> dict[str, Any]:
     if value is None:
         return {}
     if not isinstance(value, Mapping) or not all(isinstance(k, str) for k in value):
-        raise TrainConfigError(f"{name} must be a mapping with string keys, got {value!r}")
+        raise TrainConfigError(f"{name} must be a mapping with string keys, got {excerpt(value)}")
     return dict(value)
 
 
@@ -178,22 +178,25 @@ def validate(cfg: TrainConfig) -> TrainConfig:
             "residual: false trains from scratch without the expert, so expert_features must be false, "
             "residual_penalty 0, residual_legs 'all', residual_basis 'torque_limit' and expert {}, got "
             f"expert_features={cfg.expert_features}, residual_penalty={cfg.residual_penalty}, "
-            f"residual_legs={cfg.residual_legs!r}, residual_basis={cfg.residual_basis!r}, expert={cfg.expert!r}"
+            f"residual_legs={excerpt(cfg.residual_legs)}, residual_basis={excerpt(cfg.residual_basis)}, "
+            f"expert={excerpt(cfg.expert)}"
         )
     if cfg.init_from is not None and (not isinstance(cfg.init_from, str) or not cfg.init_from):
         raise TrainConfigError(
-            f"init_from must be a path to a saved model (folder or .zip) or null, got {cfg.init_from!r}"
+            f"init_from must be a path to a saved model (folder or .zip) or null, got {excerpt(cfg.init_from)}"
         )
     for name, value, unset in (
         ("init_log_std", cfg.init_log_std, None),
         ("critic_warmup_steps", cfg.critic_warmup_steps, 0),
     ):
         if value != unset and cfg.algo != "ppo":
-            raise TrainConfigError(f"{name} applies to PPO only, got algo={cfg.algo!r} with {name}={value!r}")
+            raise TrainConfigError(
+                f"{name} applies to PPO only, got algo={excerpt(cfg.algo)} with {name}={excerpt(value)}"
+            )
     if cfg.freeze_obs_norm and (cfg.init_from is None or not cfg.normalize_obs):
         raise TrainConfigError(
             "freeze_obs_norm keeps the observation statistics of init_from, so it needs init_from and "
-            f"normalize_obs: true, got init_from={cfg.init_from!r}, normalize_obs={cfg.normalize_obs}"
+            f"normalize_obs: true, got init_from={excerpt(cfg.init_from)}, normalize_obs={cfg.normalize_obs}"
         )
     expert = _mapping("expert", cfg.expert)
     if expert:
@@ -289,16 +292,16 @@ def load_train_config(
     if path is None:
         algo = overrides.get("algo", "ppo")
         if algo not in ALGOS:
-            raise TrainConfigError(f"algo must be one of {list(ALGOS)}, got {algo!r}")
+            raise TrainConfigError(f"algo must be one of {list(ALGOS)}, got {excerpt(algo)}")
         path = default_config_path(algo)
     try:
         raw = read_yaml(path)
     except ValueError as err:
         raise TrainConfigError(f"config: {err}") from None
     names = {f.name for f in dataclasses.fields(TrainConfig)}
-    unknown = sorted((set(raw) | set(overrides)) - names)
+    unknown = sorted((set(raw) | set(overrides)) - names, key=str)
     if unknown:
-        raise TrainConfigError(f"{unknown[0]}: unknown field; allowed: {sorted(names)}")
+        raise TrainConfigError(f"{clip(str(unknown[0]), 40)}: unknown field; allowed: {sorted(names)}")
     if "algo" in raw and "algo" in overrides and raw["algo"] != overrides["algo"]:
         raise TrainConfigError(
             f"algo: the config {str(path)!r} is for {raw['algo']!r}, got {overrides['algo']!r} "

@@ -55,6 +55,7 @@ from agents.outputs import OutputManifest, prepare_output_dir
 from agents.rl.model_io import write_metadata
 from agents.rl.normalization import ObsNormalization, norm_path
 from quad_uneven_env import constants as C
+from quad_uneven_env.fields import excerpt
 
 DISTILL_OUTPUTS = ("model.zip", "model_obs_norm.npz", "rl_meta.json", "distill_summary.json", "distill_curve.png")
 """Top-level names ``distill`` writes in its ``--out`` (``--overwrite`` deletes what the manifest lists)."""
@@ -133,7 +134,7 @@ class DistillConfig:
         )
         for name, ok, allowed in checks:
             if not ok:
-                raise ValueError(f"distill.{name} must be {allowed}, got {getattr(self, name)!r}")
+                raise ValueError(f"distill.{name} must be {allowed}, got {excerpt(getattr(self, name))}")
         if self.height_scan is not None:
             from quad_uneven_env.config import HeightScanConfig
             from quad_uneven_env.fields import from_mapping

@@ -17,7 +17,7 @@ import numbers
 from collections.abc import Mapping
 from typing import Any
 
-from quad_uneven_env.fields import Param
+from quad_uneven_env.fields import Param, excerpt
 
 
 def _p(name: str, default: Any, doc: str, **check: Any) -> Param:
@@ -141,7 +141,7 @@ def _check_net_arch(algo: str, value: Any) -> None:
     if isinstance(value, Mapping) and not (value and set(value) <= set(keys)):
         ok = False
     if not ok:
-        raise ValueError(f"policy_kwargs.net_arch must be {allowed}, got {_short(value)}")
+        raise ValueError(f"policy_kwargs.net_arch must be {allowed}, got {excerpt(value)}")
 
 
 def _is_width(w: Any) -> bool:
@@ -158,23 +158,24 @@ def _check_sac_special(name: str, value: Any) -> None:
     ``target_entropy`` (a number or ``"auto"``)."""
     if name == "gradient_steps":
         if not (isinstance(value, int) and not isinstance(value, bool) and (value >= 1 or value == -1)):
-            raise ValueError(f"hyperparams.gradient_steps must be an integer >= 1 or -1, got {_short(value)}")
+            raise ValueError(f"hyperparams.gradient_steps must be an integer >= 1 or -1, got {excerpt(value)}")
     elif name == "train_freq":
         pair = value if isinstance(value, list | tuple) and len(value) == 2 else (value, "step")
         ok = isinstance(pair[0], int) and not isinstance(pair[0], bool) and pair[0] >= 1
         if not (ok and pair[1] in ("step", "episode")):
             raise ValueError(
-                f"hyperparams.train_freq must be an integer >= 1 or [n, 'step' or 'episode'], got {_short(value)}"
+                f"hyperparams.train_freq must be an integer >= 1 or [n, 'step' or 'episode'], got {excerpt(value)}"
             )
     elif name == "ent_coef":
         if isinstance(value, str) and (value == "auto" or (value.startswith("auto_") and _positive(value[5:]))):
             return
         if not (_is_number(value) and value >= 0):
             raise ValueError(
-                f"hyperparams.ent_coef must be a number >= 0, 'auto' or 'auto_<initial value > 0>', got {_short(value)}"
+                "hyperparams.ent_coef must be a number >= 0, 'auto' or 'auto_<initial value > 0>', "
+                f"got {excerpt(value)}"
             )
     elif not (value == "auto" or _is_number(value)):
-        raise ValueError(f"hyperparams.target_entropy must be a finite number or 'auto', got {_short(value)}")
+        raise ValueError(f"hyperparams.target_entropy must be a finite number or 'auto', got {excerpt(value)}")
 
 
 def _positive(text: str) -> bool:
@@ -183,11 +184,6 @@ def _positive(text: str) -> bool:
     except ValueError:
         return False
     return math.isfinite(v) and v > 0
-
-
-def _short(value: Any, limit: int = 60) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit] + "..."
 
 
 __all__ = [

@@ -42,6 +42,7 @@ from agents.rl.normalization import ObsNormalization, norm_path, pickle_path
 from agents.rl.residual_config import ResidualConfig
 from agents.rl.residual_env import RESIDUAL_ENV_ID, ResidualExpertEnv
 from quad_uneven_env import ENV_ID as PLAIN_ENV_ID
+from quad_uneven_env.fields import excerpt
 
 META_FILE = "rl_meta.json"
 """Name of the metadata file next to the model(s) of a training run."""
@@ -128,12 +129,7 @@ def check_json_type(value: Any, kinds: tuple[str, ...], where: str) -> None:
     """
     if not any(_JSON_TYPES[k][1](value) for k in kinds):
         allowed = " or ".join(_JSON_TYPES[k][0] for k in kinds)
-        raise ModelError(f"{where} must be {allowed}, got {_short(value)} of type {type(value).__name__}")
-
-
-def _short(value: Any, limit: int = 60) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit] + "..."
+        raise ModelError(f"{where} must be {allowed}, got {excerpt(value)} of type {type(value).__name__}")
 
 
 def read_metadata(model_path: str | Path) -> dict[str, Any] | None:
@@ -174,14 +170,14 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
     from agents.rl.config import ALGOS
 
     if meta.get("algo") not in (None, *ALGOS):
-        raise ModelError(f"{path}: algo must be one of {list(ALGOS)}, got {meta.get('algo')!r}")
+        raise ModelError(f"{path}: algo must be one of {list(ALGOS)}, got {excerpt(meta.get('algo'))}")
     if not isinstance(meta.get("residual", False), bool):
-        raise ModelError(f"{path}: residual must be true or false, got {meta.get('residual')!r}")
+        raise ModelError(f"{path}: residual must be true or false, got {excerpt(meta.get('residual'))}")
     env_id = RESIDUAL_ENV_ID if meta.get("residual") else PLAIN_ENV_ID
     if meta.get("env_id", env_id) != env_id:
         raise ModelError(
             f"{path}: env_id must be {env_id!r} for a model with residual: {str(meta.get('residual', False)).lower()}, "
-            f"got {meta['env_id']!r}"
+            f"got {excerpt(meta['env_id'])}"
         )
     if meta.get("residual"):
         if "residual_scale" not in meta:
@@ -189,7 +185,8 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
         for name, value in NOT_READ.items():
             if name in meta and meta[name] != value:
                 raise ModelError(
-                    f"{path}: {name} must be absent or {value!r}, got {meta[name]!r} (the expert's adaptation is "
+                    f"{path}: {name} must be absent or {excerpt(value)}, got {excerpt(meta[name])} "
+                    "(the expert's adaptation is "
                     "expert: {adaptation: ...})"
                 )
         config = residual_config_of(meta, path)
@@ -469,7 +466,7 @@ def _check_entries(infos: list[zipfile.ZipInfo], path: Path, where: str) -> None
     for info in infos:
         if info.filename not in ZIP_ENTRIES and not _PTH_ENTRY.fullmatch(info.filename):
             raise ModelError(
-                f"{where}: {path} holds an entry {_short(info.filename)}; an SB3 model zip holds "
+                f"{where}: {path} holds an entry {excerpt(info.filename)}; an SB3 model zip holds "
                 f"{', '.join(ZIP_ENTRIES)} and NAME.pth tensor files (NAME an attribute path such as policy.optimizer)"
             )
         if info.file_size > MAX_ENTRY_BYTES:
@@ -504,7 +501,7 @@ def _parse_data(blob: bytes, path: Path, where: str) -> dict[str, Any]:
         if key in data and not _is_serialized(value):
             check_json_type(value, kinds, f"{where}: {path} data.{key}")
             if key in _POSITIVE_DATA_FIELDS and value < 1:
-                raise ModelError(f"{where}: {path} data.{key} must be an integer >= 1, got {value!r}")
+                raise ModelError(f"{where}: {path} data.{key} must be an integer >= 1, got {excerpt(value)}")
     return data
 
 
@@ -550,7 +547,7 @@ def _torch_reason(err: Exception) -> str:
     first line)."""
     refused = _TORCH_REFUSAL.search(str(err))
     lines = str(err).strip().splitlines()
-    detail = refused[0] if refused else _short(lines[0], 120) if lines else ""
+    detail = refused[0] if refused else excerpt(lines[0], 120) if lines else ""
     return f"{type(err).__name__}: {detail}" if detail else type(err).__name__
 
 
@@ -567,7 +564,7 @@ def recorded_shape(data: dict[str, Any], key: str, path: Path, where: str = "pol
     entry = data.get(key)
     shape = entry.get("_shape") if _is_serialized(entry) else None
     if not (isinstance(shape, list) and all(type(n) is int and n >= 0 for n in shape)):
-        raise ModelError(f"{where}: {path} data.{key}._shape must be a list of integers, got {_short(shape)}")
+        raise ModelError(f"{where}: {path} data.{key}._shape must be a list of integers, got {excerpt(shape)}")
     return tuple(shape)
 
 
@@ -582,10 +579,10 @@ def _check_recorded_spaces(data: dict[str, Any], env: Any, path: Path) -> None:
     for key, label in _SPACE_TYPES.items():
         space, entry = getattr(env, key), data.get(key)
         if not _is_serialized(entry):
-            raise ModelError(f"policy: {path} data.{key} must be a recorded space, got {_short(entry)}")
+            raise ModelError(f"policy: {path} data.{key} must be a recorded space, got {excerpt(entry)}")
         recorded, want = entry.get(":type:"), type(space).__qualname__
         if not (isinstance(recorded, str) and recorded.endswith(f".{want}'>")):  # gym's or gymnasium's class
-            raise ModelError(f"policy: {path} data.{key} is a {_short(recorded)}, the env's {label} a {want}")
+            raise ModelError(f"policy: {path} data.{key} is a {excerpt(recorded)}, the env's {label} a {want}")
         shape = recorded_shape(data, key, path)
         if shape != tuple(space.shape):
             raise ModelError(
@@ -667,7 +664,7 @@ def load_sb3_model(path: str | Path, algo: str, env: gym.Env, allow_pickle: bool
     except _BUILD_ERRORS as err:
         first = (str(err).strip().splitlines() or [""])[0]
         raise ModelError(
-            f"policy: {path} cannot be loaded as {algo.upper()} ({type(err).__name__}: {_short(first, 160)})"
+            f"policy: {path} cannot be loaded as {algo.upper()} ({type(err).__name__}: {excerpt(first, 160)})"
         ) from None
 
 
@@ -720,8 +717,8 @@ def check_model_env(meta: dict[str, Any], env: gym.Env, path: Path) -> ResidualE
     env_robot = getattr(getattr(env.unwrapped, "robot", None), "name", None)
     if env_robot is not None and env_robot != robot:
         raise ModelError(
-            f"robot must be {robot!r}, the robot {path} was trained on, got {env_robot!r}: a policy acts for the "
-            "robot it was trained on (drop --robot, or give its robot)"
+            f"robot must be {excerpt(robot)}, the robot {path} was trained on, got {excerpt(env_robot)}: a policy "
+            "acts for the robot it was trained on (drop --robot, or give its robot)"
         )
     wrapper = _residual_wrapper(env)
     if not meta.get("residual"):
@@ -741,7 +738,7 @@ def check_model_env(meta: dict[str, Any], env: gym.Env, path: Path) -> ResidualE
     if differ:
         name = differ[0]
         raise ModelError(
-            f"policy: {path} was trained with {name}={want[name]!r}, the env has {name}={got[name]!r} "
+            f"policy: {path} was trained with {name}={excerpt(want[name])}, the env has {name}={excerpt(got[name])} "
             "(agents.rl.model_io.make_model_env builds the model's env)"
         )
     return wrapper

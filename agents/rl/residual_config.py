@@ -14,7 +14,7 @@ from typing import Any
 
 from agents.control.controller import Gains
 from agents.expert.config import ExpertConfig
-from quad_uneven_env.fields import check_fields, from_mapping, param
+from quad_uneven_env.fields import check_fields, excerpt, from_mapping, param
 
 RESIDUAL_LEGS = ("all", "stance")
 """Which legs take the residual: every leg, or only those whose foot touches the ground (per physics step)."""
@@ -33,7 +33,7 @@ def check_residual_legs(residual_legs: Any) -> str:
     :raises ValueError: naming ``residual_legs`` and its allowed values otherwise.
     """
     if not isinstance(residual_legs, str) or residual_legs not in RESIDUAL_LEGS:
-        raise ValueError(f"residual_legs must be one of {list(RESIDUAL_LEGS)}, got {residual_legs!r}")
+        raise ValueError(f"residual_legs must be one of {list(RESIDUAL_LEGS)}, got {excerpt(residual_legs)}")
     return residual_legs
 
 
@@ -43,7 +43,7 @@ def check_residual_basis(residual_basis: Any) -> str:
     :raises ValueError: naming ``residual_basis`` and its allowed values otherwise.
     """
     if not isinstance(residual_basis, str) or residual_basis not in RESIDUAL_BASES:
-        raise ValueError(f"residual_basis must be one of {list(RESIDUAL_BASES)}, got {residual_basis!r}")
+        raise ValueError(f"residual_basis must be one of {list(RESIDUAL_BASES)}, got {excerpt(residual_basis)}")
     return residual_basis
 
 
@@ -57,7 +57,9 @@ def check_residual_scale(residual_scale: Any) -> float:
     except (TypeError, ValueError):
         value = float("nan")
     if isinstance(residual_scale, bool) or not (0.0 < value <= 1.0):
-        raise ValueError(f"residual_scale must be a number in (0, 1] (of the torque limit), got {residual_scale!r}")
+        raise ValueError(
+            f"residual_scale must be a number in (0, 1] (of the torque limit), got {excerpt(residual_scale)}"
+        )
     return value
 
 
@@ -119,7 +121,7 @@ class ResidualConfig:
     def __post_init__(self) -> None:
         check_fields(self)
         if not isinstance(self.expert, ExpertConfig):
-            raise ValueError(f"ResidualConfig.expert must be an ExpertConfig, got {self.expert!r}")
+            raise ValueError(f"ResidualConfig.expert must be an ExpertConfig, got {excerpt(self.expert)}")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON values of every field; ``expert`` as its fields that differ from the defaults
@@ -135,7 +137,7 @@ class ResidualConfig:
         :raises ValueError: naming ``where.field`` (or ``where.expert.field``) and its allowed values.
         """
         if not isinstance(raw, Mapping):
-            raise ValueError(f"{where} must be a mapping of ResidualConfig fields, got {raw!r}")
+            raise ValueError(f"{where} must be a mapping of ResidualConfig fields, got {excerpt(raw)}")
         values = dict(raw)
         if "expert" in values:
             values["expert"] = expert_config(values["expert"], f"{where}.expert" if where else "expert")

@@ -59,6 +59,7 @@ from agents.rl.residual_config import (
     expert_overrides,
 )
 from quad_uneven_env.env import QuadUnevenEnv
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.measurement_kernels import clip_finite_into
 
 RESIDUAL_ENV_ID = "QuadUnevenResidual-v0"
@@ -213,16 +214,18 @@ def install_residual_controller(
     """
     config = ResidualConfig() if config is None else config
     if not isinstance(config, ResidualConfig):
-        raise ValueError(f"config must be a ResidualConfig, got {config!r}")
+        raise ValueError(f"config must be a ResidualConfig, got {excerpt(config)}")
     base = env.unwrapped
     if not isinstance(base, QuadUnevenEnv):
         raise ValueError(f"the residual controller needs a QuadUneven-v0 env, got {type(base).__name__}")
     if base.action_mode != "torque":
         raise ValueError(
-            f"action_mode must be 'torque' for the residual env (expert torques), got {base.action_mode!r}"
+            f"action_mode must be 'torque' for the residual env (expert torques), got {excerpt(base.action_mode)}"
         )
+    # the given settings over the robot's scaled ones (docs/robots.md); where those are the defaults (the paper
+    # robot's), the given settings as they are
     settings = config.expert
-    if base.robot.config is None:  # a URDF robot: the given settings over the robot's scaled ones (docs/robots.md)
+    if ExpertConfig.for_robot(base.robot) != ExpertConfig():
         settings = ExpertConfig.for_robot(base.robot, expert_overrides(settings))
     expert = ExpertPolicy(env, settings)
     controller = ResidualController(

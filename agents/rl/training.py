@@ -35,6 +35,7 @@ from agents.rl.residual_env import RESIDUAL_ENV_ID
 from agents.rl.terrain_mix import TerrainMixEnv
 from agents.rl.vec_env import EVAL_SEED_OFFSET, SCRATCH_ENV_KWARGS, build_vec_env, make_train_env, normalize
 from agents.rl.warm_start import check_init_model, warm_start
+from quad_uneven_env.fields import excerpt
 
 __all__ = [
     "TRAIN_OUTPUTS",
@@ -358,7 +359,7 @@ def _preflight_env(cfg: TrainConfig) -> str:
             cfg.residual_config() if cfg.residual else None,
         )  # fmt: skip
     except (ValueError, TypeError) as err:
-        raise TrainConfigError(f"env_kwargs {cfg.env_kwargs!r}: {err}") from None
+        raise TrainConfigError(f"env_kwargs {excerpt(cfg.env_kwargs)}: {err}") from None
     base = env.unwrapped
     if isinstance(base, TerrainMixEnv):  # one env per terrain, all on the config's robot
         base = base.envs[0].unwrapped

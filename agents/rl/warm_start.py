@@ -32,6 +32,7 @@ from agents.rl.model_io import (
     recorded_shape,
 )
 from agents.rl.normalization import ObsNormalization, norm_path
+from quad_uneven_env.fields import excerpt
 
 ENV_FIELDS = (
     "robot",
@@ -92,7 +93,7 @@ def check_init_model(init_from: str | Path, expected: dict[str, Any]) -> tuple[P
             theirs, mine = float(theirs), float(mine)
         if theirs != mine:
             raise TrainConfigError(
-                f"init_from: {path} was trained with {name}={theirs!r}, the config has {name}={mine!r}; "
+                f"init_from: {path} was trained with {name}={excerpt(theirs)}, the config has {name}={excerpt(mine)}; "
                 f"a warm start needs the same {', '.join(ENV_FIELDS)}"
             )
     steps = data.get("num_timesteps", 0)

@@ -152,7 +152,7 @@ def test_contact_point_speed_against_finite_differences(rng):
     d.qpos[:] = u.data.qpos
     d.qvel[:] = rng.normal(0.0, 1.0, m.nv)
     mujoco.mj_forward(m, d)
-    r = u.robot_cfg.foot_radius
+    r = u.robot.foot_radius
     det = SlipDetector(speed=1e-9, foot_radius=r, check_dt=0.004)
     det.reset(m)
     det.update(m, d, stance=15, touch=np.ones(4), loads=lambda: np.full(4, 100.0))

@@ -52,7 +52,7 @@ def test_measurement_through_its_entry_point_equals_the_dispatcher_call():
         live = env._meas
         assert live._call is not None
         fresh = StepMeasurement(
-            env.model, env.data, env.idx, env.robot_cfg.foot_radius, env._scan_B, env._fields,
+            env.model, env.data, env.idx, env.robot.foot_radius, env._scan_B, env._fields,
             env.observation_space.low, env.observation_space.high,
         )  # fmt: skip
         fresh.mass = live.mass
@@ -95,7 +95,7 @@ def test_a_new_terrain_keeps_the_measurements_entry_point_and_its_outputs(monkey
         assert live._call[1] is env.terrain.heightfield.kernel_args[0] and live._call[1] is not flat
         assert live._call[0] is entry
         fresh = StepMeasurement(
-            env.model, env.data, env.idx, env.robot_cfg.foot_radius, env._scan_B, env._fields,
+            env.model, env.data, env.idx, env.robot.foot_radius, env._scan_B, env._fields,
             env.observation_space.low, env.observation_space.high,
         )  # fmt: skip
         fresh.mass = live.mass

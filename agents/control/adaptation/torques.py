@@ -19,6 +19,7 @@ import numpy as np
 
 from agents.control.adaptation.knee import KneeGainAdaptation
 from agents.control.adaptation.learned import LearnedGainAdaptation
+from quad_uneven_env.fields import excerpt
 
 ADAPTATIONS = ("none", "knee", "learned")
 """Values of ``ExpertConfig.adaptation``: no gains, the knee law (:mod:`agents.control.adaptation.knee`), or
@@ -86,7 +87,7 @@ def make_adaptation(name: str, period: float, torque_limit: np.ndarray) -> Adapt
         return AdaptiveGains(LearnedGainAdaptation(period), torque_limit)
     if name == "none":
         return None
-    raise ValueError(f"adaptation must be one of {list(ADAPTATIONS)}, got {name!r}")
+    raise ValueError(f"adaptation must be one of {list(ADAPTATIONS)}, got {excerpt(name)}")
 
 
 __all__ = ["ADAPTATIONS", "AdaptiveGains", "make_adaptation"]
