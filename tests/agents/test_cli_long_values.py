@@ -73,7 +73,7 @@ CASES: dict[str, tuple[Callable[[Path], list[str]], str]] = {
     ),
     "robot foot radius": (
         lambda t: evaluate(t, "smoke", "--robot", str(robot(t, foot_radius=BIG))),
-        "robot.foot_radius must be",
+        "robot.yaml.foot_radius must be",
     ),
     "env kwargs": (
         lambda t: evaluate(t, "smoke", "--env-kwargs", json.dumps({"frame_skip": BIG})),
