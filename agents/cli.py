@@ -1,8 +1,23 @@
 """The ``quad-uneven`` command line: every argparse parser of the project, and the thin handlers behind them.
 
-Subcommands: ``demo``, ``evaluate``, ``train``, ``export``, ``paper``, ``plan-paper``, ``robustness``, ``sweep`` (see
-``--help`` of each). The
-library modules expose typed functions only; this module turns arguments into their calls and their
+Subcommands (see ``--help`` of each):
+
+- ``demo``: the scripted expert walks the default rough terrain; a report;
+- ``evaluate``: a policy over a terrain suite: results.json, report.md, plots, videos;
+- ``collect``: the scripted expert over a suite's episodes as a Minari dataset;
+- ``train``: a residual RL agent (SB3 PPO or SAC) on top of the expert, or a policy from scratch;
+- ``distill``: the expert distilled into a network policy (behaviour cloning, then DAgger);
+- ``export``: a trained agent's deterministic policy as ONNX;
+- ``paper``: the paper's §6 cycle in the simulator (Figs. 4-9);
+- ``plan-paper``: the paper's §6 plan without the simulator (Figs. 4-6);
+- ``robustness``: one factor of the simulated world swept: success and stability index curves;
+- ``compare``: two evaluations of the same episodes side by side;
+- ``select``: a training run's checkpoint chosen on validation episodes;
+- ``fit-strength``: the learned motor-strength estimator fitted on expert episodes;
+- ``sweep``: a grid of training runs on Ray Tune, each model evaluated on a suite;
+- ``plot-curves``: several training runs' learning curves in one figure.
+
+The library modules expose typed functions only; this module turns arguments into their calls and their
 errors into one line on stderr with exit code 2: every validation error of the project is a ``ValueError``
 (``SuiteError``, ``PolicyError``, ``EnvArgumentError``, ``TrainConfigError``, ``OutputError``, ...) whose
 message names the field. An interrupt (Ctrl-C, or SIGTERM during ``evaluate`` and ``train``) exits with 130

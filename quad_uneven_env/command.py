@@ -123,7 +123,7 @@ class CommandConfig:
 
 
 def load_command(raw: Mapping[str, Any] | CommandConfig | None) -> CommandConfig | None:
-    """The env's ``command`` argument as a :class:`CommandConfig` (None: no command, today's task).
+    """The env's ``command`` argument as a :class:`CommandConfig` (None: no command).
 
     :raises ValueError: on a non-mapping, an unknown key, a bad value or an axis given both fixed and ranged,
         naming the field (``command.vx``, ``command.ranges.vy``, ...) and its allowed values.

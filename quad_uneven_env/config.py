@@ -210,7 +210,7 @@ class RewardWeights:
     fall: float = param(10.0)
     """penalty on the step that ends in a fall or divergence."""
     command_tracking_lin: float = param(0.0)
-    """per unit of exp(-|v_xy - v_cmd|^2 / command_sigma_lin^2) (needs a ``command``; 0: today's reward)."""
+    """per unit of exp(-|v_xy - v_cmd|^2 / command_sigma_lin^2) (needs a ``command``; 0: no tracking term)."""
     command_tracking_yaw: float = param(0.0)
     """per unit of exp(-(yaw_rate - yaw_rate_cmd)^2 / command_sigma_yaw^2) (needs a ``command``)."""
     command_sigma_lin: float = param(0.1, "m/s", lo=0.0, hi=10.0, lo_open=True)

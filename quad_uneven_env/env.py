@@ -94,8 +94,8 @@ class QuadUnevenEnv(gym.Env):
     ``torque`` (mean squared torque fraction), ``energy`` (|tau qd| / m g), ``alive``, ``fall``; with a
     ``command`` also ``command_tracking_lin`` (exp(-|v_xy - v_cmd|^2 / sigma_lin^2)) and ``command_tracking_yaw``
     (exp(-(yaw_rate - yaw_rate_cmd)^2 / sigma_yaw^2)), of the trunk's velocity at the end of the step in the
-    yaw-aligned base frame against the command in effect during the step (weights 0 by default; nonzero weights
-    without a command are refused).
+    yaw-aligned base frame against the command in effect during the step (weights 0 by default: no tracking term
+    unless they are set; nonzero weights without a command are refused).
 
     **Command** (``command`` not None, see :mod:`quad_uneven_env.command` and docs/commands.md): a commanded
     planar base velocity (vx, vy in m/s, yaw rate in rad/s) in the yaw-aligned base frame, fixed or drawn at
@@ -106,7 +106,7 @@ class QuadUnevenEnv(gym.Env):
     already in that step's observation). In heading mode (``heading`` or ``ranges.heading``) the command names
     a world heading and its yaw rate is computed at every step from the measured one (legged_gym's
     ``heading_command``); the target is ``info["command_heading"]`` (rad). With ``command=None`` (the default)
-    there is no ``command`` observation field, command reward term or ``info`` key. Fields:
+    the observation has no ``command`` field, the reward no tracking terms and ``info`` no command keys. Fields:
 
     COMMAND_TABLE
 

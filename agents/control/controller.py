@@ -57,8 +57,9 @@ from planners.types import PACKED_FIELDS, ReferenceGrid, ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env.compiled_call import entry_point
 from quad_uneven_env.fields import check_fields, excerpt, param
+from quad_uneven_env.robot.dynamics import make_dynamics
 from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
-from quad_uneven_env.robot.dynamics.base import DynamicsTerms, make_dynamics
+from quad_uneven_env.robot.dynamics.base import DynamicsTerms
 
 __all__ = [
     "ComputedTorqueController",

@@ -152,7 +152,7 @@ def friction_pyramid(normal_W: np.ndarray, mu: float) -> np.ndarray:
 class InverseDynamics:
     """Torques and contact forces realising a commanded ``beta_ddot`` for a stance set.
 
-    :param dynamics: a backend from :func:`quad_uneven_env.robot.dynamics.base.make_dynamics`.
+    :param dynamics: a backend from :func:`quad_uneven_env.robot.dynamics.make_dynamics`.
     :param distribution: ``"pinv"`` (paper) or ``"qp"`` (friction-cone aware, see module doc).
     :param mu: friction coefficient of the cone (default: the model's foot friction, if the
         backend has a model, else 1.0).

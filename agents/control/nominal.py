@@ -6,9 +6,8 @@ what its sensors measure. :class:`NominalModel` is that knowledge: an ``MjModel`
 nominal robot configuration (the same scene MJCF as the environment, so body, joint, site and dof
 ids agree) with contacts disabled, and an ``MjData`` into which :meth:`NominalModel.measure` copies
 the measured state each physics step and runs only the position and velocity stages the dynamics
-terms need (``mj_kinematics``, ``mj_comPos``, ``mj_makeM``, ``mj_comVel``, ``mj_rne``: about
-10 µs). Its ``M``, ``qfrc_bias``, frames and subtree centres of mass are then what the nominal
-robot would have at the measured state.
+terms need (``mj_kinematics``, ``mj_comPos``, ``mj_makeM``, ``mj_comVel``, ``mj_rne``). Its ``M``,
+``qfrc_bias``, frames and subtree centres of mass are then what the nominal robot would have at the measured state.
 
 When the simulated robot is exactly nominal the two models compile from the same MJCF, and the
 nominal data equal the simulator's bit for bit (tested); :meth:`NominalModel.matches` says whether

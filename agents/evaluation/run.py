@@ -130,6 +130,8 @@ def preflight(tasks: list[EpisodeTask], cfg: EvalConfig) -> None:
     def build(task: EpisodeTask):
         try:
             return make_env(task, cfg)
+        except PolicyError:  # the model's metadata: named by the policy's own message
+            raise
         except (ValueError, TypeError) as err:
             msg = str(err).split(" was raised from the environment creator")[0]  # gymnasium's suffix repeats kwargs
             raise EnvArgumentError(msg if msg.startswith("env_kwargs") else f"env_kwargs: {msg}") from None

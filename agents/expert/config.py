@@ -87,11 +87,11 @@ class ExpertConfig:
     :data:`~agents.expert.friction.SLIP_CHECK_EVERY` physics steps) multiplies it by ``friction_decrease``, at
     most once per :data:`~agents.expert.friction.SLIP_COOLDOWN` s and never below ``friction_min``; the
     cones and the foothold slope limit follow at once, and every change is logged. It is never raised
-    again within the episode. Off by default: it walks floors of 0.3-0.45, but under hard randomization
-    pushed feet read as slips and it loses ``robust_hard`` episodes (docs/robustness.md#friction-adaptation)."""
+    again within the episode. Off by default: a foot shoved by a push or moved by a late torque reads as a slip
+    too (docs/robustness.md#friction-adaptation has the figures of both)."""
     slip_speed: float = param(0.05, "m/s", lo=0.0, lo_open=True)
-    """m/s, > 0: a stance foot's contact point moving faster than this (for ``SLIP_DURATION``) slips; one
-    that holds moves < 0.025 m/s on rough terrain."""
+    """m/s, > 0: a stance foot's contact point moving faster than this (for ``SLIP_DURATION``) slips (how fast a
+    holding foot moves: docs/robustness.md#friction-adaptation)."""
     friction_decrease: float = param(0.8, "-", lo=0.0, hi=1.0, lo_open=True, hi_open=True)
     """-, in (0, 1): the factor of one decrease of the assumed friction."""
     friction_min: float = param(0.25, "-", lo=0.0, hi=2.0, lo_open=True)
@@ -107,7 +107,7 @@ class ExpertConfig:
     share_nominal_world: bool = True
     """with "nominal": when the simulated robot's parameters equal the nominal ones exactly (checked at
     every reset), read the dynamics terms from the simulator's data instead of copying the measured
-    state into the nominal model: the same numbers bit for bit (tested), about 10 µs a step cheaper."""
+    state into the nominal model: the same numbers bit for bit (tested), without the copy and its stages."""
     adaptation: str = param("none", kind="choice", choices=ADAPTATIONS)
     """adaptive gains on the controller's joint torques (:mod:`agents.control.adaptation`), updated once per control
     step of the env from the plan's tracking error and the torques: "none", "knee" (the four knees' gains follow

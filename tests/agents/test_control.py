@@ -24,7 +24,7 @@ from agents.control.controller import (
 from agents.control.references import BaseWaveReference, track_in_env
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
-from quad_uneven_env.robot.dynamics.base import BACKENDS, make_dynamics
+from quad_uneven_env.robot.dynamics import BACKENDS, make_dynamics
 from quad_uneven_env.robot.model import robot_mjcf
 
 ALL_STANCES = list(itertools.product((True, False), repeat=4))

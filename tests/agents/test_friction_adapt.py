@@ -10,7 +10,7 @@ import pytest
 import quad_uneven_env  # noqa: F401
 from agents.control.inverse_dynamics import InverseDynamics
 from agents.expert import ExpertConfig, attach_expert
-from quad_uneven_env.robot.dynamics.base import make_dynamics
+from quad_uneven_env.robot.dynamics import make_dynamics
 
 ROUGH = {"kind": "rough", "amplitude": 0.05, "wavelength": 0.6}
 ADAPT = {"friction": 0.6, "friction_adapt": True}

@@ -193,7 +193,7 @@ def test_problems_recorded_from_the_expert_match_daqp(terrain, monkeypatch):
 
 def test_a_failed_compiled_solve_falls_back_to_daqp(monkeypatch):
     """QP_FAILED (e.g. the iteration cap): InverseDynamics solves the same problem with DAQP."""
-    from quad_uneven_env.robot.dynamics.base import make_dynamics
+    from quad_uneven_env.robot.dynamics import make_dynamics
 
     env = gym.make("QuadUneven-v0", terrain="flat")
     env.reset(seed=0)

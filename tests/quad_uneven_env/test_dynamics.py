@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from quad_uneven_env import constants as C
-from quad_uneven_env.robot.dynamics.base import BACKENDS, make_dynamics
+from quad_uneven_env.robot.dynamics import BACKENDS, make_dynamics
 from quad_uneven_env.robot.model import robot_mjcf
 
 N_STATES = 1000
