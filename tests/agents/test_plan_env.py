@@ -121,6 +121,17 @@ def test_truncated_after_max_control_steps():
     assert truncated and info["control_steps"] == 45
 
 
+def test_make_vec_stacks_the_infos_of_reset_and_step():
+    envs = gym.make_vec(PLAN_ENV_ID, num_envs=2, vectorization_mode="sync", terrain="flat", max_control_steps=200)
+    _, info = envs.reset(seed=[0, 1])
+    assert info["plan_action"].shape == (2, 5) and info["control_steps"].tolist() == [0, 0]
+    for _ in range(2):  # the second step truncates both episodes (200 control steps) and autoresets
+        _, _, _, truncated, info = envs.step(np.zeros((2, 5), dtype=np.float32))
+    assert truncated.all() and info["control_steps"].tolist() == [45, 45]
+    assert info["reward_terms"]["forward_progress"].shape == (2,)
+    envs.close()
+
+
 @pytest.mark.filterwarnings("ignore:.*different from the unwrapped")
 def test_gymnasium_env_checker():
     from gymnasium.utils.env_checker import check_env
