@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from agents.cli_backend import add_backend_arguments, backend_options
+from agents.cli_baselines import add_baselines_parser
 from agents.evaluation.episode import DEFAULT_WALL_TIME_LIMIT
 from agents.evaluation.policies import SB3_ALGOS
 from agents.evaluation.ray_backend import BACKENDS, DEFAULT_LOCAL_CPUS
@@ -1125,7 +1126,7 @@ def build_parser() -> argparse.ArgumentParser:
     for add in (
         add_demo_parser, add_evaluate_parser, add_collect_parser, add_train_parser, add_export_parser, add_paper_parser,
         add_plan_paper_parser, add_robustness_parser, add_compare_parser, add_select_parser, add_sweep_parser,
-        add_fit_strength_parser, add_distill_parser, add_plot_curves_parser,
+        add_fit_strength_parser, add_distill_parser, add_plot_curves_parser, add_baselines_parser,
     ):  # fmt: skip
         add(sub)
     return parser
