@@ -1,4 +1,5 @@
-"""The ``quad-uneven`` command line: every argparse parser of the project, and the thin handlers behind them.
+"""The ``quad-uneven`` command line: every argparse parser of the project, and the thin handlers behind them
+(with the ``agents/cli_*.py`` modules: shared options, and subcommands of their own).
 
 Subcommands (see ``--help`` of each):
 
@@ -15,7 +16,8 @@ Subcommands (see ``--help`` of each):
 - ``select``: a training run's checkpoint chosen on validation episodes;
 - ``fit-strength``: the learned motor-strength estimator fitted on expert episodes;
 - ``sweep``: a grid of training runs on Ray Tune, each model evaluated on a suite;
-- ``plot-curves``: several training runs' learning curves in one figure.
+- ``plot-curves``: several training runs' learning curves in one figure;
+- ``baselines``: several policies on the same episodes of several suites: one markdown table.
 
 The library modules expose typed functions only; this module turns arguments into their calls and their
 errors into one line on stderr with exit code 2: every validation error of the project is a ``ValueError``
