@@ -175,7 +175,9 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         "Exit code 2 on an invalid suite, policy, env kwargs or output directory; 130 when interrupted (the "
         "finished episodes are kept: continue with --resume).",
     )
-    p.add_argument("--policy", required=True, help="'zero', 'expert', or the path of an SB3 model .zip")
+    p.add_argument(
+        "--policy", required=True, help="'zero', 'expert', the path of an SB3 model .zip or of an exported .onnx"
+    )
     add_suite_run_arguments(p)
     p.add_argument(
         "--workers",

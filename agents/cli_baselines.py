@@ -25,8 +25,8 @@ def add_baselines_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPa
     p.add_argument(
         "--policies",
         required=True,
-        help="comma-separated rows: 'zero', 'expert', 'expert:ADAPTATION' (e.g. expert:learned) or SB3 model .zip "
-        "paths, e.g. 'zero,expert,expert:learned,models/distilled/model.zip'",
+        help="comma-separated rows: 'zero', 'expert', 'expert:ADAPTATION' (e.g. expert:learned), SB3 model .zip "
+        "paths or exported .onnx paths, e.g. 'zero,expert,expert:learned,models/distilled/model.zip'",
     )
     p.add_argument(
         "--suites",

@@ -11,7 +11,8 @@ Each (policy, suite) pair is one ``evaluate`` run (:func:`agents.evaluation.run.
 that reached the goal / episodes) and one per-entry table per suite; ``DIR/baselines.json`` the same figures.
 
 Policies: ``zero`` (zero action in ``joint_pd``: the standing pose held), ``expert``, ``expert:ADAPTATION`` (the
-expert with ``ExpertConfig.adaptation``, e.g. ``expert:learned``) or the path of an SB3 model ``.zip``. Suites: a
+expert with ``ExpertConfig.adaptation``, e.g. ``expert:learned``), the path of an SB3 model ``.zip`` or of an ONNX
+file ``quad-uneven export`` wrote. Suites: a
 shipped name or a suite YAML path, with ``@ROBOT`` to run it on that robot at its scale (``evaluate --robot ROBOT
 --scale-terrain``). A model trained on another robot than a column's gets no figure there (``n/a``).
 """
@@ -52,7 +53,9 @@ class BaselinePolicy:
     @property
     def slug(self) -> str:
         """Its folder name under ``DIR/runs``."""
-        return _slug(self.spec.removesuffix(".zip"))
+        return _slug(
+            self.spec.removesuffix(".zip").removesuffix(".onnx") + ("-onnx" if self.spec.endswith(".onnx") else "")
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,7 +87,7 @@ def _slug(text: str) -> str:
 
 
 def parse_policy(spec: str) -> BaselinePolicy:
-    """A ``--policies`` item: ``zero``, ``expert``, ``expert:ADAPTATION`` or an SB3 model ``.zip`` path.
+    """A ``--policies`` item: ``zero``, ``expert``, ``expert:ADAPTATION``, an SB3 model ``.zip`` or an ONNX file.
 
     :raises PolicyError: naming the item and the allowed values.
     """
@@ -100,10 +103,10 @@ def parse_policy(spec: str) -> BaselinePolicy:
         kind = policy_kind(spec)
     except PolicyError:
         raise PolicyError(
-            f"policies items must be 'zero', 'expert', 'expert:ADAPTATION' ({list(ADAPTATIONS)}) or an SB3 model "
-            f".zip path, got {excerpt(spec)}"
+            f"policies items must be 'zero', 'expert', 'expert:ADAPTATION' ({list(ADAPTATIONS)}), an SB3 model "
+            f".zip path or an exported .onnx path, got {excerpt(spec)}"
         ) from None
-    if kind == "sb3" and not Path(spec).is_file():
+    if kind in ("sb3", "onnx") and not Path(spec).is_file():
         raise PolicyError(f"policies: model file {spec!r} does not exist")
     return BaselinePolicy(spec, spec, {})
 
@@ -129,6 +132,10 @@ def _model_robot(policy: BaselinePolicy) -> str | None:
     """The robot a model was trained on (None for ``zero`` and ``expert``, which run on any robot)."""
     if policy.policy in ("zero", "expert"):
         return None
+    if policy_kind(policy.policy) == "onnx":
+        from agents.evaluation.onnx_policy import onnx_metadata
+
+        return onnx_metadata(policy.policy)["robot"]
     from agents.rl.model_io import model_robot, read_metadata
 
     meta = read_metadata(policy.policy)
