@@ -17,13 +17,15 @@ import numpy as np
 
 from quad_uneven_env import ENV_ID
 
-__all__ = ["OnnxPolicy", "make_onnx_env", "onnx_metadata"]
+__all__ = ["OnnxPolicy", "OnnxPolicyError", "make_onnx_env", "onnx_metadata"]
 
 
-def _error(message: str) -> ValueError:
-    from agents.evaluation.policies import PolicyError  # that module imports this one
+class OnnxPolicyError(ValueError):
+    """An ONNX file that cannot be used as a policy (``agents.evaluation.policies`` raises it as a ``PolicyError``)."""
 
-    return PolicyError(message)
+
+def _error(message: str) -> OnnxPolicyError:
+    return OnnxPolicyError(message)
 
 
 def _session(path: str | Path) -> Any:
@@ -47,7 +49,7 @@ def _session(path: str | Path) -> Any:
 def onnx_metadata(path: str | Path) -> dict[str, Any]:
     """``env_id`` (str), ``env_kwargs`` (dict), ``robot`` (str) and ``residual`` (bool) of an exported ONNX policy.
 
-    :raises PolicyError: on a missing or unreadable file, or metadata ``quad-uneven export`` did not write.
+    :raises OnnxPolicyError: on a missing or unreadable file, or metadata ``quad-uneven export`` did not write.
     """
     props = _session(path).get_modelmeta().custom_metadata_map
     try:
@@ -70,7 +72,7 @@ def onnx_metadata(path: str | Path) -> dict[str, Any]:
 def make_onnx_env(path: str | Path, **kwargs: Any) -> gym.Env:
     """The env the ONNX policy at ``path`` acts in: its ``env_id`` with its ``env_kwargs``, ``kwargs`` over them.
 
-    :raises PolicyError: for a residual policy, or an env of another robot than the policy's.
+    :raises OnnxPolicyError: for a residual policy, or an env of another robot than the policy's.
     """
     meta = onnx_metadata(path)
     if meta["residual"] or meta["env_id"] != ENV_ID:
@@ -94,7 +96,7 @@ class OnnxPolicy:
 
     :param path: the ``.onnx`` file.
     :param env: the env it acts in (:func:`make_onnx_env`); its observation size must be the graph's input size.
-    :raises PolicyError: if the sizes differ.
+    :raises OnnxPolicyError: if the sizes differ.
     """
 
     def __init__(self, path: str | Path, env: gym.Env) -> None:

@@ -61,9 +61,12 @@ def make_policy_env(name: str, **kwargs: Any) -> gym.Env:
     """
     kind = policy_kind(name)
     if kind == "onnx":
-        from agents.evaluation.onnx_policy import make_onnx_env
+        from agents.evaluation.onnx_policy import OnnxPolicyError, make_onnx_env
 
-        return make_onnx_env(name, **kwargs)
+        try:
+            return make_onnx_env(name, **kwargs)
+        except OnnxPolicyError as err:
+            raise PolicyError(str(err)) from None
     if kind != "sb3":
         return gym.make(ENV_ID, **{**POLICY_ENV_KWARGS[kind], **kwargs})
     from agents.rl.model_io import ModelError, make_model_env
@@ -151,7 +154,10 @@ def make_policy(
     if kind == "expert":
         return _expert(env, expert_config)
     if kind == "onnx":
-        from agents.evaluation.onnx_policy import OnnxPolicy
+        from agents.evaluation.onnx_policy import OnnxPolicy, OnnxPolicyError
 
-        return OnnxPolicy(name, env)
+        try:
+            return OnnxPolicy(name, env)
+        except OnnxPolicyError as err:
+            raise PolicyError(str(err)) from None
     return _sb3(name, env, algo, allow_pickle)
