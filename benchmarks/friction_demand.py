@@ -3,7 +3,8 @@
 One expert walk (every factor nominal but the floor's friction) on flat ground, rough 5 cm or 8 cm stairs (lengths
 times the robot's leg length over 0.42 m), for ``--seconds`` or 2 m (times that ratio). Every control step it reads
 the contact forces MuJoCo applied to each foot and the stance forces the controller's QP commanded, and prints:
-the commanded tangential / normal ratio of the loaded stance feet (median, 95th percentile, max), the measured
+the commanded tangential / normal ratio of the loaded stance feet (world frame: on tilted ground the cone is about
+the terrain normal; median, 95th percentile, max), the measured
 one (95th percentile), how many loaded stance-foot steps slid (contact point faster than 0.05 m/s), the first
 slide (time, foot, gait phase), the peak joint torque over the motor limit per joint type, and the distance.
 
@@ -26,8 +27,8 @@ from planners.gait import SWING_ORDER
 from planners.robot_geometry import robot_geometry
 from quad_uneven_env import constants as C
 
-LOADED = 20.0
-"""N: a stance foot counts when its measured normal force exceeds this."""
+LOADED = 0.04
+"""a stance foot counts when its measured normal force exceeds this fraction of the robot's weight (20 N on 50 kg)."""
 SLIDE_SPEED = 0.05
 """m/s: a loaded foot whose site moves faster than this slides (the expert's slip threshold)."""
 
@@ -64,6 +65,7 @@ def main() -> None:
     feet = [m.geom(g).id for g in C.FOOT_GEOMS]
     sites = [m.site(n).id for n in C.FOOT_SITES]
     limit = np.asarray(u.idx.torque_limit, dtype=float)
+    loaded = LOADED * u.total_mass * 9.81  # N
     f6, v6 = np.zeros(6), np.zeros(6)
     commanded, measured, peak = [], [], np.zeros(C.N_JOINTS)
     slid = loaded_steps = 0
@@ -85,10 +87,10 @@ def main() -> None:
         last = expert.controller.last
         if last is not None:
             f = np.asarray(last.contact_forces)
-            for leg in np.flatnonzero(fn > LOADED):
+            for leg in np.flatnonzero(fn > loaded):
                 loaded_steps += 1
                 measured.append(ft[leg] / fn[leg])
-                if f[leg, 2] > LOADED:
+                if f[leg, 2] > loaded:
                     commanded.append(np.hypot(f[leg, 0], f[leg, 1]) / f[leg, 2])
                 mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, sites[leg], v6, 0)
                 if np.hypot(v6[3], v6[4]) > SLIDE_SPEED:
