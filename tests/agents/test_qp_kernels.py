@@ -217,3 +217,31 @@ def test_a_failed_compiled_solve_falls_back_to_daqp(monkeypatch):
             np.testing.assert_allclose(got.tau, ref.tau, rtol=0, atol=1e-8)
             np.testing.assert_allclose(got.contact_forces, ref.contact_forces, rtol=0, atol=1e-7)
             assert (got.distribution, got.relaxed, got.qp_fallback) == ("qp", relaxed, False)
+
+
+def test_a_problem_infeasible_in_narrow_cones_is_solved_in_the_wide_ones(monkeypatch):
+    """Cones of 0.25 cannot give a forward base acceleration of 3 m/s^2 on four feet (the QP alone relaxes it);
+    both solvers then solve it with cones of ``WIDE_MU`` = 0.5: the optimum of a QP built with cones of 0.5."""
+    from quad_uneven_env.robot.dynamics.base import make_dynamics
+
+    env = gym.make("QuadUneven-v0", terrain="flat")
+    env.reset(seed=0)
+    m, d = env.unwrapped.model, env.unwrapped.data
+    stance, bdd = (True,) * 4, np.array([3.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+    def solve(mu, solver):
+        return ID.InverseDynamics(make_dynamics("mujoco", m), "qp", qp_solver=solver, mu=mu).solve(
+            d.qpos, d.qvel, bdd, stance
+        )
+
+    assert QK.WIDE_MU == 0.5
+    wide = solve(0.5, "daqp")
+    assert not wide.relaxed
+    for solver in ("compiled", "daqp"):
+        got = solve(0.25, solver)
+        assert (got.distribution, got.relaxed) == ("qp", False)
+        np.testing.assert_allclose(got.tau, wide.tau, rtol=0, atol=1e-7)
+        np.testing.assert_allclose(got.contact_forces, wide.contact_forces, rtol=0, atol=1e-6)
+    with monkeypatch.context() as patch:
+        patch.setattr(QK, "WIDE_MU", 0.25)  # no wider cones: the Python path relaxes the narrow problem
+        assert solve(0.25, "daqp").relaxed
