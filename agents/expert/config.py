@@ -73,9 +73,10 @@ class ExpertConfig:
     its footholds (``foothold_limits_for_friction``: 10 deg at 0.25). The QP keeps the torques closest to the
     pinv ones, whose internal forces lean on the feet: it uses the cone up to its edge (stance forces at
     tangential / normal 0.5 with cones of 0.5 on any floor), so this is the friction the walk demands of the
-    floor, not a margin below it. The nominal floor's is 1.0; 0.25 walks floors down to 0.2 (flat) and 0.25
-    (rough 5 cm). With ``friction_adapt`` it is lowered when a stance foot slips. Unused by "oracle", which
-    takes the simulator's."""
+    floor, not a margin below it. Where no forces inside it give the planned base acceleration (a payload's or a
+    push's correction) the QP takes cones of 0.5 instead (:data:`agents.control.qp_kernels.WIDE_MU`). The nominal
+    floor's is 1.0; 0.25 walks floors down to 0.2 (flat) and 0.3 (rough 5 cm, 8 cm stairs). With
+    ``friction_adapt`` it is lowered when a stance foot slips. Unused by "oracle", which takes the simulator's."""
     steep_friction: float = param(0.8, "-", lo=0.0, hi=2.0)
     """-, in [0, 2]: the friction the nominal model may assume for one gait cycle whose footholds ``friction``
     refuses as too steep (a ramp steeper than atan(friction / sqrt(2)), 10 deg at 0.25): such a stride is
