@@ -354,6 +354,9 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
             f"{kind:16s} success {g['successes']}/{g['episodes']}  mean distance {g['mean_distance']:.2f} m  "
             f"mean speed {speed if speed is None else round(speed, 3)} m/s"
         )
+    for g in results["summary"]["by_factor"]:
+        if g["factor"] == "friction":
+            print(f"friction {g['bin']:9s} success {g['successes']}/{g['episodes']}")
     for t in results["targets"]:
         verdict = "PASS" if t["passed"] else f"FAIL ({t['why_not']})"
         print(f"target {t['target']:18s} entry {t['entry']}: {verdict}")
