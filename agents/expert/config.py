@@ -8,6 +8,8 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from agents.control.adaptation import ADAPTATIONS
 from agents.control.controller import Gains
 from agents.control.inverse_dynamics import DISTRIBUTIONS
@@ -154,10 +156,22 @@ class ExpertConfig:
 
 
 SCALED_ROBOT_FRICTION = 0.5
-"""-: the friction of the force QP's cones on a URDF robot (``ExpertConfig.friction``; the paper robot's: 0.25).
+"""-: the friction of the force QP's cones on a robot whose motors have little margin over its weight
+(:func:`motor_load` at least :data:`NARROW_CONES_MAX_LOAD`; ``ExpertConfig.friction``, the narrow cones, otherwise).
 Cones of 0.25 make the QP trade friction for joint torque: on rough ground at their scale the stance peaks rise
 from 0.72 to 0.82 of the motor limit (ANYmal C's hip flexion), 0.58 to 0.69 (Go1's), 0.75 to 0.77 (HyQ's),
 where the paper robot's stay at 0.33; those robots keep the wider cones (docs/robustness.md#every-robot)."""
+
+NARROW_CONES_MAX_LOAD = 2.0
+"""-: the largest :func:`motor_load` at which the expert plans with the narrow cones of ``ExpertConfig.friction``
+(the paper robot: 1.72; Go1 2.31, Solo12 2.95, HyQ 3.95, ANYmal C 4.17)."""
+
+
+def motor_load(robot: RobotDescription) -> float:
+    """-: the robot's weight times its leg length over its weakest hip-flexion or knee motor's torque limit, how hard
+    its motors work to hold it up (``m g L / tau_max``)."""
+    limits = np.asarray(robot.torque_limits, dtype=float).reshape(4, 3)[:, 1:]
+    return float(robot.total_mass * 9.81 * robot.leg_length / limits.min())
 
 
 def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
@@ -171,7 +185,8 @@ def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
     lengths); the computed-torque gains (per unit mass) with ``1 / s`` (stiffness) and ``1 / sqrt(s)``
     (damping), the same damping ratio at a natural frequency scaled like the gait's. The COG height is the
     robot's standing COG height times the paper robot's ratio of its walking to its standing COG height. The
-    force QP's cones assume :data:`SCALED_ROBOT_FRICTION`. The robot YAML's ``gait`` overrides them.
+    force QP's cones are the narrow default where :func:`motor_load` is below :data:`NARROW_CONES_MAX_LOAD`, else
+    :data:`SCALED_ROBOT_FRICTION`. The robot YAML's ``gait`` overrides them.
     """
     from planners.robot_geometry import robot_geometry
     from planners.wholebody import WholeBody
@@ -207,7 +222,7 @@ def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
         "recovery_position": base.recovery_position * s,
         "slip_speed": base.slip_speed * t,
         "foothold_scale": s,
-        "friction": SCALED_ROBOT_FRICTION,
+        "friction": base.friction if motor_load(robot) < NARROW_CONES_MAX_LOAD else SCALED_ROBOT_FRICTION,
         "gains": gains,
     }
 

@@ -223,7 +223,7 @@ def test_a_problem_infeasible_in_narrow_cones_is_solved_in_the_wide_ones():
     """Cones of 0.25 cannot give a forward base acceleration of 3 m/s^2 on four feet; both solvers then solve it
     with cones of ``wide_mu(0.25)`` = 0.5: the optimum of a QP built with cones of 0.5. At 4 m/s^2 those cannot
     either: the relaxed problem in the wide cones, as a QP built with cones of 0.5 relaxes it."""
-    from quad_uneven_env.robot.dynamics.base import make_dynamics
+    from quad_uneven_env.robot.dynamics import make_dynamics
 
     assert [QK.wide_mu(mu) for mu in (0.07, 0.25, 0.4, 0.5, 0.8)] == [0.14, 0.5, 0.5, 0.5, 0.8]
     env = gym.make("QuadUneven-v0", terrain="flat")
