@@ -26,7 +26,9 @@ WORLDS = (None, "hard")
 ADAPTATIONS = ("none", "learned", "knee")
 
 
-def walk(robot: str, terrain: str, world: str | None, adaptation: str, steps: int, readable: bool) -> tuple[str, np.ndarray]:
+def walk(
+    robot: str, terrain: str, world: str | None, adaptation: str, steps: int, readable: bool
+) -> tuple[str, np.ndarray]:
     """SHA-256 of one seeded expert walk, and its final qpos."""
     env = gym.make("QuadUneven-v0", robot=robot, terrain=terrain, randomization=world)
     config = ExpertConfig.for_robot(env.unwrapped.robot)

@@ -51,7 +51,7 @@ from agents.evaluation.policies import PolicyError
 from agents.evaluation.run import EvaluationInterrupted, preflight, run_tasks
 from agents.evaluation.store import IDENTITY_KEYS, RUN_FILE, check_resume, open_output_dir, run_identity
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite
-from agents.outputs import OutputError, OutputManifest, write_json_atomic
+from agents.outputs import OutputError, write_json_atomic
 
 __all__ = ["COLLECT_FORMAT", "COLLECT_OUTPUTS", "CollectInterrupted", "CollectedEpisode", "collect", "collect_task"]
 
@@ -280,8 +280,8 @@ def collect(
             f"got {env_kwargs['action_mode']!r}"
         )
     tasks = episode_tasks(suite, episodes, seed)
-    out = open_output_dir(Path(out), resume=resume, overwrite=overwrite, outputs=COLLECT_OUTPUTS, what="collect")
-    with OutputManifest(out, "collect"):  # --overwrite deletes only what a collect wrote
+    out = Path(out)
+    with open_output_dir(out, resume, overwrite, COLLECT_OUTPUTS, "collect", "collect"):  # --overwrite: only ours
         entries = [
             {"kind": e.kind, "params": e.params, "seeds": list(e.seeds), "randomization": e.randomization,
              "command": e.command, "waypoints": e.waypoints}
