@@ -130,7 +130,7 @@ def _holder_text(fd: int) -> str:
         argv = str(info["argv"])
         if len(argv) > MAX_COMMAND_CHARS:
             argv = argv[: MAX_COMMAND_CHARS - 3] + "..."
-        return f"pid {int(info['pid'])} on {info['host']}, since {info['started']}: {argv}"
+        return f"{info['command']}, pid {int(info['pid'])} on {info['host']}, since {info['started']}: {argv}"
     except (OSError, ValueError, KeyError, TypeError):
         return "a run that is starting"
 
