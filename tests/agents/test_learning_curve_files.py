@@ -31,7 +31,8 @@ def good_monitor(folder: Path) -> None:
 
 def evaluations(folder: Path, **arrays: object) -> None:
     (folder / "eval").mkdir(parents=True, exist_ok=True)
-    good = {"timesteps": np.array([100, 200]), "results": np.array([[1.0], [2.0]]), "ep_lengths": np.array([[50], [60]])}
+    good = {"timesteps": np.array([100, 200]), "results": np.array([[1.0], [2.0]]),
+            "ep_lengths": np.array([[50], [60]])}  # fmt: skip
     np.savez(folder / "eval" / "evaluations.npz", **{k: v for k, v in {**good, **arrays}.items() if v is not None})
 
 

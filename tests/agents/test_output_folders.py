@@ -126,7 +126,8 @@ def test_a_second_run_into_a_held_folder_is_refused_naming_the_holder(running_ev
         rc, err = run_cli([*evaluate, *extra], capsys)
         one_error_line(rc, err, f"--out {str(out)!r} is in use by another run", *holder)
     pytest.importorskip("minari")
-    rc, err = run_cli(["collect", "--policy", "expert", "--suite", str(suite), "--out", str(out), "--overwrite"], capsys)
+    collect = ["collect", "--policy", "expert", "--suite", str(suite), "--out", str(out), "--overwrite"]
+    rc, err = run_cli(collect, capsys)
     one_error_line(rc, err, "in use by another run", *holder)
     for path, data in before.items():
         assert path.read_bytes() == data, path
@@ -134,7 +135,7 @@ def test_a_second_run_into_a_held_folder_is_refused_naming_the_holder(running_ev
 
 
 def test_a_killed_holder_leaves_a_folder_the_next_run_can_take(running_evaluation, tmp_path, capsys):
-    proc, out, suite = running_evaluation
+    proc, out, _ = running_evaluation
     assert json.loads((out / LOCK_FILE).read_text())["pid"] == proc.pid
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait(timeout=60)
@@ -170,10 +171,10 @@ def test_two_runs_started_together_into_one_empty_folder(tmp_path):
     refused; DIR holds one run (run.json, results.json and the records agree on the policy)."""
     suite = tiny_suite(tmp_path / "s.yaml", seeds=4, time_limit=2.0)
     out = tmp_path / "out"
+    argv = [sys.executable, "-m", "agents.cli", "evaluate", "--suite", str(suite), "--out", str(out), "--no-progress"]
+    pipe = subprocess.PIPE
     procs = [
-        subprocess.Popen([sys.executable, "-m", "agents.cli", "evaluate", "--policy", policy, "--suite", str(suite),
-                          "--out", str(out), "--no-progress"], cwd=ROOT, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)  # fmt: skip
+        subprocess.Popen([*argv, "--policy", policy], cwd=ROOT, stdout=pipe, stderr=pipe, text=True)
         for policy in ("zero", "expert")
     ]
     results = [(p.wait(timeout=600), p.communicate()[1]) for p in procs]
@@ -210,7 +211,7 @@ LONG_CASES: dict[str, tuple[str, list[str]]] = {
     "export": ("--out", ["export", "--policy", str(ROOT / "models/ppo_scratch/model.zip"), "--out", LONG + ".onnx"]),
     "fit-strength --plot": ("--plot", ["fit-strength", "--from-data", "none.npz", "--out", "e.npz", "--plot", LONG]),
     "demo --gif": ("--gif", ["demo", "--out", "demo", "--gif", LONG + ".gif"]),
-    "a long folder inside --out": ("--out", ["evaluate", "--policy", "zero", "--suite", "s.yaml", "--out", LONG + "/o"]),
+    "a long folder in --out": ("--out", ["evaluate", "--policy", "zero", "--suite", "s.yaml", "--out", LONG + "/o"]),
 }
 """Commands given a 300-character name: (the option named in the error, the command line, run in tmp_path)."""
 
