@@ -16,11 +16,12 @@ its subcommand and every option it names exist); every file it reads is in the c
 command of the page; the shortened form that the slow test runs (:data:`SHORTER`) parses too; every ``make``
 target exists (``make -n``). Commands that take a few seconds (:data:`CHEAP`) are run.
 
-**Runs (make test-slow)**, per page: the page's commands in order, in a fresh working directory holding only the
-checkout's files they read (copies), exactly as written (relative paths included) but for :data:`SHORTER`; each
-must exit 0. Not run, with the reason: :data:`NOT_RUN` (a Ray cluster, hours of training), ``make`` targets other
-than :data:`MAKE_RUN` (checked with ``make -n``), commands that need an extra that is not installed
-(:data:`EXTRAS`), and commands that read what one of those would have written.
+**Runs (make test-slow)**, per page: the page's commands in order, in a fresh working directory holding copies of
+the checkout's data (:data:`CHECKOUT_DATA`, and any other checkout file they name), exactly as written (relative
+paths included) but for :data:`SHORTER`; each must exit 0. Not run, with the reason (a warning lists them):
+:data:`NOT_RUN` (a Ray cluster, hours of training), ``make`` targets other than :data:`MAKE_RUN` (checked with
+``make -n``), commands that need an extra that is not installed (:data:`EXTRAS`), and commands that read what one
+of those would have written.
 """
 
 from __future__ import annotations
@@ -77,9 +78,12 @@ NOT_RUN: dict[str, Callable[[argparse.Namespace], bool]] = {
 """Commands the slow run does not run, checked as above: the reason, and which commands."""
 
 MAKE_RUN: dict[str, tuple[str, ...]] = {"demo": ("OUT=out/demo",)}
-"""``make`` targets the slow run runs (from the checkout, the venv taken as installed, outputs in the working
-directory); the others (test, test-slow, docs, venv, the trainings: minutes to hours, or this suite itself) are
-checked with ``make -n``."""
+"""``make`` targets the slow run runs, on the first page that shows them (from the checkout, the venv taken as
+installed, outputs in the working directory); the others (test, test-slow, docs, venv, the trainings: minutes to
+hours, or this suite itself) are checked with ``make -n``."""
+
+CHECKOUT_DATA = ("configs", "models")
+"""The checkout's folders a command may read without naming them (a training config's ``init_from: models/...``)."""
 
 CHEAP = ("plan-paper",)
 """Subcommands that take a few seconds: run by the default suite too, when they read only the checkout's files."""
@@ -369,8 +373,8 @@ def test_every_documented_command_parses_and_reads_what_exists(page):
 
 # ---------------------------------------------------------------------------------------------------- the runs
 def _workdir(tmp: Path, commands: list[Command]) -> None:
-    """Copy into ``tmp`` the checkout's top-level folders and files that ``commands`` read."""
-    tops = set()
+    """Copy into ``tmp`` the checkout's data and the top-level folders and files that ``commands`` read."""
+    tops = set(CHECKOUT_DATA)
     for cmd in commands:
         if cmd.program == "quad-uneven" and not cmd.mention:
             for p in paths(_parse(cmd.argv), outputs=False):
@@ -403,7 +407,8 @@ def run_commands(commands: list[Command], tmp: Path, only: Callable[[Command, ar
             continue
         seen.add(tuple([cmd.program, *cmd.argv]))
         if cmd.program == "make":
-            if cmd.argv[0] in MAKE_RUN and only(cmd, argparse.Namespace(command="make")):
+            first = next(page for page, cmds in all_commands().items() if any(c.argv == cmd.argv for c in cmds))
+            if cmd.argv[0] in MAKE_RUN and first == cmd.page and only(cmd, argparse.Namespace(command="make")):
                 done = _run_make(cmd, tmp)
                 assert done.returncode == 0, f"{cmd}\n{done.stderr[-3000:]}"
                 ran += 1
