@@ -1,8 +1,23 @@
 """The ``quad-uneven`` command line: every argparse parser of the project, and the thin handlers behind them.
 
-Subcommands: ``demo``, ``evaluate``, ``train``, ``export``, ``paper``, ``plan-paper``, ``robustness``, ``sweep`` (see
-``--help`` of each). The
-library modules expose typed functions only; this module turns arguments into their calls and their
+Subcommands (see ``--help`` of each):
+
+- ``demo``: the scripted expert walks the default rough terrain; a report;
+- ``evaluate``: a policy over a terrain suite: results.json, report.md, plots, videos;
+- ``collect``: the scripted expert over a suite's episodes as a Minari dataset;
+- ``train``: a residual RL agent (SB3 PPO or SAC) on top of the expert, or a policy from scratch;
+- ``distill``: the expert distilled into a network policy (behaviour cloning, then DAgger);
+- ``export``: a trained agent's deterministic policy as ONNX;
+- ``paper``: the paper's §6 cycle in the simulator (Figs. 4-9);
+- ``plan-paper``: the paper's §6 plan without the simulator (Figs. 4-6);
+- ``robustness``: one factor of the simulated world swept: success and stability index curves;
+- ``compare``: two evaluations of the same episodes side by side;
+- ``select``: a training run's checkpoint chosen on validation episodes;
+- ``fit-strength``: the learned motor-strength estimator fitted on expert episodes;
+- ``sweep``: a grid of training runs on Ray Tune, each model evaluated on a suite;
+- ``plot-curves``: several training runs' learning curves in one figure.
+
+The library modules expose typed functions only; this module turns arguments into their calls and their
 errors into one line on stderr with exit code 2: every validation error of the project is a ``ValueError``
 (``SuiteError``, ``PolicyError``, ``EnvArgumentError``, ``TrainConfigError``, ``OutputError``, ...) whose
 message names the field. An interrupt (Ctrl-C, or SIGTERM during ``evaluate`` and ``train``) exits with 130
@@ -29,6 +44,7 @@ from agents.outputs import output_dir, output_file
 from agents.paper.simulation import DISTRIBUTIONS as PAPER_DISTRIBUTIONS
 from agents.plotting import video_to_gif
 from agents.rl.config import ALGOS, load_train_config, validate
+from quad_uneven_env.fields import excerpt
 
 EXIT_USAGE = 2
 """Exit code of an invalid argument, file or output directory (argparse's own code for bad options)."""
@@ -253,9 +269,9 @@ def _json_object(text: str, option: str) -> dict:
     try:
         value = json.loads(text, object_pairs_hook=no_duplicates)
     except json.JSONDecodeError as err:
-        raise ValueError(f"{option} is not valid JSON ({err}), got {text!r}") from None
+        raise ValueError(f"{option} is not valid JSON ({err}), got {excerpt(text)}") from None
     if not isinstance(value, dict):
-        raise ValueError(f"{option} must be a JSON object, got {text!r}")
+        raise ValueError(f"{option} must be a JSON object, got {excerpt(text)}")
     return value
 
 
@@ -282,7 +298,9 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
     env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
     if args.robot is not None:
         if env_kwargs.get("robot", args.robot) != args.robot:
-            raise ValueError(f"--robot {args.robot!r} and --env-kwargs robot {env_kwargs['robot']!r} differ: give one")
+            raise ValueError(
+                f"--robot {excerpt(args.robot)} and --env-kwargs robot {excerpt(env_kwargs['robot'])} differ: give one"
+            )
         env_kwargs["robot"] = args.robot
     expert_config = _json_object(args.expert_config, "--expert-config")
     if expert_config and args.policy != "expert":
@@ -766,7 +784,8 @@ def _number_list(text: str, option: str) -> list[float]:
             value = math.nan
         if not math.isfinite(value):
             raise ValueError(
-                f"{option} must be comma-separated finite numbers (e.g. 0.8,0.6,0.4), got {text!r} ({item!r} is not)"
+                f"{option} must be comma-separated finite numbers (e.g. 0.8,0.6,0.4), got {excerpt(text)} "
+                f"({excerpt(item)} is not)"
             )
         values.append(value)
     return values

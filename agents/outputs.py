@@ -36,6 +36,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from quad_uneven_env.fields import clip, excerpt
+
 __all__ = [
     "LOCK_FILE",
     "MANIFEST_FILE",
@@ -102,18 +104,13 @@ def check_path_name(path: str | os.PathLike[str], field: str = "--out") -> Path:
         size = len(os.fsencode(part))
         if size > name_max:
             raise OutputError(
-                f"{field} {_excerpt(str(p))!r}: the name {_excerpt(part, 40)!r} is {size} bytes; the file system "
-                f"allows at most {name_max}"
+                f"{field} {excerpt(str(p))}: the name {excerpt(part, 40)} is {size} bytes; the file system allows "
+                f"at most {name_max}"
             )
     size = len(os.fsencode(str(full)))
     if size >= path_max:
-        raise OutputError(f"{field} {_excerpt(str(p))!r} is {size} bytes long; the file system allows {path_max - 1}")
+        raise OutputError(f"{field} {excerpt(str(p))} is {size} bytes long; the file system allows {path_max - 1}")
     return p
-
-
-def _excerpt(text: str, most: int = 100) -> str:
-    """``text``, or its start and end around ``...`` if it is longer than ``most`` characters."""
-    return text if len(text) <= most else f"{text[: most // 2]}...{text[-(most // 2 - 3) :]}"
 
 
 # ----------------------------------------------------------------------------------------------------- the lock
@@ -127,9 +124,7 @@ def _holder_text(fd: int) -> str:
     """The holder a lock file names, as text for a message."""
     try:
         info = json.loads(os.pread(fd, 4096, 0).decode())
-        argv = str(info["argv"])
-        if len(argv) > MAX_COMMAND_CHARS:
-            argv = argv[: MAX_COMMAND_CHARS - 3] + "..."
+        argv = clip(str(info["argv"]), MAX_COMMAND_CHARS)
         return f"{info['command']}, pid {int(info['pid'])} on {info['host']}, since {info['started']}: {argv}"
     except (OSError, ValueError, KeyError, TypeError):
         return "a run that is starting"
@@ -373,7 +368,7 @@ def read_manifest(out: Path, field: str = "out") -> dict[str, list[str]] | None:
         for x in items:
             parts = Path(x).parts
             if not x or Path(x).is_absolute() or ".." in parts or x == MANIFEST_FILE:
-                raise bad(f"{key} lists {x!r}, a path outside the directory")
+                raise bad(f"{key} lists {excerpt(x)}, a path outside the directory")
         lists[key] = list(items)
     return lists
 

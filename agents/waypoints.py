@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from quad_uneven_env.fields import check_fields, from_mapping, param
+from quad_uneven_env.fields import check_fields, excerpt, from_mapping, param
 from quad_uneven_env.spatial import wrap_angle
 
 HEADING_MODES: tuple[str, ...] = ("face", "hold")
@@ -57,7 +57,7 @@ class WaypointConfig:
     def __post_init__(self) -> None:
         check_fields(self, "waypoints")
         pts = self.points
-        bad = ValueError(f"waypoints.points must be a non-empty list of finite [x, y] pairs (m), got {pts!r}")
+        bad = ValueError(f"waypoints.points must be a non-empty list of finite [x, y] pairs (m), got {excerpt(pts)}")
         if isinstance(pts, str | bytes | Mapping) or not isinstance(pts, Sequence) or len(pts) == 0:
             raise bad
         out = []

@@ -32,7 +32,7 @@ def measure_depth(steps: int, seed: int, setup: Callable[[gym.Env], None] | None
         setup(env)
     m, d = u.model, u.data
     sites = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, C.foot_site(leg)) for leg in C.LEG_NAMES]
-    radius = u.robot_cfg.foot_radius
+    radius = u.robot.foot_radius
     env.action_space.seed(seed)
     env.reset(seed=seed)
     depth, ncon, side = [], 0, 0

@@ -26,7 +26,7 @@ from agents.control.controller import ComputedTorqueController, InverseDynamics
 from agents.control.references import track_in_env
 from planners.types import ReferenceSample
 from quad_uneven_env.robot.conventions import qpos_mj_to_pin, qvel_mj_to_pin
-from quad_uneven_env.robot.dynamics.base import BACKENDS, make_dynamics
+from quad_uneven_env.robot.dynamics import BACKENDS, make_dynamics
 from quad_uneven_env.robot.dynamics.pinocchio_backend import build_pinocchio_model
 
 

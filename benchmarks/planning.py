@@ -35,8 +35,7 @@ import dataclasses  # noqa: E402
 import numpy as np  # noqa: E402
 
 from planners import PAPER_DURATIONS, PlanningError, Scenario, choose_footholds, plan_gait_cycle  # noqa: E402
-from quad_uneven_env.config import load_robot_config  # noqa: E402
-from quad_uneven_env.robot.kinematics import hip_positions_B  # noqa: E402
+from quad_uneven_env.robot.description import load_robot  # noqa: E402
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec  # noqa: E402
 
 TERRAINS = {
@@ -48,7 +47,7 @@ TERRAINS = {
 
 
 def _paper_feet_xy() -> np.ndarray:
-    return hip_positions_B(load_robot_config("paper"))[:, :2]
+    return load_robot("paper").hip_positions_B[:, :2]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,11 +74,8 @@ def robot_setting(name: str) -> Setting:
     """The paper robot's :class:`Setting` scaled to robot ``name`` by the expert's rules (the paper's: unchanged)."""
     from agents.expert.config import ExpertConfig
     from planners.robot_geometry import robot_geometry
-    from quad_uneven_env.robot.description import load_robot
 
     desc = load_robot(name)
-    if desc.config is not None:
-        return Setting()
     paper, mine = ExpertConfig(), ExpertConfig.for_robot(desc)
     geometry = robot_geometry(desc)
     t = sum(mine.durations) / sum(paper.durations)
@@ -138,7 +134,7 @@ def main() -> str:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--robot", default="paper", help="a shipped robot or a robot YAML (default: paper)")
     args = ap.parse_args()
-    cfg = load_robot_config("paper")
+    cfg = load_robot("paper")
     setting = robot_setting(args.robot)
     rng = np.random.default_rng(args.seed)
     rows = []
@@ -205,14 +201,14 @@ def main() -> str:
 
 def walk(n_cycles: int = 16) -> None:
     """Continuous walking: chain cycles (each starts where the last ended), footholds chosen automatically."""
-    cfg = load_robot_config("paper")
+    cfg = load_robot("paper")
     print(f"\n| terrain (seed 0) | cycles planned in a row (of {n_cycles}) | distance (m) | first failure |")
     print("|---|---|---|---|")
     for spec in ("flat", "rough", "slope", "stairs", {"kind": "stairs", "riser": 0.1}, "stepping_stones", "paper"):
         terr = Terrain(parse_terrain_spec(spec))
         hf = terr.generate(np.random.default_rng(0))
         sx, sy = terr.spawn_xy
-        feet = np.column_stack([hip_positions_B(cfg)[:, :2] + [sx, sy], np.zeros(4)])
+        feet = np.column_stack([cfg.hip_positions_B[:, :2] + [sx, sy], np.zeros(4)])
         feet[:, 2] = hf.height(feet[:, 0], feet[:, 1])
         if spec == "paper":
             from quad_uneven_env.terrain import PAPER_BLOCKS

@@ -18,14 +18,13 @@ import tempfile
 import time
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 import torch
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.evaluation.policies import make_policy
 from agents.rl.export import export_onnx
-from agents.rl.model_io import metadata_env_kwargs
+from agents.rl.model_io import make_model_env
 
 
 def median_ms(fn, args: list, repeats: int) -> float:
@@ -48,7 +47,7 @@ def main() -> None:
     import onnxruntime as ort
 
     torch.set_num_threads(1)
-    env = gym.make("QuadUneven-v0", **metadata_env_kwargs(Path(args.policy)))
+    env = make_model_env(args.policy)
     policy = make_policy(args.policy, env)
     obs, _ = env.reset(seed=0)
     observations, actions = [], []

@@ -17,12 +17,11 @@ import argparse
 import json
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 import torch
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
-from agents.rl.model_io import load_sb3_policy
+from agents.rl.model_io import load_sb3_policy, make_model_env
 
 
 def main() -> None:
@@ -39,7 +38,7 @@ def main() -> None:
     terrains = meta["terrain"] if isinstance(meta["terrain"], list) else [meta["terrain"]]
     print("terrain  log_std  episode  steps  fell  distance_m")
     for t in (int(i) for i in args.terrains.split(",")):
-        env = gym.make("QuadUneven-v0", terrain=terrains[t], max_episode_steps=args.steps, **meta["env_kwargs"])
+        env = make_model_env(args.policy, terrain=terrains[t], max_episode_steps=args.steps)
         policy = load_sb3_policy(args.policy, env, meta.get("algo", "ppo"))
         for log_std in (float(x) for x in args.log_stds.split(",")):
             rng = np.random.default_rng(0)

@@ -37,6 +37,7 @@ from planners.blas import single_blas_thread
 from planners.cog_qp import WarmStartQP, whitening
 from planners.polynomial import N_COEF, PiecewisePolynomial, accel_gram, basis_rows
 from planners.types import PlanningError
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.spatial import cross
 from quad_uneven_env.stability import GRAVITY, order_clockwise
 
@@ -428,7 +429,7 @@ def plan_cog(
     :raises PlanningError: naming the phase, the support edge and the violation when infeasible.
     """
     if method not in ("sqp", "slsqp", "slsqp-fd"):
-        raise ValueError(f"method must be 'sqp', 'slsqp' or 'slsqp-fd', got {method!r}")
+        raise ValueError(f"method must be 'sqp', 'slsqp' or 'slsqp-fd', got {excerpt(method)}")
     t0 = time.perf_counter()
     stats = CogStats(method=method)
     red = _Reduced(prob)

@@ -212,9 +212,9 @@ def plan_gait_cycle(scenario: Scenario) -> GaitCyclePlan:
         def range_excess(t, sites, i=i):
             return _joint_range_excess(cfg, i, cog.position(t), rotation, t, hips_com[i], sites)
 
-        # The paper's robot is planned as the paper plans it (reach only); a URDF robot's swing knots are also
-        # tested against its joint ranges.
-        joint_test = None if cfg.description is None else range_excess
+        # Two-link legs (the paper's robot) are planned as the paper plans them (reach only); a chain model's swing
+        # knots are also tested against its joint ranges.
+        joint_test = range_excess if cfg.tests_joint_ranges else None
 
         swings[ph.swing_leg] = plan_swing(
             ph.swing_leg, foot_site_on(terrain, start[i], r), foot_site_on(terrain, target[i], r),

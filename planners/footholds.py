@@ -43,13 +43,12 @@ from planners.pitch import BodyPitch, planar_rotation, terrain_pitch
 from planners.robot_geometry import RobotGeometry, robot_geometry
 from planners.terrain_query import capsule_clearance, max_height_in_disk
 from planners.types import FootholdError, HeightMap
-from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import LEG_NAMES
 from quad_uneven_env.fields import check_fields, param
 from quad_uneven_env.robot.description import RobotDescription
 
 SHANK_RADIUS_SCALE = 0.7
-"""shank capsule radius / ``RobotConfig.link_radius`` (as built by :mod:`quad_uneven_env.robot.model`)."""
+"""shank capsule radius / ``RobotDescription.link_radius`` (as built by :mod:`quad_uneven_env.robot.model`)."""
 
 FOOTHOLD_TESTS: tuple[str, ...] = ("slope", "edge", "hole", "foot rest", "reach", "shank clearance")
 """The acceptance tests of a candidate foothold, in the order they are applied."""
@@ -182,7 +181,7 @@ def _terrain_terms(terrain, x, y, nominal_xy, foot_radius, lim):
 
 def shank_clearance(
     terrain: HeightMap,
-    cfg: RobotConfig | RobotDescription | RobotGeometry,
+    cfg: RobotDescription | RobotGeometry,
     leg: str,
     site: np.ndarray,
     hip: np.ndarray,
@@ -305,7 +304,7 @@ class _LegSearch:
 
 def choose_footholds(
     terrain: HeightMap,
-    cfg: RobotConfig | RobotDescription | RobotGeometry,
+    cfg: RobotDescription | RobotGeometry,
     feet_start: np.ndarray,
     cog_start: np.ndarray,
     goal_xy: np.ndarray,

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from quad_uneven_env.constants import LEG_NAMES
+from quad_uneven_env.fields import excerpt
 
 SWING_ORDER: tuple[str | None, ...] = (None, "RH", "RF", None, "LH", "LF", None)
 """Swing leg of each of the seven phases (None: four-leg support)."""
@@ -65,7 +66,7 @@ def validate_durations(durations: Sequence[float]) -> tuple[float, ...]:
     """Check 7 finite positive phase durations (s); raise ``ValueError`` naming the field."""
     d = np.asarray(durations, dtype=float)
     if d.shape != (N_PHASES,) or not np.all(np.isfinite(d)) or np.any(d <= 0.0):
-        raise ValueError(f"durations must be {N_PHASES} finite numbers > 0 (s), got {durations!r}")
+        raise ValueError(f"durations must be {N_PHASES} finite numbers > 0 (s), got {excerpt(durations)}")
     return tuple(float(x) for x in d)
 
 
@@ -77,7 +78,7 @@ def walk_cycle(
     :param order: a key of :data:`SWING_ORDERS` (``"right_first"``: the paper's RH, RF, LH, LF).
     """
     if order not in SWING_ORDERS:
-        raise ValueError(f"order must be one of {list(SWING_ORDERS)}, got {order!r}")
+        raise ValueError(f"order must be one of {list(SWING_ORDERS)}, got {excerpt(order)}")
     d = validate_durations(durations)
     ends = t0 + np.cumsum(d)
     starts = np.concatenate([[t0], ends[:-1]])

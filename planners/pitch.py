@@ -13,7 +13,8 @@ axis going from ``start`` to ``end``, and, for a body that turns, a yaw ``psi(t)
 going from ``yaw_start`` to ``yaw_end`` (``R_WB = Rz(psi) Ry(theta)``, zero roll), both with a quintic
 smoothstep (zero rate and acceleration at both ends, so consecutive cycles join with continuous rate
 and acceleration). Without yaw (``yaw_start = yaw_end = 0``, the default) it is the rotation about
-world y alone, computed exactly as before yaw existed. :func:`terrain_pitch` is the pitch of the
+world y alone, computed without the yaw factor (no product with an identity, so the numbers are those of the
+pitch alone). :func:`terrain_pitch` is the pitch of the
 least-squares plane through four footholds along a heading.
 """
 

@@ -22,7 +22,6 @@ from planners.robot_geometry import RobotGeometry, robot_geometry
 from planners.terrain_query import foot_site_on
 from planners.types import ReferenceGrid, ReferenceSample
 from planners.wholebody import WholeBody
-from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.constants import LEG_NAMES
 from quad_uneven_env.robot.description import RobotDescription
 from quad_uneven_env.spatial import quat_to_matrix
@@ -39,21 +38,19 @@ class Reference:
     """Whole-robot reference of a planned gait cycle; ``sample(t)`` for the controller.
 
     :param plan: the gait-cycle plan.
-    :param cfg: the robot (a ``RobotConfig``, ``RobotDescription`` or :class:`~planners.robot_geometry.RobotGeometry`;
+    :param cfg: the robot (a ``RobotDescription`` or :class:`~planners.robot_geometry.RobotGeometry`;
         default: the paper's Table 1); must be the robot the plan was made for.
     :param grid_dt: spacing (s) of the exact samples precomputed (vectorised) at construction;
         ``sample(t)`` at a grid time (the controller's 2 ms ticks from the cycle start) is a
         lookup, other times are computed exactly on the spot (Newton warm-started from the grid).
     """
 
-    def __init__(
-        self, plan, cfg: RobotConfig | RobotDescription | RobotGeometry | None = None, grid_dt: float = 0.002
-    ) -> None:
+    def __init__(self, plan, cfg: RobotDescription | RobotGeometry | None = None, grid_dt: float = 0.002) -> None:
         self.plan = plan
         self.geometry = robot_geometry(cfg)
         """the planners' view of the robot."""
-        self.cfg = self.geometry.config or self.geometry.description
-        """the robot: its Table-1 config (the paper's robot) or its description."""
+        self.cfg = self.geometry.description
+        """the robot's description."""
         self.wb = WholeBody(self.geometry)
         r = self.geometry.foot_radius
         self.sites_start = foot_site_on(plan.terrain, plan.feet_start, r)
@@ -236,7 +233,7 @@ def aim_feet_below_footholds(
     t: float,
     legs: np.ndarray,
     depth: float,
-    cfg: RobotConfig | RobotDescription | RobotGeometry,
+    cfg: RobotDescription | RobotGeometry,
 ) -> ReferenceSample:
     """``sample`` with the joints of ``legs`` (4 bools) aimed ``depth`` (m) below their current footholds.
 

@@ -1,15 +1,15 @@
 """The robot as the planners see it: :class:`RobotGeometry`, one view of any robot description.
 
 Every robot-specific number the planners use comes from here: the legs' hips, where their feet stand, how far
-they reach, the foot and shank radii, the whole-body mass, the leg inverse kinematics and the knee. Two
-builders fill it:
+they reach, the foot and shank radii, the whole-body mass, the leg inverse kinematics and the knee. One builder,
+:meth:`RobotGeometry.from_description`, reads them from the robot's description, in one of two leg models:
 
-- the paper's Table-1 robot (:meth:`RobotGeometry.from_config`): hips at the trunk corners, a two-link leg of
-  ``thigh.length`` and ``shank.length`` hanging from each (:mod:`quad_uneven_env.robot.kinematics`), exactly
-  the numbers the planners were written with;
-- any :class:`~quad_uneven_env.robot.description.RobotDescription` of a URDF robot
-  (:meth:`RobotGeometry.from_description`): the HAA-HFE-KFE chain of each leg with its offsets
-  (:mod:`quad_uneven_env.robot.leg_chain`).
+- two-link legs (the paper's Table-1 robot, the description's
+  :class:`~quad_uneven_env.robot.quadruped.TwoLinkLegs`): hips at the trunk corners, a leg of ``thigh`` and
+  ``shank`` hanging from each (:mod:`quad_uneven_env.robot.kinematics`), exactly the numbers the planners were
+  written with, planned as the paper plans them (reach only);
+- any other description (a URDF robot): the HAA-HFE-KFE chain of each leg with its offsets
+  (:mod:`quad_uneven_env.robot.leg_chain`), its swing knots also tested against its joint ranges.
 
 Three points per leg, all in the trunk frame (m), coincide for the paper's robot and differ for a robot with
 hip offsets:
@@ -22,8 +22,8 @@ hip offsets:
   normal to both axes (Go1, Solo12, ANYmal C; HyQ's 8 cm below its HAA axis makes it approximate);
 - ``feet_B``: the foot point in the standing pose (the nominal foothold lies under it).
 
-:func:`robot_geometry` builds (and caches) the view of a ``RobotConfig``, a ``RobotDescription`` or returns a
-``RobotGeometry`` as it is.
+:func:`robot_geometry` builds (and caches) the view of a ``RobotDescription`` or returns a ``RobotGeometry`` as
+it is.
 """
 
 from __future__ import annotations
@@ -34,10 +34,11 @@ from typing import Any
 import numpy as np
 
 from quad_uneven_env import constants as C
-from quad_uneven_env.config import RobotConfig, load_robot_config
-from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
-from quad_uneven_env.robot.description import PAPER_LEG_LENGTH, RobotDescription
-from quad_uneven_env.robot.kinematics import hip_positions_B, leg_fk_hip, leg_ik_hip, standing_joint_angles
+from quad_uneven_env.constants import LEG_NAMES
+from quad_uneven_env.fields import excerpt
+from quad_uneven_env.robot.description import RobotDescription, TwoLinkLegs, load_robot
+from quad_uneven_env.robot.kinematics import leg_fk_hip, leg_ik_hip
+from quad_uneven_env.robot.leg_chain import chain_constants, feet_positions_B, knee_position_B, leg_ik_B
 
 PAPER_MIN_REACH = 0.12
 """m: the paper robot's hip-to-foot-site distance below which a swing knot is too close to the hip (knee fully
@@ -191,36 +192,35 @@ class RobotGeometry:
     min_reach: float
     """m, shoulder-to-foot-site distance below which a swing knot is too close to the hip."""
     scale: float
-    """-, the description's leg length / :data:`~quad_uneven_env.robot.description.PAPER_LEG_LENGTH` (1 for the
-    paper's robot)."""
-    config: RobotConfig | None = None
-    """the Table-1 config (the paper's robot), else None."""
-    description: RobotDescription | None = None
-    """the description of a URDF robot, else None."""
+    """-, the description's leg length over the paper robot's
+    (:attr:`~quad_uneven_env.robot.quadruped.RobotDescription.length_ratio`: 1 for the paper's robot)."""
+    description: RobotDescription
+    """the robot's description."""
+    joint_ranges: np.ndarray
+    """(12, 2) rad, each joint's [low, high] in ``JOINT_NAMES`` order."""
+    two_link: TwoLinkLegs | None = None
+    """the legs in the paper's closed form (the Table-1 robot), else None."""
     chain: LegChainModel | None = None
-    """the legs' chain constants (a URDF robot), else None."""
-    joint_ranges: np.ndarray | None = None
-    """(12, 2) rad, each joint's [low, high] in ``JOINT_NAMES`` order (the robot's config or description)."""
+    """the legs' chain constants (any other robot), else None."""
 
-    @classmethod
-    def from_config(cls, cfg: RobotConfig) -> RobotGeometry:
-        """The paper's Table-1 robot: hips, shoulders and standing feet at the trunk corners."""
-        hips = hip_positions_B(cfg)
-        ranges = [r for leg in LEG_NAMES for r in (cfg.joint_range["HAA"], cfg.joint_range["HFE"], cfg.knee_range(leg))]
-        return cls(
-            name=cfg.name, mass=cfg.total_mass, hips_B=hips, shoulders_B=hips, feet_B=hips,
-            leg_length=cfg.leg_length, shank_length=cfg.shank.length, foot_radius=cfg.foot_radius,
-            link_radius=cfg.link_radius, min_reach=PAPER_MIN_REACH, scale=1.0, config=cfg,
-            joint_ranges=np.array(ranges, dtype=float),
-        )  # fmt: skip
+    @property
+    def tests_joint_ranges(self) -> bool:
+        """The swing knots are tested against the joint ranges (the chain model; two-link legs are planned as the
+        paper plans them, by reach alone)."""
+        return self.two_link is None
 
     @classmethod
     def from_description(cls, desc: RobotDescription) -> RobotGeometry:
-        """Any description (the paper's: as :meth:`from_config` of its config)."""
-        if desc.config is not None:
-            return cls.from_config(desc.config)
-        from quad_uneven_env.robot.leg_chain import chain_constants, feet_positions_B
-
+        """The planners' view of ``desc`` (two-link legs: hips, shoulders and standing feet at the trunk corners)."""
+        if desc.two_link is not None:
+            hips = desc.hip_positions_B
+            return cls(
+                name=desc.name, mass=desc.total_mass, hips_B=hips, shoulders_B=hips, feet_B=hips,
+                leg_length=desc.two_link.thigh + desc.two_link.shank, shank_length=desc.two_link.shank,
+                foot_radius=desc.foot_radius, link_radius=desc.link_radius,
+                min_reach=PAPER_MIN_REACH * desc.length_ratio, scale=desc.length_ratio, description=desc,
+                joint_ranges=desc.joint_ranges, two_link=desc.two_link,
+            )  # fmt: skip
         chains = chain_constants(desc)
         # The HFE origin's offset along the HAA axis and normal to both axes moves the centre; the lateral offset
         # (along the HFE axis) is a radius: a foot whose planar distance from the HFE axis is d lies
@@ -236,7 +236,7 @@ class RobotGeometry:
             lo, hi = desc.joint_ranges[3 * i + 2]
             q3 = float(np.clip(lo if c.branch * c.sigma > 0 else hi, -np.pi, np.pi))
             bent.append(float(np.hypot(abs(c.U1 + c.U2 * np.exp(-1j * c.sigma * q3)), c.lat)))
-        scale = desc.leg_length / PAPER_LEG_LENGTH
+        scale = desc.length_ratio
         return cls(
             name=desc.name, mass=desc.total_mass, hips_B=desc.hip_positions_B, shoulders_B=shoulders,
             feet_B=feet_positions_B(desc, desc.standing_joints), leg_length=leg_length,
@@ -249,62 +249,50 @@ class RobotGeometry:
     def ik(self, e: np.ndarray) -> np.ndarray:
         """Leg angles (..., 4, 3) (rad) placing the foot points at ``e`` (..., 4, 3) from the hips (trunk axes, m)."""
         e = np.asarray(e, dtype=float)
-        if self.description is None:
-            cfg = self.config
-            knee = np.array([KNEE_SIGN[leg] for leg in LEG_NAMES])
-            return leg_ik_hip(e, cfg.thigh.length, cfg.shank.length, knee)  # type: ignore[union-attr]
-        from quad_uneven_env.robot.leg_chain import leg_ik_B
-
+        if self.two_link is not None:
+            return leg_ik_hip(e, self.two_link.thigh, self.two_link.shank, self.two_link.knee_signs)
         return np.stack([leg_ik_B(self.description, i, self.hips_B[i] + e[..., i, :]) for i in range(C.N_LEGS)], -2)
 
     def leg_ik(self, i: int, e: np.ndarray) -> np.ndarray:
         """Angles (..., 3) (rad) of leg ``i`` placing its foot point at ``e`` (..., 3) from its hip (trunk axes, m)."""
-        if self.description is None:
-            cfg = self.config
-            return leg_ik_hip(e, cfg.thigh.length, cfg.shank.length, KNEE_SIGN[LEG_NAMES[i]])  # type: ignore[union-attr]
-        from quad_uneven_env.robot.leg_chain import leg_ik_B
-
+        if self.two_link is not None:
+            return leg_ik_hip(e, self.two_link.thigh, self.two_link.shank, C.KNEE_SIGN[LEG_NAMES[i]])
         return leg_ik_B(self.description, i, self.hips_B[i] + np.asarray(e, dtype=float))
 
     def knee(self, i: int, q: np.ndarray) -> np.ndarray:
         """Knee (..., 3) of leg ``i`` from its hip (trunk axes, m) for its angles ``q`` (..., 3)."""
-        if self.description is None:
-            return leg_fk_hip(q, self.config.thigh.length, 0.0)  # type: ignore[union-attr]
-        from quad_uneven_env.robot.leg_chain import knee_position_B
-
+        if self.two_link is not None:
+            return leg_fk_hip(q, self.two_link.thigh, 0.0)
         return knee_position_B(self.description.legs[i], q) - self.hips_B[i]
 
     def standing_legs(self, height: float) -> np.ndarray:
         """Leg angles (4, 3) (rad) with the feet under their standing points, ``height`` (m) below the shoulders
-        (the paper's robot: :func:`~quad_uneven_env.robot.kinematics.standing_joint_angles`)."""
-        if self.description is None:
-            return standing_joint_angles(self.config, height).reshape(4, 3)  # type: ignore[arg-type]
+        (two-link legs: :meth:`~quad_uneven_env.robot.quadruped.TwoLinkLegs.standing_joints`)."""
+        if self.two_link is not None:
+            return self.two_link.standing_joints(height).reshape(4, 3)
         feet = self.feet_B.copy()
         feet[:, 2] = self.shoulders_B[:, 2] - height
         return self.ik(feet - self.hips_B)
 
 
-def robot_geometry(robot: RobotConfig | RobotDescription | RobotGeometry | None = None) -> RobotGeometry:
-    """The planners' view of ``robot`` (None: the paper's robot), built once per config or description."""
+def robot_geometry(robot: RobotDescription | RobotGeometry | None = None) -> RobotGeometry:
+    """The planners' view of ``robot`` (None: the paper's robot), built once per description."""
     if isinstance(robot, RobotGeometry):
         return robot
     if robot is None:
-        robot = load_robot_config("paper")
-    if isinstance(robot, RobotDescription) and robot.config is not None:
-        robot = robot.config
-    if not isinstance(robot, RobotConfig | RobotDescription):
-        raise ValueError(f"robot must be a RobotConfig, a RobotDescription or a RobotGeometry, got {robot!r}")
+        robot = load_robot("paper")
+    if not isinstance(robot, RobotDescription):
+        raise ValueError(f"robot must be a RobotDescription or a RobotGeometry, got {excerpt(robot)}")
     hit = _CACHE.get(id(robot))
     if hit is None or hit[0] is not robot:
         if len(_CACHE) >= 64:
             _CACHE.clear()
-        build = RobotGeometry.from_config if isinstance(robot, RobotConfig) else RobotGeometry.from_description
-        hit = _CACHE[id(robot)] = (robot, build(robot))  # type: ignore[arg-type]
+        hit = _CACHE[id(robot)] = (robot, RobotGeometry.from_description(robot))
     return hit[1]
 
 
-_CACHE: dict[int, tuple[RobotConfig | RobotDescription, RobotGeometry]] = {}
-"""the geometry of each config or description seen (keyed by identity; both are immutable)."""
+_CACHE: dict[int, tuple[RobotDescription, RobotGeometry]] = {}
+"""the geometry of each description seen (keyed by identity; descriptions are immutable)."""
 
 
 __all__ = ["LegChainModel", "RobotGeometry", "robot_geometry"]

@@ -12,14 +12,14 @@ from planners.footholds import FootholdLimits
 from planners.gait import PAPER_DURATIONS, SWING_ORDERS, validate_durations
 from planners.robot_geometry import RobotGeometry, robot_geometry
 from planners.types import HeightMap
-from quad_uneven_env.config import RobotConfig, load_robot_config
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.robot.description import RobotDescription
 
 
 def _vec3(value: Any, field: str) -> np.ndarray:
     v = np.asarray(value, dtype=float)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ValueError(f"{field} must be 3 finite numbers, got {value!r}")
+        raise ValueError(f"{field} must be 3 finite numbers, got {excerpt(value)}")
     return v
 
 
@@ -28,10 +28,12 @@ def _boundary(value: Mapping[str, Any] | None, field: str) -> np.ndarray | None:
     if value is None:
         return None
     if not isinstance(value, Mapping) or "pos" not in value:
-        raise ValueError(f"{field} must be a dict with 'pos' (and optional 'vel', 'acc') 3-vectors, got {value!r}")
+        raise ValueError(
+            f"{field} must be a dict with 'pos' (and optional 'vel', 'acc') 3-vectors, got {excerpt(value)}"
+        )
     unknown = set(value) - {"pos", "vel", "acc"}
     if unknown:
-        raise ValueError(f"{field}: unknown key(s) {sorted(unknown)}; allowed: pos, vel, acc")
+        raise ValueError(f"{field}: unknown key(s) {excerpt(sorted(unknown, key=str))}; allowed: pos, vel, acc")
     return np.stack([_vec3(value.get(k, np.zeros(3)), f"{field}.{k}") for k in ("pos", "vel", "acc")])
 
 
@@ -84,8 +86,8 @@ class Scenario:
     """COG cost weights W (x, y, z) (1/m^2)."""
     smoothing: float = 1e-2
     """weight of the integrated squared COG acceleration (s^3/m^2)."""
-    robot: RobotConfig | RobotDescription | RobotGeometry | None = None
-    """the robot: Table-1 parameters, any robot description, or its planning view; None: the paper's Table 1
+    robot: RobotDescription | RobotGeometry | None = None
+    """the robot: its description or its planning view; None: the paper's Table-1 robot
     (configs/robot/paper.yaml)."""
     method: str = "sqp"
     """COG solver: 'sqp', 'slsqp' or 'slsqp-fd'."""
@@ -123,9 +125,9 @@ class Scenario:
         if not 0.0 < self.cog_height < 1.0:
             raise ValueError(f"cog_height must be in (0, 1) m, got {self.cog_height}")
         if self.swing_order not in SWING_ORDERS:
-            raise ValueError(f"swing_order must be one of {list(SWING_ORDERS)}, got {self.swing_order!r}")
+            raise ValueError(f"swing_order must be one of {list(SWING_ORDERS)}, got {excerpt(self.swing_order)}")
         if self.body_pitch not in BODY_PITCH_MODES:
-            raise ValueError(f"body_pitch must be one of {list(BODY_PITCH_MODES)}, got {self.body_pitch!r}")
+            raise ValueError(f"body_pitch must be one of {list(BODY_PITCH_MODES)}, got {excerpt(self.body_pitch)}")
         if not (np.isfinite(self.pitch_start) and abs(self.pitch_start) < 0.5 * np.pi):
             raise ValueError(f"pitch_start must be a finite angle in (-pi/2, pi/2) rad, got {self.pitch_start}")
         if not np.isfinite(self.yaw_start):
@@ -133,15 +135,12 @@ class Scenario:
         if not (np.isfinite(self.turn) and abs(self.turn) < 0.5 * np.pi):
             raise ValueError(f"turn must be a finite angle in (-pi/2, pi/2) rad, got {self.turn}")
         if self.foothold_limits is not None and not isinstance(self.foothold_limits, FootholdLimits):
-            raise ValueError(f"foothold_limits must be a FootholdLimits or None, got {self.foothold_limits!r}")
-
-    def robot_config(self) -> RobotConfig | RobotDescription | RobotGeometry:
-        """The robot (Table 1 unless given)."""
-        return self.robot or load_robot_config("paper")
+            raise ValueError(f"foothold_limits must be a FootholdLimits or None, got {excerpt(self.foothold_limits)}")
 
     def robot_geometry(self) -> RobotGeometry:
-        """The planners' view of the robot (:mod:`planners.robot_geometry`)."""
-        return robot_geometry(self.robot_config())
+        """The planners' view of the robot (:mod:`planners.robot_geometry`; the paper's Table-1 robot unless
+        given)."""
+        return robot_geometry(self.robot)
 
     def height_map(self) -> HeightMap:
         """The terrain as a height map (generated from the spec with ``terrain_seed``)."""

@@ -11,6 +11,7 @@ import numpy as np
 from scipy.linalg import solve_banded
 
 from planners.spline_kernels import hermite_into
+from quad_uneven_env.fields import excerpt
 
 
 class ClampedCubicSpline:
@@ -24,7 +25,7 @@ class ClampedCubicSpline:
         tau = np.asarray(tau, dtype=float)
         pts = np.asarray(points, dtype=float)
         if tau.ndim != 1 or tau.size < 2 or pts.shape[0] != tau.size or np.any(np.diff(tau) <= 0.0):
-            raise ValueError(f"tau must be N >= 2 increasing times matching points {pts.shape}, got {tau!r}")
+            raise ValueError(f"tau must be N >= 2 increasing times matching points {pts.shape}, got {excerpt(tau)}")
         self.tau = tau
         self.points = pts
         self.slopes = _clamped_slopes(tau, pts)

@@ -32,8 +32,6 @@ import numpy as np
 
 from planners.robot_geometry import RobotGeometry, robot_geometry
 from planners.wholebody_kernels import place_base_grid
-from quad_uneven_env.config import RobotConfig
-from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES
 from quad_uneven_env.robot.description import RobotDescription
 from quad_uneven_env.robot.kinematics import leg_ik_hip
 from quad_uneven_env.spatial import cross, inv3
@@ -87,13 +85,13 @@ def _solve3(A: np.ndarray, b: np.ndarray) -> np.ndarray:
 class WholeBody:
     """Mass distribution of a robot for COM placement (identity or a given base orientation).
 
-    :param robot: the robot (a ``RobotConfig``, a ``RobotDescription`` or a
-        :class:`~planners.robot_geometry.RobotGeometry`): the paper's two-link legs (Table 1) are computed by
-        :func:`leg_point` and the compiled kernel; a URDF robot's legs by their chain model
+    :param robot: the robot (a ``RobotDescription`` or a :class:`~planners.robot_geometry.RobotGeometry`): two-link
+        legs (the paper's Table 1) are computed by :func:`leg_point` and the compiled kernel; other legs by their
+        chain model
         (:class:`~planners.robot_geometry.LegChainModel`, numpy only).
     """
 
-    def __init__(self, robot: RobotConfig | RobotDescription | RobotGeometry) -> None:
+    def __init__(self, robot: RobotDescription | RobotGeometry) -> None:
         geom = robot_geometry(robot)
         self.geometry = geom
         """the planners' view of the robot."""
@@ -101,13 +99,14 @@ class WholeBody:
         self.hips = geom.hips_B  # (4, 3)
         self.chain = geom.chain
         if self.chain is None:
-            cfg = geom.config
-            self.cfg = cfg
-            t, s = cfg.thigh, cfg.shank
-            self.l1, self.l2 = t.length, s.length
-            self.moment_ab = (t.mass * t.com + s.mass * t.length, s.mass * s.com)
-            self.leg_mass = t.mass + s.mass
-            self.knee_sign = np.array([KNEE_SIGN[leg] for leg in LEG_NAMES])
+            legs = geom.two_link
+            self.l1, self.l2 = legs.thigh, legs.shank
+            self.moment_ab = (
+                legs.thigh_mass * legs.thigh_com + legs.shank_mass * legs.thigh,
+                legs.shank_mass * legs.shank_com,
+            )
+            self.leg_mass = legs.thigh_mass + legs.shank_mass
+            self.knee_sign = legs.knee_signs
             # Constant part of M (c - p_base): the leg masses placed at the hips.
             self._hip_moment = self.leg_mass * self.hips.sum(axis=0)
         else:

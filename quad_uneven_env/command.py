@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from quad_uneven_env.fields import check_fields, from_mapping, param, params_of
+from quad_uneven_env.fields import check_fields, excerpt, from_mapping, param, params_of
 from quad_uneven_env.spatial import wrap_angle
 
 COMMAND_AXES: tuple[str, ...] = ("vx", "vy", "yaw_rate")
@@ -94,7 +94,7 @@ class CommandConfig:
         check_fields(self)
         if not isinstance(self.ranges, CommandRanges):
             raise ValueError(
-                f"command.ranges must be a mapping with keys from {list(_RANGED_AXES)}, got {self.ranges!r}"
+                f"command.ranges must be a mapping with keys from {list(_RANGED_AXES)}, got {excerpt(self.ranges)}"
             )
         if self.heading is not None and self.ranges.heading is not None:
             raise ValueError(
@@ -123,7 +123,7 @@ class CommandConfig:
 
 
 def load_command(raw: Mapping[str, Any] | CommandConfig | None) -> CommandConfig | None:
-    """The env's ``command`` argument as a :class:`CommandConfig` (None: no command, today's task).
+    """The env's ``command`` argument as a :class:`CommandConfig` (None: no command).
 
     :raises ValueError: on a non-mapping, an unknown key, a bad value or an axis given both fixed and ranged,
         naming the field (``command.vx``, ``command.ranges.vy``, ...) and its allowed values.
@@ -132,11 +132,11 @@ def load_command(raw: Mapping[str, Any] | CommandConfig | None) -> CommandConfig
         return raw
     names = [f.name for f in dataclasses.fields(CommandConfig)]
     if not isinstance(raw, Mapping):
-        raise ValueError(f"command must be None or a mapping with keys from {sorted(names)}, got {raw!r}")
+        raise ValueError(f"command must be None or a mapping with keys from {sorted(names)}, got {excerpt(raw)}")
     values = dict(raw)
     ranges = values.pop("ranges", None)
     if ranges is not None and not isinstance(ranges, Mapping | CommandRanges):
-        raise ValueError(f"command.ranges must be a mapping with keys from {list(_RANGED_AXES)}, got {ranges!r}")
+        raise ValueError(f"command.ranges must be a mapping with keys from {list(_RANGED_AXES)}, got {excerpt(ranges)}")
     values["ranges"] = from_mapping(CommandRanges, ranges, "command.ranges")
     both = [a for a in _RANGED_AXES if a in raw and raw[a] is not None and getattr(values["ranges"], a) is not None]
     if both:
@@ -198,7 +198,7 @@ class CommandSchedule:
         if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(np.abs(v) > bounds):
             raise ValueError(
                 f"command must be 3 finite numbers (vx, vy in [-{MAX_LIN:g}, {MAX_LIN:g}] m/s, yaw_rate in "
-                f"[-{MAX_YAW_RATE:g}, {MAX_YAW_RATE:g}] rad/s), got {value!r}"
+                f"[-{MAX_YAW_RATE:g}, {MAX_YAW_RATE:g}] rad/s), got {excerpt(value)}"
             )
         self.value[:] = v
 

@@ -8,17 +8,14 @@ is named (``"paper"`` -> ``configs/robot/paper.yaml``) or given as a path.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import importlib.resources
 import os
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
-from quad_uneven_env.fields import Param, check_fields, param
+from quad_uneven_env.fields import check_fields, clip, excerpt, param
 
 
 def shipped_config_dir() -> Path:
@@ -37,175 +34,80 @@ CONFIG_DIR = shipped_config_dir()
 """Directory of the shipped YAML configs (:func:`shipped_config_dir`)."""
 
 
-@dataclasses.dataclass(frozen=True)
-class BodyParams:
-    """The trunk: a rigid box with its COM at the geometric centre."""
+MAX_YAML_BYTES = 16 * 2**20
+"""Largest YAML file :func:`read_yaml` reads (bytes): a config is a few kB; large arrays go in .npy files."""
 
-    mass: float
-    """kg"""
-    size: tuple[float, float, float]
-    """length, width, height (m), along body x, y, z."""
-    inertia: tuple[float, float, float]
-    """principal inertia about the COM (kg m^2) along body x, y, z."""
+MAX_YAML_DEPTH = 64
+"""Deepest nesting of sequences and mappings a YAML document may have (levels)."""
 
-
-@dataclasses.dataclass(frozen=True)
-class LinkParams:
-    """A leg link (thigh or shank), a rod hanging along -z of its joint frame at zero angles."""
-
-    length: float
-    """joint-to-joint (or joint-to-foot) length (m)."""
-    mass: float
-    """kg"""
-    com: float
-    """distance from the proximal joint to the COM along the link (m)."""
-    inertia: tuple[float, float, float]
-    """principal inertia about the COM (kg m^2): about the long axis first, then the two others."""
-
-
-@dataclasses.dataclass(frozen=True)
-class RobotConfig:
-    """Paper Table 1 plus the simulation details the paper leaves open."""
-
-    name: str
-    """config name."""
-    body: BodyParams
-    """trunk parameters."""
-    thigh: LinkParams
-    """upper leg (hip to knee)."""
-    shank: LinkParams
-    """lower leg (knee to foot point)."""
-    foot_radius: float
-    """collision sphere radius centred on the foot point (m)."""
-    link_radius: float
-    """collision capsule radius of the leg links (m); massless."""
-    joint_range: Mapping[str, tuple[float, float]]
-    """joint ranges (rad) keyed HAA, HFE, KFE_front, KFE_hind."""
-    torque_limit: Mapping[str, float]
-    """symmetric motor torque limits (N m) keyed HAA, HFE, KFE."""
-    joint_damping: float
-    """viscous joint damping (N m s / rad)."""
-    joint_armature: float
-    """rotor inertia reflected through the gearbox, added to each joint's diagonal of M (kg m^2)."""
-    friction: float
-    """Coulomb friction coefficient between feet and terrain."""
-
-    @property
-    def total_mass(self) -> float:
-        """Whole-robot mass (kg): trunk plus four legs."""
-        return self.body.mass + 4.0 * (self.thigh.mass + self.shank.mass)
-
-    @property
-    def leg_length(self) -> float:
-        """Thigh plus shank length (m): the stretched-leg reach."""
-        return self.thigh.length + self.shank.length
-
-    def knee_range(self, leg: str) -> tuple[float, float]:
-        """KFE range (rad) of ``leg`` (front and hind knees bend in opposite directions)."""
-        return tuple(self.joint_range["KFE_front" if leg[1] == "F" else "KFE_hind"])  # type: ignore[return-value]
-
-
-def _positive(value: Any, field: str) -> float:
-    return Param(field, None, "", "", lo=0.0, lo_open=True).check(value, "")
-
-
-def _non_negative(value: Any, field: str) -> float:
-    return Param(field, None, "", "", lo=0.0).check(value, "")
-
-
-def _triple(value: Any, field: str, allow_zero: bool = False) -> tuple[float, float, float]:
-    arr = np.asarray(value, dtype=float)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)) or np.any(arr < 0) or (not allow_zero and np.any(arr == 0)):
-        need = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{field} must be 3 finite numbers {need}, got {value!r}")
-    return tuple(float(x) for x in arr)  # type: ignore[return-value]
-
-
-JOINT_RANGE_KEYS = ("HAA", "HFE", "KFE_front", "KFE_hind")
-"""Joints of ``robot.joint_range`` (the knee's range differs between front and hind legs)."""
-
-TORQUE_LIMIT_KEYS = ("HAA", "HFE", "KFE")
-"""Joints of ``robot.torque_limit``."""
-
-
-def _range_pair(value: Any, field: str) -> tuple[float, float]:
-    """``[low, high]`` as two finite floats (the order is checked by the caller)."""
-    try:
-        lo, hi = (float(x) for x in value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{field} must be [low, high] (two numbers, rad), got {value!r}") from None
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        raise ValueError(f"{field} must be [low, high] (two finite numbers, rad), got {value!r}")
-    return lo, hi
-
-
-def _require(raw: Mapping[str, Any], keys: set[str], where: str) -> None:
-    if not isinstance(raw, Mapping):
-        raise ValueError(f"{where} must be a mapping with fields {sorted(keys)}, got {raw!r}")
-    missing = keys - set(raw)
-    unknown = set(raw) - keys
-    if missing:
-        raise ValueError(f"{where}: missing field(s) {sorted(missing)}")
-    if unknown:
-        raise ValueError(f"{where}: unknown field(s) {sorted(unknown)}; allowed: {sorted(keys)}")
-
-
-def _link(raw: Mapping[str, Any], where: str) -> LinkParams:
-    _require(raw, {"length", "mass", "com", "inertia"}, where)
-    length = _positive(raw["length"], f"{where}.length")
-    com = float(raw["com"])
-    if not 0.0 <= com <= length:
-        raise ValueError(f"{where}.com must lie in [0, {where}.length={length}], got {com}")
-    return LinkParams(
-        length, _positive(raw["mass"], f"{where}.mass"), com, _triple(raw["inertia"], f"{where}.inertia", True)
-    )
-
-
-def robot_config_from_dict(raw: Mapping[str, Any]) -> RobotConfig:
-    """Validate a raw mapping (as read from YAML) into a :class:`RobotConfig`.
-
-    :raises ValueError: naming the offending field and its allowed values.
-    """
-    keys = {f.name for f in dataclasses.fields(RobotConfig)}
-    _require(raw, keys, "robot")
-    body = raw["body"]
-    _require(body, {"mass", "size", "inertia"}, "robot.body")
-    _require(raw["joint_range"], set(JOINT_RANGE_KEYS), "robot.joint_range")
-    _require(raw["torque_limit"], set(TORQUE_LIMIT_KEYS), "robot.torque_limit")
-    ranges = {}
-    for k in JOINT_RANGE_KEYS:
-        lo, hi = _range_pair(raw["joint_range"][k], f"robot.joint_range.{k}")
-        if not lo < hi:
-            raise ValueError(f"robot.joint_range.{k} must be [low, high] with low < high, got {[lo, hi]}")
-        ranges[k] = (lo, hi)
-    if ranges["KFE_front"][1] >= 0.0 or ranges["KFE_hind"][0] <= 0.0:
-        raise ValueError("robot.joint_range: KFE_front must stay < 0 and KFE_hind > 0 (no stretched knee)")
-    limits = {k: _positive(raw["torque_limit"][k], f"robot.torque_limit.{k}") for k in TORQUE_LIMIT_KEYS}
-    return RobotConfig(
-        name=str(raw["name"]),
-        body=BodyParams(
-            _positive(body["mass"], "robot.body.mass"),
-            _triple(body["size"], "robot.body.size"),
-            _triple(body["inertia"], "robot.body.inertia"),
-        ),
-        thigh=_link(raw["thigh"], "robot.thigh"),
-        shank=_link(raw["shank"], "robot.shank"),
-        foot_radius=_positive(raw["foot_radius"], "robot.foot_radius"),
-        link_radius=_positive(raw["link_radius"], "robot.link_radius"),
-        joint_range=ranges,
-        torque_limit=limits,
-        joint_damping=_non_negative(raw["joint_damping"], "robot.joint_damping"),
-        joint_armature=_non_negative(raw["joint_armature"], "robot.joint_armature"),
-        friction=_positive(raw["friction"], "robot.friction"),
-    )
+MAX_ALIAS_VALUES = 10_000
+"""Most values the aliases (``*name``, ``<<: *name``) of one YAML document may repeat in all: each alias counts
+the values of its anchor, aliases inside it included, so a few hundred bytes of nested aliases cannot stand for
+billions of values."""
 
 
 class DuplicateKeyError(yaml.constructor.ConstructorError):
     """A mapping of a YAML file that gives one key twice (YAML says keys are unique; PyYAML keeps the last)."""
 
 
+class YamlLimitError(yaml.composer.ComposerError):
+    """A YAML document beyond this reader's bounds: nested too deep, an alias inside its own anchor, or aliases
+    repeating more than :data:`MAX_ALIAS_VALUES` values."""
+
+
+def _node_count(node: yaml.Node, counts: dict[int, int]) -> int:
+    """Values of the complete ``node`` with its aliases expanded (``counts`` memoises them by node id)."""
+    key = id(node)
+    if key not in counts:
+        if isinstance(node, yaml.SequenceNode):
+            counts[key] = 1 + sum(_node_count(child, counts) for child in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            counts[key] = 1 + sum(_node_count(k, counts) + _node_count(v, counts) for k, v in node.value)
+        else:
+            counts[key] = 1
+    return counts[key]
+
+
 class UniqueKeyLoader(yaml.SafeLoader):
-    """PyYAML's safe loader that refuses a mapping giving one key twice, naming the key and both lines."""
+    """PyYAML's safe loader that refuses a mapping giving one key twice, naming the key and both lines, and a
+    document nested deeper than :data:`MAX_YAML_DEPTH`, whose aliases repeat more than :data:`MAX_ALIAS_VALUES`
+    values, or with an alias inside its own anchor (a value containing itself)."""
+
+    def __init__(self, stream: Any) -> None:
+        super().__init__(stream)
+        self._depth = 0
+        self._open_anchors: set[str] = set()
+        self._counts: dict[int, int] = {}
+        self._repeated = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:
+        """The node at the parser's position, within the bounds above; :raises YamlLimitError: beyond them."""
+        event = self.peek_event()
+        if isinstance(event, yaml.AliasEvent):
+            if event.anchor in self._open_anchors:
+                problem = f"the alias *{clip(event.anchor, 40)} lies inside its own anchor (a value containing itself)"
+                raise YamlLimitError(None, None, problem, event.start_mark)
+            target = self.anchors.get(event.anchor)
+            if target is not None:  # else PyYAML's own error names the undefined alias
+                self._repeated += _node_count(target, self._counts)
+                if self._repeated > MAX_ALIAS_VALUES:
+                    problem = (
+                        f"its aliases repeat more than {MAX_ALIAS_VALUES} values (here *{clip(event.anchor, 40)}); "
+                        "write the values out"
+                    )
+                    raise YamlLimitError(None, None, problem, event.start_mark)
+            return super().compose_node(parent, index)
+        if self._depth >= MAX_YAML_DEPTH:
+            raise YamlLimitError(None, None, f"values nest deeper than {MAX_YAML_DEPTH} levels", event.start_mark)
+        anchor = getattr(event, "anchor", None)
+        if anchor is not None:
+            self._open_anchors.add(anchor)
+        self._depth += 1
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+            self._open_anchors.discard(anchor)
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
         """The mapping of ``node``; :raises DuplicateKeyError: on a key given twice (at its second line)."""
@@ -223,7 +125,7 @@ class UniqueKeyLoader(yaml.SafeLoader):
                     raise DuplicateKeyError(
                         "while constructing a mapping",
                         node.start_mark,
-                        f"duplicate key {key!r} (first given at line {first + 1})",
+                        f"duplicate key {excerpt(key)} (first given at line {first + 1})",
                         key_node.start_mark,
                     )
                 seen[key] = key_node.start_mark.line
@@ -231,9 +133,11 @@ class UniqueKeyLoader(yaml.SafeLoader):
 
 
 def load_yaml_text(text: str) -> Any:
-    """Parse YAML ``text`` safely (no Python objects), refusing duplicate keys (:class:`UniqueKeyLoader`).
+    """Parse YAML ``text`` safely (no Python objects), refusing duplicate keys and unbounded documents
+    (:class:`UniqueKeyLoader`).
 
-    :raises yaml.YAMLError: on invalid YAML or a duplicate key (its ``problem_mark`` gives the line).
+    :raises yaml.YAMLError: on invalid YAML, a duplicate key or a document beyond the reader's bounds
+        (:class:`YamlLimitError`); its ``problem_mark`` gives the line.
     """
     return yaml.load(text, Loader=UniqueKeyLoader)  # a SafeLoader subclass: no Python objects
 
@@ -241,22 +145,32 @@ def load_yaml_text(text: str) -> Any:
 def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read one YAML file into a dict (the only YAML reader of the project).
 
-    :raises ValueError: naming the file if it is missing, unreadable, not valid YAML, gives a key twice in one
-        mapping (the key and its line are named) or does not hold a mapping at the top level.
+    :raises ValueError: naming the file if it is missing, unreadable, larger than :data:`MAX_YAML_BYTES`, not
+        valid YAML, gives a key twice in one mapping (the key and its line are named), nests deeper than
+        :data:`MAX_YAML_DEPTH`, has aliases that repeat more than :data:`MAX_ALIAS_VALUES` values or refer to
+        a value containing them, or does not hold a mapping at the top level.
     """
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"config file {str(p)!r} does not exist")
     try:
-        with p.open() as f:
-            data = load_yaml_text(f.read())
+        with p.open("rb") as f:
+            raw = f.read(MAX_YAML_BYTES + 1)
+        if len(raw) > MAX_YAML_BYTES:
+            raise ValueError(
+                f"config file {str(p)!r} is larger than {MAX_YAML_BYTES // 2**20} MB (give large arrays as .npy files)"
+            )
+        data = load_yaml_text(raw.decode("utf-8"))
     except DuplicateKeyError as err:
         line = err.problem_mark.line + 1
         raise ValueError(f"config file {str(p)!r} gives a key twice at line {line}: {err.problem}") from None
+    except YamlLimitError as err:
+        line = err.problem_mark.line + 1
+        raise ValueError(f"config file {str(p)!r} is refused at line {line}: {err.problem}") from None
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(err, "problem", None) or type(err).__name__
+        problem = clip(getattr(err, "problem", None) or type(err).__name__)
         raise ValueError(f"config file {str(p)!r} is not valid YAML{where}: {problem}") from None
     except (OSError, UnicodeDecodeError) as err:
         raise ValueError(f"config file {str(p)!r} cannot be read: {err}") from None
@@ -275,16 +189,6 @@ def resolve_config_path(name_or_path: str | os.PathLike[str], group: str) -> Pat
         names = sorted(x.stem for x in (CONFIG_DIR / group).glob("*.yaml"))
         raise ValueError(f"unknown {group} config {str(name_or_path)!r}; shipped: {names} (or give a .yaml path)")
     return candidate
-
-
-def load_robot_config(name_or_path: str | os.PathLike[str] = "paper") -> RobotConfig:
-    """Load a robot config by name (``configs/robot/NAME.yaml``) or path (cached: planners ask often)."""
-    return _load_robot_config(str(name_or_path))
-
-
-@functools.lru_cache(maxsize=16)
-def _load_robot_config(name_or_path: str) -> RobotConfig:
-    return robot_config_from_dict(read_yaml(resolve_config_path(name_or_path, "robot")))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -306,7 +210,7 @@ class RewardWeights:
     fall: float = param(10.0)
     """penalty on the step that ends in a fall or divergence."""
     command_tracking_lin: float = param(0.0)
-    """per unit of exp(-|v_xy - v_cmd|^2 / command_sigma_lin^2) (needs a ``command``; 0: today's reward)."""
+    """per unit of exp(-|v_xy - v_cmd|^2 / command_sigma_lin^2) (needs a ``command``; 0: no tracking term)."""
     command_tracking_yaw: float = param(0.0)
     """per unit of exp(-(yaw_rate - yaw_rate_cmd)^2 / command_sigma_yaw^2) (needs a ``command``)."""
     command_sigma_lin: float = param(0.1, "m/s", lo=0.0, hi=10.0, lo_open=True)

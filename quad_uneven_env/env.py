@@ -7,7 +7,6 @@ import dataclasses
 import logging
 import math
 import os
-import reprlib
 import sys
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
@@ -22,10 +21,9 @@ from quad_uneven_env.command import CommandConfig, CommandSchedule, command_argu
 from quad_uneven_env.config import (
     HeightScanConfig,
     RewardWeights,
-    RobotConfig,
     TerminationLimits,
 )
-from quad_uneven_env.fields import Param, from_mapping
+from quad_uneven_env.fields import Param, excerpt, from_mapping
 from quad_uneven_env.measurement import StepMeasurement
 from quad_uneven_env.measurement_kernels import clip_finite_into
 from quad_uneven_env.observations import (
@@ -48,10 +46,7 @@ from quad_uneven_env.randomization import (
 )
 from quad_uneven_env.rewards import COMMAND_REWARD_TERMS, REWARD_TERMS, command_reward_terms, reward_terms
 from quad_uneven_env.robot.description import RobotDescription, load_robot
-from quad_uneven_env.robot.description_model import description_scene_mjcf, standing_feet_B
-from quad_uneven_env.robot.kinematics import hip_positions_B, leg_ik_hip
-from quad_uneven_env.robot.leg_chain import feet_ik_B
-from quad_uneven_env.robot.model import NOMINAL_HIP_HEIGHT, PhysicsOptions, scene_mjcf
+from quad_uneven_env.robot.model import PhysicsOptions, scene_mjcf
 from quad_uneven_env.spatial import yaw_of_quat
 from quad_uneven_env.termination import FallCheck
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec
@@ -61,6 +56,28 @@ RENDER_MODES = ("human", "rgb_array", "depth_array")
 
 MAX_EPISODE_STEPS = 10**9
 """Upper bound of ``episode_step_cap`` (control steps)."""
+
+PAPER_BASE_HEIGHT_LIMITS = (0.12, 1.0)
+"""m: the paper robot's fall rule: a base height below the first or above the second ends an episode (a third of
+its 0.36 m stand, and 2.78 times it)."""
+PAPER_PD_GAINS = (100.0, 3.0)
+"""(N m/rad, N m s/rad): the paper robot's ``joint_pd`` servo gains."""
+
+
+def default_base_height_limits(robot: RobotDescription) -> tuple[float, float]:
+    """m, the default ``termination.min_base_height`` and ``max_base_height`` on ``robot``: the paper robot's
+    :data:`PAPER_BASE_HEIGHT_LIMITS` in units of its standing height (a third of it, and 2.78 times it)."""
+    k = robot.height_ratio
+    return PAPER_BASE_HEIGHT_LIMITS[0] * k, PAPER_BASE_HEIGHT_LIMITS[1] * k
+
+
+def default_pd_gains(robot: RobotDescription) -> tuple[float, float]:
+    """(N m/rad, N m s/rad), the default ``joint_pd`` gains on ``robot``: the paper robot's :data:`PAPER_PD_GAINS`
+    scaled with its weight times leg length (stiffness) and with the same damping ratio at a natural frequency
+    ~ 1 / sqrt(leg length) (damping ~ mass x leg length^1.5)."""
+    m, s = robot.mass_ratio, robot.length_ratio
+    return PAPER_PD_GAINS[0] * m * s, PAPER_PD_GAINS[1] * m * s**1.5
+
 
 ENV_ARGS: tuple[Param, ...] = (
     Param("frame_skip", 10, "-", "physics steps per control step", kind="int", lo=1, hi=1000),
@@ -224,8 +241,8 @@ class QuadUnevenEnv(gym.Env):
     ``torque`` (mean squared torque fraction), ``energy`` (|tau qd| / m g), ``alive``, ``fall``; with a
     ``command`` also ``command_tracking_lin`` (exp(-|v_xy - v_cmd|^2 / sigma_lin^2)) and ``command_tracking_yaw``
     (exp(-(yaw_rate - yaw_rate_cmd)^2 / sigma_yaw^2)), of the trunk's velocity at the end of the step in the
-    yaw-aligned base frame against the command in effect during the step (weights 0 by default: the reward is
-    today's unless they are set; nonzero weights without a command are refused).
+    yaw-aligned base frame against the command in effect during the step (weights 0 by default: no tracking term
+    unless they are set; nonzero weights without a command are refused).
 
     **Command** (``command`` not None, see :mod:`quad_uneven_env.command` and docs/commands.md): a commanded
     planar base velocity (vx, vy in m/s, yaw rate in rad/s) in the yaw-aligned base frame, fixed or drawn at
@@ -236,7 +253,7 @@ class QuadUnevenEnv(gym.Env):
     already in that step's observation). In heading mode (``heading`` or ``ranges.heading``) the command names
     a world heading and its yaw rate is computed at every step from the measured one (legged_gym's
     ``heading_command``); the target is ``info["command_heading"]`` (rad). With ``command=None`` (the default)
-    the observation, reward and ``info`` are exactly those of an env without this feature. Fields:
+    the observation has no ``command`` field, the reward no tracking terms and ``info`` no command keys. Fields:
 
     COMMAND_TABLE
 
@@ -345,9 +362,7 @@ class QuadUnevenEnv(gym.Env):
             )
         self.robot: RobotDescription = load_robot(robot)
         """the robot's description (any robot: the paper's, a shipped URDF robot's or a user's YAML)."""
-        self.robot_cfg: RobotConfig | None = self.robot.config
-        """the paper robot's Table-1 config (None for a URDF robot)."""
-        kp0, kd0 = self.robot.joint_pd_gains
+        kp0, kd0 = default_pd_gains(self.robot)
         pd_kp = kp0 if pd_kp is None else pd_kp
         pd_kd = kd0 if pd_kd is None else pd_kd
         given = dict(
@@ -369,7 +384,7 @@ class QuadUnevenEnv(gym.Env):
         self.reward_weights: RewardWeights = from_mapping(RewardWeights, reward_weights, "reward_weights")
         if termination is None or isinstance(termination, Mapping):
             # the robot's base-height limits (the paper robot's: the TerminationLimits defaults, 0.12 and 1 m)
-            lo, hi = self.robot.base_height_limits
+            lo, hi = default_base_height_limits(self.robot)
             termination = {"min_base_height": lo, "max_base_height": hi, **(termination or {})}
         self.termination: TerminationLimits = from_mapping(TerminationLimits, termination, "termination")
         self.height_scan: HeightScanConfig = from_mapping(HeightScanConfig, height_scan, "height_scan")
@@ -389,7 +404,7 @@ class QuadUnevenEnv(gym.Env):
                 if getattr(self.reward_weights, name) != 0.0:
                     raise ValueError(
                         f"reward_weights.{name} must be 0 without a command (command=None), got "
-                        f"{getattr(self.reward_weights, name)!r}; pass command=... to make()"
+                        f"{excerpt(getattr(self.reward_weights, name))}; pass command=... to make()"
                     )
         self.frame_skip = int(frame_skip)
         self.gait_period = args["gait_period"]
@@ -400,20 +415,12 @@ class QuadUnevenEnv(gym.Env):
         self._controller = controller
         self._episode_steps = 0
 
-        if self.robot_cfg is not None:  # the paper's robot: its own MJCF generator (Table 1)
-            xml = scene_mjcf(
-                self.robot_cfg,
-                self.terrain.hfield_asset_xml(),
-                self.terrain.hfield_geom_xml(self.robot_cfg.friction),
-                PhysicsOptions(timestep=float(timestep)),
-            )
-        else:
-            xml = description_scene_mjcf(
-                self.robot,
-                self.terrain.hfield_asset_xml(),
-                self.terrain.hfield_geom_xml(self.robot.friction),
-                PhysicsOptions(timestep=float(timestep)),
-            )
+        xml = scene_mjcf(
+            self.robot,
+            self.terrain.hfield_asset_xml(),
+            self.terrain.hfield_geom_xml(self.robot.friction),
+            PhysicsOptions(timestep=float(timestep)),
+        )
         route_mujoco_warnings()
         self.model = mujoco.MjModel.from_xml_string(xml)
         # Divergence must end the episode visibly, not be hidden by MuJoCo's automatic reset.
@@ -429,11 +436,8 @@ class QuadUnevenEnv(gym.Env):
         self._gravity = self.model.opt.gravity.copy()
         self._g = float(-self._gravity[2])
         self._fall = FallCheck(self.termination)
-        # Where each foot stands at reset (trunk frame, x y): below its hip (the paper's robot), or where the
-        # standing pose puts it (a URDF robot).
-        self._feet_home_B = (
-            hip_positions_B(self.robot_cfg) if self.robot_cfg is not None else standing_feet_B(self.robot)
-        )
+        # Where each foot stands at reset (trunk frame): where the standing pose puts it.
+        self._feet_home_B = self.robot.standing_feet_B
         # Row 0 is the point under the base, the rest the height scan grid.
         self._scan_B = np.vstack([np.zeros((1, 2)), height_scan_points_B(self.height_scan)])
 
@@ -550,18 +554,18 @@ class QuadUnevenEnv(gym.Env):
         if not callable(controller):
             raise ValueError(
                 f"controller must be None or a callable (model, data, action) -> 12 torques (N m), "
-                f"got {reprlib.repr(controller)} of type {type(controller).__name__}"
+                f"got {excerpt(controller)} of type {type(controller).__name__}"
             )
         for hook in ("reset", "torques_into"):
             if hasattr(controller, hook) and not callable(getattr(controller, hook)):
                 raise ValueError(
                     f"controller.{hook} must be a method (see PhysicsController), got "
-                    f"{reprlib.repr(getattr(controller, hook))} of type {type(getattr(controller, hook)).__name__}"
+                    f"{excerpt(getattr(controller, hook))} of type {type(getattr(controller, hook)).__name__}"
                 )
         if self.action_mode != "torque":
             raise ValueError(
-                f"controller must be None with action_mode={self.action_mode!r}: a physics-rate controller returns "
-                "torques, which would drive the position servos as targets; use action_mode='torque'"
+                f"controller must be None with action_mode={excerpt(self.action_mode)}: a physics-rate controller "
+                "returns torques, which would drive the position servos as targets; use action_mode='torque'"
             )
 
     # ------------------------------------------------------------------ reset
@@ -573,7 +577,7 @@ class QuadUnevenEnv(gym.Env):
         if seed is not None and (
             isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer) or seed < 0
         ):
-            raise ValueError(f"seed must be None or an integer >= 0, got {seed!r} of type {type(seed).__name__}")
+            raise ValueError(f"seed must be None or an integer >= 0, got {excerpt(seed)} of type {type(seed).__name__}")
         super().reset(seed=None if seed is None else int(seed))
         if options:
             raise ValueError(f"reset options are not supported (got keys {sorted(options)}); pass terrain to make()")
@@ -620,28 +624,14 @@ class QuadUnevenEnv(gym.Env):
         return self._last_obs.copy(), info
 
     def _spawn_qpos(self) -> np.ndarray:
-        """Standing pose over the spawn point: each foot on the terrain below its hip."""
-        cfg = self.robot_cfg
+        """Standing pose over the spawn point: each foot on the terrain below its standing point."""
         x0, y0 = self.terrain.spawn_xy
         feet_xy = self._feet_home_B[:, :2] + np.array([x0, y0])
         ground = np.asarray(self.terrain.height(feet_xy[:, 0], feet_xy[:, 1]), dtype=float)
+        base_z, joints = self.robot.stand_on(ground)
         qpos = np.zeros(C.NQ)
-        qpos[3] = 1.0
-        if cfg is None:  # a URDF robot: the standing pose's feet, each moved to the terrain under it
-            r = self.robot.foot_radius
-            base_z = float(np.mean(ground - self._feet_home_B[:, 2])) + r
-            targets = self._feet_home_B.copy()
-            targets[:, 2] = ground + r - base_z
-            qpos[7:] = feet_ik_B(self.robot, targets)
-        else:
-            base_z = float(np.mean(ground)) + NOMINAL_HIP_HEIGHT + cfg.foot_radius
-            for i, leg in enumerate(C.LEG_NAMES):
-                target_H = np.array([0.0, 0.0, ground[i] + cfg.foot_radius - base_z])
-                qpos[7 + 3 * i : 10 + 3 * i] = leg_ik_hip(
-                    target_H, cfg.thigh.length, cfg.shank.length, C.KNEE_SIGN[leg]
-                )
-        qpos[:3] = (x0, y0, base_z)
-        qpos[7:] = np.clip(qpos[7:], self._joint_lo, self._joint_hi)
+        qpos[:4] = (x0, y0, base_z, 1.0)
+        qpos[7:] = np.clip(joints, self._joint_lo, self._joint_hi)
         return qpos
 
     # ------------------------------------------------------------------ step
@@ -1115,7 +1105,7 @@ def _describe(raw: Any) -> str:
     """A short description of a malformed controller return, for ``termination_reason``."""
     if isinstance(raw, np.ndarray):
         return f"an array of shape {raw.shape} and dtype {raw.dtype}"
-    return f"{reprlib.repr(raw)} of type {type(raw).__name__}"
+    return f"{excerpt(raw)} of type {type(raw).__name__}"
 
 
 if QuadUnevenEnv.__doc__:

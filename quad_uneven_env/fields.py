@@ -6,7 +6,9 @@ project is validated through it, so every bad value raises the same ``ValueError
 
 - terrain kinds list their parameters as ``Param`` objects (:mod:`quad_uneven_env.terrain.params`);
 - frozen config dataclasses declare fields with :func:`param` and call :func:`check_fields` in
-  ``__post_init__``; :func:`from_mapping` builds one from a user's mapping, rejecting unknown keys.
+  ``__post_init__``; :func:`from_mapping` builds one from a user's mapping, rejecting unknown keys;
+- :func:`excerpt` is how every error message of the project shows a value the user gave: a short, one-line
+  excerpt, whatever the value's size.
 """
 
 from __future__ import annotations
@@ -14,6 +16,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import re
+import reprlib
 from collections.abc import Mapping
 from typing import Any, TypeVar
 
@@ -21,6 +25,40 @@ import numpy as np
 
 REQUIRED = object()
 """Sentinel default of a parameter the user must give."""
+
+EXCERPT_CHARS = 120
+"""Longest text :func:`excerpt` returns (characters)."""
+
+_EXCERPT = reprlib.Repr()
+_EXCERPT.maxlevel = 3
+_EXCERPT.maxlist = _EXCERPT.maxtuple = _EXCERPT.maxset = _EXCERPT.maxfrozenset = _EXCERPT.maxdict = 6
+_EXCERPT.maxdeque = _EXCERPT.maxarray = 6
+_EXCERPT.maxstring = _EXCERPT.maxother = 80
+_EXCERPT.maxlong = 40
+
+
+def excerpt(value: Any, limit: int = EXCERPT_CHARS) -> str:
+    """The repr of ``value`` cut to at most ``limit`` characters on one line, for an error message.
+
+    Containers show their first items and nest at most 3 deep (:mod:`reprlib`), so the cost is bounded too:
+    a value a user file or argument gives (a list of 10^9 items, a 1 MB string) is never repr'd in full.
+    Short values read as ``repr`` gives them (``0.5``, ``'abc'``, ``[1, 2]``).
+    """
+    if isinstance(value, np.ndarray) and value.size > _EXCERPT.maxlist:  # numpy's summary: first and last items
+        with np.printoptions(threshold=_EXCERPT.maxlist, edgeitems=2):
+            text = repr(value)
+    elif isinstance(value, np.ndarray):
+        text = _EXCERPT.repr(value.tolist())
+    else:
+        text = _EXCERPT.repr(value)
+    return clip(text, limit)
+
+
+def clip(text: str, limit: int = EXCERPT_CHARS) -> str:
+    """``text`` on one line (line breaks and the blanks around them become one space), cut to at most ``limit``
+    characters (the cut marked by ``...``): a message of a library that may quote the user's input."""
+    text = re.sub(r"\s*\n\s*", " ", text[: 4 * limit])
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,11 +127,13 @@ class Param:
             return None
         if self.kind == "bool":
             if not isinstance(value, bool | np.bool_):
-                raise ValueError(f"{field} must be {self.allowed()}, got {value!r} of type {type(value).__name__}")
+                raise ValueError(
+                    f"{field} must be {self.allowed()}, got {excerpt(value)} of type {type(value).__name__}"
+                )
             return bool(value)
         if self.kind == "choice":
             if not isinstance(value, str) or value not in self.choices:
-                raise ValueError(f"{field} must be {self.allowed()}, got {value!r}")
+                raise ValueError(f"{field} must be {self.allowed()}, got {excerpt(value)}")
             return value
         if self.kind == "xy":
             if value is None:
@@ -103,27 +143,29 @@ class Param:
             except (TypeError, ValueError):
                 pair = ()
             if len(pair) != 2 or not all(math.isfinite(v) for v in pair):
-                raise ValueError(f"{field} must be {self.allowed()} (m), got {value!r}")
+                raise ValueError(f"{field} must be {self.allowed()} (m), got {excerpt(value)}")
             return pair
         if self.kind == "range":
             return self._check_range(value, field)
         if self.kind == "array":
             return value
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
-            raise ValueError(f"{field} must be {self._a()}{self._unit()}, got {value!r} of type {type(value).__name__}")
+            raise ValueError(
+                f"{field} must be {self._a()}{self._unit()}, got {excerpt(value)} of type {type(value).__name__}"
+            )
         v = float(value)
         if self.kind == "int":
             if not math.isfinite(v) or v != int(v):
-                raise ValueError(f"{field} must be an {self.allowed()}, got {value!r}")
+                raise ValueError(f"{field} must be an {self.allowed()}, got {excerpt(value)}")
             v = int(v)
         if not math.isfinite(v) or not self._in_range(v):
-            raise ValueError(f"{field} must be {self._a()}{self._unit()}, got {value!r}")
+            raise ValueError(f"{field} must be {self._a()}{self._unit()}, got {excerpt(value)}")
         return v
 
     def _check_range(self, value: Any, field: str) -> tuple[float, float] | None:
         if value is None:
             return None
-        bad = ValueError(f"{field} must be {self.allowed()}{self._unit()}, got {value!r}")
+        bad = ValueError(f"{field} must be {self.allowed()}{self._unit()}, got {excerpt(value)}")
         if isinstance(value, str | bytes | Mapping) or not hasattr(value, "__len__") or len(value) != 2:
             raise bad
         if any(isinstance(v, bool) or not isinstance(v, numbers.Real) for v in value):
@@ -190,13 +232,48 @@ def from_mapping(cls: type[T], raw: Mapping[str, Any] | T | None, where: str) ->
         return raw
     names = [f.name for f in dataclasses.fields(cls)]  # type: ignore[arg-type]
     if not isinstance(raw, Mapping):
-        raise ValueError(f"{where} must be a mapping with keys from {sorted(names)}, got {raw!r}")
-    unknown = sorted(set(raw) - set(names))
+        raise ValueError(f"{where} must be a mapping with keys from {sorted(names)}, got {excerpt(raw)}")
+    unknown = sorted((k for k in raw if k not in names), key=str)
     if unknown:
-        raise ValueError(f"{where}: unknown field(s) {unknown}; allowed: {sorted(names)}")
+        raise ValueError(f"{where}: unknown field(s) {excerpt(unknown)}; allowed: {sorted(names)}")
     checks = {p.name: p for p in params_of(cls)}
     values = {k: checks[k].check(v, where) if k in checks else v for k, v in raw.items()}
     try:
         return cls(**values)
     except ValueError as err:  # cross-field checks of __post_init__ name the class: name ``where`` instead
         raise ValueError(str(err).replace(f"{cls.__name__}.", f"{where}.", 1)) from None
+
+
+def check_mapping(raw: Any, params: tuple[Param, ...], where: str) -> dict[str, Any]:
+    """``raw`` (a user's mapping) checked against ``params``: no unknown key, every ``REQUIRED`` one given, each
+    value checked by its :class:`Param`, the defaults of the others filled in.
+
+    :raises ValueError: ``where must be a mapping ...``, ``where: unknown field(s) ...``, ``where.field is
+        required (<allowed>)`` or the field's own message.
+    """
+    allowed = {p.name: p for p in params}
+    if not isinstance(raw, Mapping):
+        raise ValueError(f"{where} must be a mapping with keys from {sorted(allowed)}, got {excerpt(raw)}")
+    unknown = sorted((k for k in raw if k not in allowed), key=str)
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {excerpt(unknown)}; allowed: {sorted(allowed)}")
+    out: dict[str, Any] = {}
+    for name, p in allowed.items():
+        if name in raw:
+            out[name] = p.check(raw[name], where)
+        elif p.default is REQUIRED:
+            raise ValueError(f"{where}.{name} is required ({p.allowed()})")
+        else:
+            out[name] = p.default
+    return out
+
+
+def check_vector(value: Any, p: Param, where: str, n: int = 3) -> tuple[float, ...]:
+    """``n`` numbers, each checked by ``p`` (as ``where.name[i]``).
+
+    :raises ValueError: ``where.name must be n numbers ...`` or the element's own message.
+    """
+    field = f"{where}.{p.name}" if where else p.name
+    if isinstance(value, str | bytes | Mapping) or not hasattr(value, "__len__") or len(value) != n:
+        raise ValueError(f"{field} must be {n} numbers, each {p._a()}{p._unit()}, got {excerpt(value)}")
+    return tuple(dataclasses.replace(p, name=f"{p.name}[{i}]").check(v, where) for i, v in enumerate(value))

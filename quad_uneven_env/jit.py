@@ -11,21 +11,31 @@ the source file of the function it loads, so a kernel that calls a kernel of ano
 keep a stale copy of its callee after an upgrade or an edit. A folder that cannot be created or written
 disables the cache (kernels are then compiled in every process, as without it). ``NUMBA_CACHE_DIR``, numba's
 own setting, is left to numba for other code: only this package's kernels use the folder above.
+
+A cache entry that cannot be read (a truncated or garbage ``.nbi`` index or ``.nbc`` data file: a full disk, a
+killed copy, a user's edit) is a cache miss, never a failed process: :class:`HealingFunctionCache` sets the
+kernel folder that holds it aside (renamed ``NAME.unreadable-PID-N``, for a look; delete it at will), compiles
+the kernel again into a fresh folder and warns once per process (:class:`KernelCacheWarning`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
+import itertools
 import os
 import tempfile
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numba as nb
+import numba.core.dispatcher as _numba_dispatcher
 from numba.core import config as _numba_config
-from numba.core.caching import UserProvidedCacheLocator
+from numba.core.caching import FunctionCache, UserProvidedCacheLocator
+
+from quad_uneven_env.fields import clip
 
 _PACKAGES = ("quad_uneven_env", "planners", "agents")
 _ROOT = Path(__file__).resolve().parent.parent
@@ -90,17 +100,73 @@ class PackageCacheLocator(UserProvidedCacheLocator):
             return super().get_suitable_cache_subpath(py_file)
 
 
+class KernelCacheWarning(UserWarning):
+    """An entry of the kernel cache could not be read (or written): its folder was set aside, the kernels compiled
+    again."""
+
+
+_set_aside_count = itertools.count()
+_warned = False
+
+
+def _set_aside(folder: Path, action: str, err: Exception) -> None:
+    """Rename the kernel cache ``folder`` (one package's kernels) ``NAME.unreadable-PID-N`` after ``err`` while
+    ``action`` (a loaded kernel stays loaded; the others are compiled again and cached in a fresh folder), and warn
+    once per process. Another process may have moved it first: then nothing is renamed."""
+    global _warned
+    target = folder.with_name(f"{folder.name}.unreadable-{os.getpid()}-{next(_set_aside_count)}")
+    try:
+        folder.rename(target)
+        where = f"set aside as {target}"
+    except OSError:  # gone already (another process set it aside) or not renamable: the compiled kernel is not cached
+        where = "left in place"
+    if not _warned:
+        _warned = True
+        message = (
+            f"quad-uneven: the compiled-kernel cache {folder} failed while {action} ({type(err).__name__}: "
+            f"{clip(str(err))}); it was {where} and its kernels are compiled again"
+        )
+        warnings.warn(message, KernelCacheWarning, stacklevel=2)
+
+
+class HealingFunctionCache(FunctionCache):
+    """numba's on-disk cache of one kernel, which takes an entry it cannot read for a cache miss.
+
+    numba unpickles its index (``.nbi``) and data (``.nbc``) files and rebuilds the machine code from them; a
+    truncated or garbage file raises whatever the unpickler or the rebuild raises (``UnpicklingError``,
+    ``EOFError``, ``MemoryError``, ...) at import or at a kernel's first call. Here any such error sets the kernel's
+    folder aside (:func:`_set_aside`) and the kernel is compiled instead; a write that fails is skipped the same way.
+    """
+
+    def load_overload(self, sig: Any, target_context: Any) -> Any:
+        """The cached compile result of ``sig``, or None (compile it) if there is none or it cannot be read."""
+        try:
+            return super().load_overload(sig, target_context)
+        except Exception as err:  # a damaged cache file can raise any error while it is unpickled and rebuilt
+            _set_aside(Path(self.cache_path), "loading a kernel", err)
+            return None
+
+    def save_overload(self, sig: Any, data: Any) -> None:
+        """Cache the compile result ``data`` of ``sig``; a folder that cannot take it is set aside instead."""
+        try:
+            super().save_overload(sig, data)
+        except Exception as err:  # a damaged index read back before the write, a full disk
+            _set_aside(Path(self.cache_path), "saving a kernel", err)
+
+
 @contextlib.contextmanager
 def _numba_cache_dir(folder: Path) -> Iterator[None]:
-    """numba reads its cache settings when a function is decorated: point them at ``folder`` and
-    :class:`PackageCacheLocator` for that moment only."""
-    saved = _numba_config.CACHE_DIR, _numba_config.CACHE_LOCATOR_CLASSES
+    """numba reads its cache settings when a function is decorated: point them at ``folder``,
+    :class:`PackageCacheLocator` and :class:`HealingFunctionCache` (the cache class ``Dispatcher.enable_caching``
+    makes) for that moment only."""
+    saved = _numba_config.CACHE_DIR, _numba_config.CACHE_LOCATOR_CLASSES, _numba_dispatcher.FunctionCache
     _numba_config.CACHE_DIR = str(folder)
     _numba_config.CACHE_LOCATOR_CLASSES = f"{__name__}.{PackageCacheLocator.__name__}"
+    _numba_dispatcher.FunctionCache = HealingFunctionCache
     try:
         yield
     finally:
-        _numba_config.CACHE_DIR, _numba_config.CACHE_LOCATOR_CLASSES = saved
+        _numba_config.CACHE_DIR, _numba_config.CACHE_LOCATOR_CLASSES, _numba_dispatcher.FunctionCache = saved
 
 
 def njit(*signature: Any, **options: Any) -> Callable[[Callable[..., Any]], Any]:
@@ -123,4 +189,13 @@ def njit(*signature: Any, **options: Any) -> Callable[[Callable[..., Any]], Any]
     return decorate
 
 
-__all__ = ["CACHE_DIR", "PackageCacheLocator", "cache_root", "kernel_fingerprint", "kernel_sources", "njit"]
+__all__ = [
+    "CACHE_DIR",
+    "HealingFunctionCache",
+    "KernelCacheWarning",
+    "PackageCacheLocator",
+    "cache_root",
+    "kernel_fingerprint",
+    "kernel_sources",
+    "njit",
+]

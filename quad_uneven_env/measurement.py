@@ -22,7 +22,7 @@ import numpy as np
 
 from quad_uneven_env import constants as C
 from quad_uneven_env.compiled_call import argument_type, entry_point
-from quad_uneven_env.measurement_kernels import measure_observe_into
+from quad_uneven_env.measurement_kernels import MEASURED_VIEWS, measure_observe_into
 from quad_uneven_env.observations import ObsField, observation_structure
 from quad_uneven_env.physics import ContactMeasurement, RobotIndex
 from quad_uneven_env.terrain.heightfield import HeightField
@@ -129,22 +129,24 @@ class StepMeasurement:
         self._scalars = np.zeros(5)
         self.obs = np.zeros(self._obs_low.shape[0])
         """float64 observation, clipped to its bounds."""
+        self._layout = (self._scan_B, self._obs_start, self._obs_low, self._obs_high)
+        self._out = (
+            self.foot_forces, self.foot_contact, self.foot_points, self.total_force, self.cog, self.cog_vel,
+            self.cog_acc, self.feet_pos, self._moments, self.R, self.base, self.heights, self._scalars, self.obs,
+        )  # fmt: skip  # in the kernel's order (measurement_kernels.OUTPUTS)
         self._call: tuple | None = None
         # (the kernel's compiled entry point, the height field, action and gravity arrays it was resolved with, the
-        # height field's numba type): every other array argument is a buffer of this object; a new terrain's heights
-        # of the same type keep the entry point (see quad_uneven_env.compiled_call)
-
-    _DATA_VIEWS = ("_sensordata", "_site_xpos", "_subtree_com", "_subtree_linvel", "_qpos", "_qvel")
-    """The views of ``data``'s buffers the kernel reads (bound once: MuJoCo never reallocates them)."""
+        # terrain tuple's numba type): every other array argument is a buffer of this object; a new terrain's
+        # heights of the same type keep the entry point (see quad_uneven_env.compiled_call)
 
     def _bind(self, data: mujoco.MjData) -> None:
-        for name in self._DATA_VIEWS:
-            setattr(self, name, getattr(data, name[1:]))
+        """The views of ``data``'s buffers the kernel reads (bound once: MuJoCo never reallocates them)."""
+        self._views = tuple(getattr(data, name) for name in MEASURED_VIEWS)
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickled and copied without its views of ``data`` (a copy gets views of its own copy of ``data``) and
         without the kernel's entry point (bound to this process; resolved again at the first call)."""
-        state = {k: v for k, v in self.__dict__.items() if k not in self._DATA_VIEWS}
+        state = {k: v for k, v in self.__dict__.items() if k != "_views"}
         state["_call"] = None
         return state
 
@@ -214,60 +216,32 @@ class StepMeasurement:
             when the layout has them: the trunk's yaw ``atan2(R[1, 0], R[0, 0])`` from world +x and its origin's
             y minus ``course_y``).
         """
-        flat, nrow, ncol, ox, oy, inv_cell = heightfield.kernel_args
+        terrain = heightfield.kernel_args
+        flat = terrain[0]
         call = self._call
         kernel = None
         if call is not None and call[2] is prev_action and call[3] is self.gravity:
             if call[1] is flat:
                 kernel = call[0]
-            elif argument_type(measure_observe_into, flat) == call[4]:  # a new terrain (every reset), same type
+            elif argument_type(measure_observe_into, terrain) == call[4]:  # a new terrain (every reset), same type
                 kernel = call[0]
                 self._call = (kernel, flat, prev_action, self.gravity, call[4])
         args = (
-            self._sensordata,
-            self._site_xpos,
-            self._subtree_com,
-            self._subtree_linvel,
-            self._qpos,
-            self._qvel,
-            self._ints,
-            self.foot_radius,
-            self.mass,
-            self.gravity,
-            flat,
-            nrow,
-            ncol,
-            ox,
-            oy,
-            inv_cell,
-            self._scan_B,
+            self._views,
+            (self._ints, self.foot_radius, self.mass, self.gravity),
+            terrain,
+            self._layout,
             prev_action,
             2.0 * math.pi * self._data.time / gait_period,
-            self._obs_start,
-            self._obs_low,
-            self._obs_high,
-            self.foot_forces,
-            self.foot_contact,
-            self.foot_points,
-            self.total_force,
-            self.cog,
-            self.cog_vel,
-            self.cog_acc,
-            self.feet_pos,
-            self._moments,
-            self.R,
-            self.base,
-            self.heights,
-            self._scalars,
-            self.obs,
+            self._out,
         )
         if kernel is not None:
             kernel(*args)
         else:
             measure_observe_into(*args)
             entry = entry_point(measure_observe_into, args)
-            flat_type = argument_type(measure_observe_into, flat)
-            self._call = None if entry is None else (entry, flat, prev_action, self.gravity, flat_type)
+            terrain_type = argument_type(measure_observe_into, terrain)
+            self._call = None if entry is None else (entry, flat, prev_action, self.gravity, terrain_type)
         sl = self._command
         if sl is not None:
             np.clip(command, self._obs_low[sl], self._obs_high[sl], out=self.obs[sl])

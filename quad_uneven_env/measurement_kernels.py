@@ -21,45 +21,36 @@ from quad_uneven_env.terrain.heightfield_kernels import heights_into
 _MIN_FOOT_FORCE_SQ = MIN_FOOT_FORCE * MIN_FOOT_FORCE
 
 
+MEASURED_VIEWS = ("sensordata", "site_xpos", "subtree_com", "subtree_linvel", "qpos", "qvel")
+"""The ``MjData`` arrays :func:`measure_observe_into` reads, in the order of its ``sim`` tuple."""
+OUTPUTS = (
+    "foot_forces", "foot_contact", "foot_points", "total_force", "cog", "cog_vel", "cog_acc", "feet_pos", "moments",
+    "R", "base", "heights", "scalars", "obs",
+)  # fmt: skip
+"""The buffers :func:`measure_observe_into` writes, in the order of its ``out`` tuple."""
+
+
 @njit(nogil=True)
-def measure_observe_into(  # pragma: no cover - compiled
-    sd,
-    site_xpos,
-    subtree_com,
-    subtree_linvel,
-    qpos,
-    qvel,
-    ints,
-    foot_radius,
-    mass,
-    gravity,
-    hf_flat,
-    nrow,
-    ncol,
-    ox,
-    oy,
-    inv_cell,
-    scan_B,
-    prev_action,
-    clock_phase,
-    obs_start,
-    obs_low,
-    obs_high,
-    foot_forces,
-    foot_contact,
-    foot_points,
-    total_force,
-    cog,
-    cog_vel,
-    cog_acc,
-    feet_pos,
-    moments,
-    R,
-    base,
-    heights,
-    scalars,
-    obs,
-):
+def measure_observe_into(sim, robot, terrain, layout, prev_action, clock_phase, out):  # pragma: no cover - compiled
+    """Measure one state and write the observation.
+
+    :param sim: the ``MjData`` arrays of :data:`MEASURED_VIEWS`.
+    :param robot: ``(ints, foot_radius, mass, gravity)``: the trunk body, the robot's and the trunk's contact sensor
+        addresses, the four feet's sensor addresses and the four foot sites (int64); m; kg; (3,) m/s^2.
+    :param terrain: the height field's kernel arguments (``HeightField.kernel_args``).
+    :param layout: ``(scan_B, obs_start, obs_low, obs_high)``: the (k, 2) m scan points in the yaw-aligned base
+        frame, the start of each field of ``OBS_ORDER`` in the observation, its bounds.
+    :param prev_action: (12,) the previous clipped action.
+    :param clock_phase: rad, the gait clock's phase.
+    :param out: the buffers of :data:`OUTPUTS` (``scalars``: index, feet in contact, ground height, trunk contact,
+        other contact).
+    """
+    sd, site_xpos, subtree_com, subtree_linvel, qpos, qvel = sim
+    ints, foot_radius, mass, gravity = robot
+    hf_flat, nrow, ncol, ox, oy, inv_cell = terrain
+    scan_B, obs_start, obs_low, obs_high = layout
+    (foot_forces, foot_contact, foot_points, total_force, cog, cog_vel, cog_acc, feet_pos, moments, R, base, heights,
+     scalars, obs) = out  # fmt: skip
     trunk, robot_adr, trunk_adr = ints[0], ints[1], ints[2]
     # Contacts: sensors report the force the robot exerts on the terrain; the terrain's is its negative.
     # A foot's point is the sensor's force-weighted contact point, or the foot's lowest point when it

@@ -33,9 +33,9 @@ import numpy as np
 
 from quad_uneven_env import constants as C
 from quad_uneven_env.config import read_yaml, resolve_config_path
-from quad_uneven_env.fields import check_fields, from_mapping, param, params_of
+from quad_uneven_env.fields import check_fields, excerpt, from_mapping, param, params_of
 from quad_uneven_env.physics import RobotIndex
-from quad_uneven_env.robot.description import PAPER_LEG_LENGTH, PAPER_MASS, RobotDescription
+from quad_uneven_env.robot.description import RobotDescription
 
 ROBOT_BODIES: tuple[str, ...] = (
     C.TRUNK_BODY,
@@ -277,18 +277,17 @@ def load_randomization(
     elif isinstance(spec, Mapping):
         raw = spec
     else:
-        raise ValueError(f"{where} must be None, a preset name, a YAML path or a mapping, got {spec!r}")
+        raise ValueError(f"{where} must be None, a preset name, a YAML path or a mapping, got {excerpt(spec)}")
     return from_mapping(RandomizationConfig, raw, where)
 
 
 def randomization_for_robot(cfg: RandomizationConfig | None, robot: RobotDescription) -> RandomizationConfig | None:
     """``cfg`` in SI units for ``robot``: :meth:`RandomizationConfig.for_robot` with its mass and leg length over the
-    paper robot's (:data:`PAPER_MASS`, :data:`PAPER_LEG_LENGTH`); the paper's robot takes the ranges as written."""
+    paper robot's (:attr:`RobotDescription.mass_ratio`, :attr:`RobotDescription.length_ratio`); the paper's robot
+    (both ratios 1) takes the ranges as written."""
     if cfg is None:
         return None
-    if robot.config is not None:
-        return dataclasses.replace(cfg, scale="none")
-    return cfg.for_robot(robot.total_mass / PAPER_MASS, robot.leg_length / PAPER_LEG_LENGTH)
+    return cfg.for_robot(robot.mass_ratio, robot.length_ratio)
 
 
 def config_table() -> str:

@@ -14,7 +14,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from quad_uneven_env.fields import Param
+from quad_uneven_env.fields import Param, excerpt
 
 VECTORIZATION = Param("vectorization", "async", "-", "how the copies run", kind="choice", choices=("async", "sync"))
 """``"async"``: one subprocess per copy (the physics is the cost; default), ``"sync"``: in this process."""
@@ -32,7 +32,7 @@ def make_vector_env(
     :raises ValueError: on a bad ``num_envs`` or ``vectorization``.
     """
     if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
-        raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        raise ValueError(f"num_envs must be an integer >= 1, got {excerpt(num_envs)}")
     mode = VECTORIZATION.check(vectorization, "")
 
     def make_one() -> gym.Env:

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from quad_uneven_env.config import RobotConfig, load_robot_config
+from quad_uneven_env.robot.description import RobotDescription, load_robot
 
 
 @pytest.fixture(scope="session")
-def robot_cfg() -> RobotConfig:
+def paper_robot() -> RobotDescription:
     """The paper's Table 1 robot."""
-    return load_robot_config("paper")
+    return load_robot("paper")
 
 
 @pytest.fixture

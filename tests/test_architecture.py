@@ -1,4 +1,5 @@
-"""The layout's rules as tests: layering, no private imports, pure planners, argparse only in the CLI.
+"""The layout's rules as tests: layering, no import cycles, no private imports, pure planners, argparse only in
+the CLI.
 
 Each rule walks the source with ``ast`` (what a module imports is what it says), so a new module
 that breaks a rule fails here, whatever it is named.
@@ -107,6 +108,146 @@ def test_the_rules_catch_a_wrong_import(tmp_path):
         ROOT = root
 
 
+def _type_checking_blocks(tree: ast.Module) -> set[int]:
+    """ids of the statements under ``if TYPE_CHECKING:`` (never run: no import-time dependency)."""
+    guarded: set[int] = set()
+    for node in ast.walk(tree):
+        test = node.test if isinstance(node, ast.If) else None
+        if isinstance(test, ast.Name | ast.Attribute) and ast.unparse(test).endswith("TYPE_CHECKING"):
+            guarded |= {id(n) for stmt in node.body for n in ast.walk(stmt)}
+    return guarded
+
+
+def module_imports(mod: str, path: Path, known: set[str]) -> set[str]:
+    """The project modules ``mod`` (at ``path``) imports, at any depth (module level, functions, methods).
+
+    ``import a.b`` and ``from a.b import x`` depend on ``a.b``; ``from a import b`` on the submodule ``a.b`` when
+    there is one (else on ``a``, for its name ``b``); relative imports are resolved against ``mod``. Imports under
+    ``if TYPE_CHECKING:`` are left out: they never run. A package's parent packages are not counted (every module
+    imports its parents first; that is no cycle).
+    """
+    tree = ast.parse(path.read_text(), str(path))
+    guarded = _type_checking_blocks(tree)
+    package = mod.split(".") if path.name == "__init__.py" else mod.split(".")[:-1]
+    out = set()
+    for node in ast.walk(tree):
+        if id(node) in guarded:
+            continue
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names if a.name in known}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parent = package[: len(package) - node.level + 1]
+                base = ".".join([*parent, *([node.module] if node.module else [])])
+            for a in node.names:
+                target = f"{base}.{a.name}" if f"{base}.{a.name}" in known else base
+                if target in known:
+                    out.add(target)
+    out.discard(mod)
+    return out
+
+
+def import_cycles(modules=MODULES) -> list[list[str]]:
+    """Every set of project modules that import each other, directly or through others (the strongly connected
+    components of the import graph with more than one module, Tarjan's algorithm), each sorted."""
+    known = {m for m, _ in modules}
+    graph = {m: sorted(module_imports(m, p, known)) for m, p in modules}
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return sorted(cycles)
+
+
+def test_no_import_cycles():
+    """No two modules import each other, at module level or inside a function, directly or through others."""
+    assert import_cycles() == []
+
+
+def _fake_package(tmp_path: Path, files: dict[str, str]) -> list[tuple[str, Path]]:
+    modules = []
+    for name, text in files.items():
+        path = tmp_path / (name.replace(".", "/") + ("/__init__.py" if name in ("pkg", "pkg.sub") else ".py"))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+        modules.append((name, path))
+    return modules
+
+
+def test_the_cycle_rule_catches_a_cycle_through_a_function_level_import(tmp_path):
+    modules = _fake_package(
+        tmp_path,
+        {
+            "pkg": "",
+            "pkg.a": "from pkg.b import f\n",
+            "pkg.b": "def f():\n    if True:\n        from pkg import c\n",
+            "pkg.c": "import pkg.a\n",
+        },
+    )
+    assert import_cycles(modules) == [["pkg.a", "pkg.b", "pkg.c"]]
+
+
+def test_the_cycle_rule_tells_a_submodule_from_a_name_and_resolves_relative_imports(tmp_path):
+    """``from pkg import mod`` depends on ``pkg.mod``, not on ``pkg`` (whose ``__init__`` imports ``pkg.mod``);
+    ``from pkg import name`` on ``pkg``; ``from . import x`` and ``from .x import y`` on ``pkg.sub.x``."""
+    modules = _fake_package(
+        tmp_path,
+        {
+            "pkg": "from pkg.kernels import k\nfrom pkg.sub import helper\n",
+            "pkg.kernels": "k = 1\n",
+            "pkg.user": "from pkg import kernels\n",  # the submodule: no cycle with pkg
+            "pkg.sub": "from . import x\nhelper = 1\n",
+            "pkg.sub.x": "from .y import z\n",
+            "pkg.sub.y": "z = 1\n\ndef g():\n    from pkg import k\n",  # the name k of pkg: pkg -> sub -> x -> y -> pkg
+        },
+    )
+    known = {m for m, _ in modules}
+    paths = dict(modules)
+    assert module_imports("pkg.user", paths["pkg.user"], known) == {"pkg.kernels"}
+    assert module_imports("pkg.sub", paths["pkg.sub"], known) == {"pkg.sub.x"}
+    assert module_imports("pkg.sub.x", paths["pkg.sub.x"], known) == {"pkg.sub.y"}
+    assert import_cycles(modules) == [["pkg", "pkg.sub", "pkg.sub.x", "pkg.sub.y"]]
+
+
+def test_the_cycle_rule_leaves_out_type_checking_imports(tmp_path):
+    modules = _fake_package(
+        tmp_path,
+        {
+            "pkg": "",
+            "pkg.a": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from pkg.b import B\n",
+            "pkg.b": "from pkg.a import A\n",
+        },
+    )
+    assert import_cycles(modules) == []
+
+
 def _loaded_after(statement: str) -> set[str]:
     code = f"import sys; {statement}; print(' '.join(sorted({{m.split('.')[0] for m in sys.modules}})))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
@@ -143,6 +284,16 @@ def test_every_package_has_a_front_door(mod):
     assert ast.get_docstring(tree), f"{mod} has no docstring"
     names = [t.id for n in tree.body if isinstance(n, ast.Assign) for t in n.targets if isinstance(t, ast.Name)]
     assert "__all__" in names or mod.count(".") >= 2, f"{mod} has no __all__"
+
+
+def test_the_cli_docstring_lists_every_command():
+    """The ``agents/cli.py`` docstring is the map of the command line: every subcommand appears in it."""
+    import agents.cli
+
+    parser = agents.cli.build_parser()
+    commands = next(a for a in parser._actions if a.dest == "command").choices  # argparse's subcommands
+    listed = set(re.findall(r"^- ``([a-z-]+)``:", agents.cli.__doc__, re.MULTILINE))
+    assert listed == set(commands)
 
 
 HISTORY = re.compile(r"\b[Ii]ssue \d+|\(issue|section \d+ of|the first version")

@@ -41,8 +41,8 @@ import mujoco
 import numpy as np
 from numba.core.errors import NumbaError
 
-from agents.control import controller_kernels as FK
-from agents.control import inverse_dynamics_kernels as K
+from agents.control import controller_kernels
+from agents.control import inverse_dynamics_kernels as IK
 from agents.control.elimination import DAMPING, SINGULAR_SIGMA, ProjectedDynamics, eliminate_constraints, stance_layout
 from agents.control.inverse_dynamics import (
     DISTRIBUTIONS,
@@ -56,9 +56,10 @@ from agents.control.verify import IDCheck, verify_inverse_dynamics
 from planners.types import PACKED_FIELDS, ReferenceGrid, ReferenceSample
 from quad_uneven_env import constants as C
 from quad_uneven_env.compiled_call import entry_point
-from quad_uneven_env.fields import check_fields, param
+from quad_uneven_env.fields import check_fields, excerpt, param
+from quad_uneven_env.robot.dynamics import make_dynamics
 from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
-from quad_uneven_env.robot.dynamics.base import DynamicsTerms, make_dynamics
+from quad_uneven_env.robot.dynamics.base import DynamicsTerms
 
 __all__ = [
     "ComputedTorqueController",
@@ -143,7 +144,7 @@ def measured_foot_contacts(data: mujoco.MjData, foot_of_geom: np.ndarray, terrai
     :param foot_of_geom: from :func:`foot_lookup`.
     """
     lut = np.asarray(foot_of_geom, dtype=np.int64)
-    mask = K.foot_contact_mask(data.contact.geom, lut, int(terrain_geom)) if data.ncon else 0
+    mask = IK.foot_contact_mask(data.contact.geom, lut, int(terrain_geom)) if data.ncon else 0
     return np.array([bool(mask >> i & 1) for i in range(C.N_LEGS)])
 
 
@@ -180,9 +181,9 @@ class ComputedTorqueController:
         qp_solver: str = "compiled",
     ) -> None:
         if distribution not in DISTRIBUTIONS:
-            raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {distribution!r}")
+            raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {excerpt(distribution)}")
         if stance_mode not in STANCE_MODES:
-            raise ValueError(f"stance_mode must be one of {list(STANCE_MODES)}, got {stance_mode!r}")
+            raise ValueError(f"stance_mode must be one of {list(STANCE_MODES)}, got {excerpt(stance_mode)}")
         self.reference = reference
         self.backend = backend
         self.distribution = distribution
@@ -190,10 +191,10 @@ class ComputedTorqueController:
         self.stance_mode = stance_mode
         self.min_normal_force = float(min_normal_force)
         if mu is not None and not mu > 0:
-            raise ValueError(f"mu must be > 0 (friction coefficient of the cones), got {mu!r}")
+            raise ValueError(f"mu must be > 0 (friction coefficient of the cones), got {excerpt(mu)}")
         self.mu = mu
         if qp_solver not in QP_SOLVERS:
-            raise ValueError(f"qp_solver must be one of {list(QP_SOLVERS)}, got {qp_solver!r}")
+            raise ValueError(f"qp_solver must be one of {list(QP_SOLVERS)}, got {excerpt(qp_solver)}")
         self.qp_solver = qp_solver
         self.t0 = 0.0
         self.terrain: Any = None
@@ -349,12 +350,12 @@ class ComputedTorqueController:
             result = self.id.solve_terms(terms, beta_ddot.copy(), stance, normals)
         self._last, self._last_reference = result, ref
         tau = np.empty(C.N_JOINTS)
-        K.clip_into(result.tau, self.torque_limit, tau)
+        IK.clip_into(result.tau, self.torque_limit, tau)
         return tau
 
     def foot_contact_bits(self, data: mujoco.MjData) -> int:
         """Bitmask of the feet touching the terrain in ``data.contact`` (bit i: leg i; after ``mj_step1``)."""
-        return K.foot_contact_mask(contact_pairs(data), self.foot_of_geom, self.terrain_geom) if data.ncon else 0
+        return IK.foot_contact_mask(contact_pairs(data), self.foot_of_geom, self.terrain_geom) if data.ncon else 0
 
     def grid_step_into(
         self,
@@ -368,13 +369,12 @@ class ComputedTorqueController:
         tau_ok: np.ndarray,
         limit: np.ndarray,
         out: np.ndarray,
-        off_plan: tuple[float, float] = (-1.0, -1.0),
         contacts: int = -1,
-    ) -> int:
+    ) -> bool:
         """The call ``self(model, data, None, contacts)`` for a reference planned on ``grid``, in one compiled call
         (:func:`~agents.control.controller_kernels.grid_control_step`): its torques (clipped to the motor limits,
-        finite) into ``tau_ok`` and, clipped to ``±limit`` (N m), into ``out``. 1 when it took the step; 0 where
-        the call must run instead (nothing but the inverse-dynamics buffers changed).
+        finite) into ``tau_ok`` and, clipped to ``±limit`` (N m), into ``out``. True when it took the step; False
+        where the call must run instead (nothing but the inverse-dynamics buffers changed).
 
         It takes the step where the reference at controller time ``t`` is ``grid``'s row at ``t - t_start`` (s),
         every planned stance foot touches (``touch[touch_adr[leg]] > 0``, the simulator's touch sensors), and the
@@ -383,14 +383,11 @@ class ComputedTorqueController:
 
         :param grid: the plan's rows, valid for controller times ``t`` (s) in [``t_start``, ``t_stop``).
         :param contacts: bitmask of the feet measured in contact (bit i: leg i); -1: from ``data.contact``.
-        :param off_plan: (m^2, (m/s)^2) squared tolerances of the base's horizontal position and velocity
-            against the grid row, checked before the step (negative: no check); off the plan it returns
-            :data:`~agents.control.controller_kernels.OFF_PLAN` (-2) and writes nothing.
         """
         t = data.time - self.t0
         args = None if t >= t_stop else self._grid_arguments(model, data, grid, touch, touch_adr, tau_ok)
         if args is None:
-            return 0
+            return False
         self.id.workspace_version += 1  # the compiled call rewrites the inverse-dynamics buffers
         a, g = args
         key = (id(limit), id(out))
@@ -400,28 +397,26 @@ class ComputedTorqueController:
                 call is not None and call[1] is a and call[2] is g and call[3] is limit and call[4] is out
                 and call[5] is self.stance_mode
             ):  # fmt: skip
-                code = call[0](
-                    t - t_start, off_plan[0], off_plan[1], call[6], contact_pairs(data), contacts, a, g, limit, out
-                )
+                code = call[0](t - t_start, call[6], contact_pairs(data), contacts, a, g, limit, out)
             else:
                 values = (
-                    t - t_start, float(off_plan[0]), float(off_plan[1]), STANCE_MODES.index(self.stance_mode),
-                    contact_pairs(data), int(contacts), a, g, limit, out,
+                    t - t_start, STANCE_MODES.index(self.stance_mode), contact_pairs(data), int(contacts), a, g, limit,
+                    out,
                 )  # fmt: skip
-                code = FK.grid_control_step(*values)
-                entry = entry_point(FK.grid_control_step, values)
+                code = controller_kernels.grid_control_step(*values)
+                entry = entry_point(controller_kernels.grid_control_step, values)
                 if len(self._grid_calls) >= 4:  # a caller handing new buffers every step: keep the cache small
                     self._grid_calls.clear()
                 if entry is not None:
-                    self._grid_calls[key] = (entry, a, g, limit, out, self.stance_mode, values[3])
+                    self._grid_calls[key] = (entry, a, g, limit, out, self.stance_mode, values[1])
         except (TypeError, NumbaError):  # arrays the kernel does not take (numba dispatch): the readable path,
             # for these inputs from now on: a failed compilation is not retried every step
             self._step_cache = (data, getattr(self.terrain, "heightfield", None), self._gains, None)
-            return 0
+            return False
         if code < 0:
-            return FK.OFF_PLAN if code == FK.OFF_PLAN else 0
+            return False
         self._grid_step = (code, t, grid, self.id.workspace_version)
-        return 1
+        return True
 
     def _grid_arguments(
         self,
@@ -431,7 +426,7 @@ class ComputedTorqueController:
         touch: np.ndarray,
         touch_adr: np.ndarray,
         tau_ok: np.ndarray,
-    ) -> tuple[FK.StepArguments, FK.GridArguments] | None:
+    ) -> tuple[controller_kernels.StepArguments, controller_kernels.GridArguments] | None:
         """The compiled step's two argument records (built when an input changes), or None where the readable
         path must run (not the "mujoco" backend, another model, arguments the kernel refused)."""
         if self.backend != "mujoco" or model is not self._model:
@@ -442,11 +437,13 @@ class ComputedTorqueController:
         c = self._grid_cache
         if c is None or c[0] is not grid or c[1] is not touch or c[2] is not tau_ok:
             qp = self.distribution == "qp"
-            g = FK.GridArguments(grid.t, grid.dt, grid.t_end, grid.packed, grid.masks, touch, touch_adr, tau_ok, qp)
+            g = controller_kernels.GridArguments(
+                grid.t, grid.dt, grid.t_end, grid.packed, grid.masks, touch, touch_adr, tau_ok, qp
+            )
             c = self._grid_cache = (grid, touch, tau_ok, g)
         return packed, c[3]
 
-    def _step_arguments(self, data: mujoco.MjData) -> FK.StepArguments | None:
+    def _step_arguments(self, data: mujoco.MjData) -> controller_kernels.StepArguments | None:
         """The arguments of ``control_step`` that outlive a step (views and buffers) in one record (None: refused
         by the kernel), rebuilt when an input object changes (the data, the terrain's height field, the gains) and
         after :meth:`set_friction`."""
@@ -466,7 +463,7 @@ class ComputedTorqueController:
             ident.mu if qp else 0.0, ident.cone_lower, ident.cone_buffer, ident.qp_solver == "compiled",
             self.torque_limit, self._step_tau,
         )  # fmt: skip
-        packed = FK.StepArguments(*fields)
+        packed = controller_kernels.StepArguments(*fields)
         self._step_cache = (data, hf, self._gains, packed)
         return packed
 
@@ -474,9 +471,9 @@ class ComputedTorqueController:
         """Turn the last grid step's code into :attr:`last`'s and :attr:`last_reference`'s records."""
         code, t, grid, version = self._grid_step
         self._grid_step = None
-        planned = code >> FK.GRID_PLANNED_SHIFT & 15
-        self._last = WorkspaceResult(code >> 4 & 15, self._layouts[code & 15], version, bool(code & FK.QP_RELAXED))
-        self._last_reference = PackedReference(t, grid.rows[code >> FK.GRID_ROW_SHIFT], planned)
+        fields = controller_kernels.decode_grid_code(code)
+        self._last = WorkspaceResult(fields.status, self._layouts[fields.stance], version, fields.relaxed)
+        self._last_reference = PackedReference(t, grid.rows[fields.row], fields.planned)
 
     def select_stance(self, planned, measured: np.ndarray) -> tuple[bool, bool, bool, bool]:
         """Stance set from the plan and the measured contacts (rule in the module docstring)."""
@@ -503,10 +500,10 @@ class ComputedTorqueController:
         """Write beta_ddot_cmd into ``self._bdd`` (compiled kernel); returns n_beta."""
         args = [getattr(ref, f) for f in _CMD_INPUTS[:9]]
         try:
-            n = K.beta_command(qpos, qvel, *args, self._gains, mask, self._bdd)
+            n = IK.beta_command(qpos, qvel, *args, self._gains, mask, self._bdd)
         except TypeError:  # lists, other dtypes, read-only arrays: convert once
             args = [np.ascontiguousarray(a, dtype=float).reshape(-1) for a in args]
-            n = K.beta_command(qpos, qvel, *args, self._gains, mask, self._bdd)
+            n = IK.beta_command(qpos, qvel, *args, self._gains, mask, self._bdd)
         if n < 0:
             what = _CMD_INPUTS[-n - 1]
             got = np.shape(qpos if what == "qpos" else qvel if what == "qvel" else getattr(ref, what))

@@ -27,6 +27,7 @@ import itertools
 import numpy as np
 
 from quad_uneven_env import constants as C
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.robot.dynamics.base import DynamicsTerms
 
 SINGULAR_SIGMA = 2e-3
@@ -47,7 +48,7 @@ def check_stance(stance) -> tuple[bool, bool, bool, bool]:
     except TypeError:
         flags = ()
     if len(flags) != C.N_LEGS or any(not isinstance(s, (bool, np.bool_, int, np.integer)) for s in stance):
-        raise ValueError(f"stance must be 4 booleans in leg order {C.LEG_NAMES}, got {stance!r}")
+        raise ValueError(f"stance must be 4 booleans in leg order {C.LEG_NAMES}, got {excerpt(stance)}")
     return flags  # type: ignore[return-value]
 
 

@@ -42,7 +42,7 @@ import daqp
 import mujoco
 import numpy as np
 
-from agents.control import inverse_dynamics_kernels as K
+from agents.control import inverse_dynamics_kernels as IK
 from agents.control import qp_kernels as QK
 from agents.control.elimination import (
     DAMPING,
@@ -53,6 +53,7 @@ from agents.control.elimination import (
     layout_of,
 )
 from quad_uneven_env import constants as C
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.robot.dynamics.base import Dynamics, DynamicsTerms
 
 DISTRIBUTIONS: tuple[str, ...] = ("pinv", "qp")
@@ -144,14 +145,14 @@ def friction_pyramid(normal_W: np.ndarray, mu: float) -> np.ndarray:
     n = np.asarray(normal_W, dtype=float)
     flat = np.ascontiguousarray(n.reshape(-1, 3))
     out = np.empty((len(flat), 5, 3))
-    K.friction_pyramid_into(flat, float(mu), out)
+    IK.friction_pyramid_into(flat, float(mu), out)
     return out.reshape((*n.shape[:-1], 5, 3))
 
 
 class InverseDynamics:
     """Torques and contact forces realising a commanded ``beta_ddot`` for a stance set.
 
-    :param dynamics: a backend from :func:`quad_uneven_env.robot.dynamics.base.make_dynamics`.
+    :param dynamics: a backend from :func:`quad_uneven_env.robot.dynamics.make_dynamics`.
     :param distribution: ``"pinv"`` (paper) or ``"qp"`` (friction-cone aware, see module doc).
     :param mu: friction coefficient of the cone (default: the model's foot friction, if the
         backend has a model, else 1.0).
@@ -168,9 +169,9 @@ class InverseDynamics:
         qp_solver: str = "compiled",
     ) -> None:
         if distribution not in DISTRIBUTIONS:
-            raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {distribution!r}")
+            raise ValueError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {excerpt(distribution)}")
         if qp_solver not in QP_SOLVERS:
-            raise ValueError(f"qp_solver must be one of {list(QP_SOLVERS)}, got {qp_solver!r}")
+            raise ValueError(f"qp_solver must be one of {list(QP_SOLVERS)}, got {excerpt(qp_solver)}")
         self.qp_solver = qp_solver
         if min_normal_force < 0:
             raise ValueError(f"min_normal_force must be >= 0 N, got {min_normal_force}")
@@ -259,7 +260,7 @@ class InverseDynamics:
         ws = self.workspace
         self.workspace_version += 1
         try:
-            status = K.id_pinv(
+            status = IK.id_pinv(
                 M, h, J_feet, Jdot_qdot_feet, lay.mask, beta_ddot,
                 1.0 / SINGULAR_SIGMA, DAMPING, *ws,
             )  # fmt: skip
@@ -277,7 +278,7 @@ class InverseDynamics:
         ws = self.workspace
         return IDResult(
             ws.tau.copy(), ws.F.copy(), ws.qacc.copy(), lay.stance, "pinv",
-            exact=bool(status & K.EXACT), damped=bool(status & K.DAMPED),
+            exact=bool(status & IK.EXACT), damped=bool(status & IK.DAMPED),
         )  # fmt: skip
 
     # ---------------------------------------------------------------- internals
@@ -356,8 +357,9 @@ class InverseDynamics:
         def fill(J_feet: np.ndarray, r: np.ndarray, normals_W: np.ndarray | None) -> bool:
             F0, low = result.contact_forces, self.cone_lower
             if normals_W is None:
-                return K.qp_fill(J_feet, lay.mask, r, F0, self._cone_up[:p], low, *qp.problem)
-            return K.qp_fill_with_cones(normals_W, self.mu, J_feet, lay.mask, r, F0, self.cone_buffer, low, *qp.problem)
+                return IK.qp_fill(J_feet, lay.mask, r, F0, self._cone_up[:p], low, *qp.problem)
+            cones = self.cone_buffer
+            return IK.qp_fill_with_cones(normals_W, self.mu, J_feet, lay.mask, r, F0, cones, low, *qp.problem)
 
         try:
             inside = fill(J_feet, r, normals_W)
@@ -374,7 +376,7 @@ class InverseDynamics:
             return
         x = qp.solve()
         tau, F = result.tau.copy(), np.zeros((C.N_LEGS, 3))
-        if x is None or not K.qp_apply(x, C_in, lower, A, b, J_feet, lay.mask, r, tau, F):
+        if x is None or not IK.qp_apply(x, C_in, lower, A, b, J_feet, lay.mask, r, tau, F):
             self._relax(lay, J_feet, r, result, qp)
             return
         result.tau, result.contact_forces, result.distribution = tau, F, "qp"

@@ -6,9 +6,8 @@ what its sensors measure. :class:`NominalModel` is that knowledge: an ``MjModel`
 nominal robot configuration (the same scene MJCF as the environment, so body, joint, site and dof
 ids agree) with contacts disabled, and an ``MjData`` into which :meth:`NominalModel.measure` copies
 the measured state each physics step and runs only the position and velocity stages the dynamics
-terms need (``mj_kinematics``, ``mj_comPos``, ``mj_makeM``, ``mj_comVel``, ``mj_rne``: about
-10 µs). Its ``M``, ``qfrc_bias``, frames and subtree centres of mass are then what the nominal
-robot would have at the measured state.
+terms need (``mj_kinematics``, ``mj_comPos``, ``mj_makeM``, ``mj_comVel``, ``mj_rne``). Its ``M``,
+``qfrc_bias``, frames and subtree centres of mass are then what the nominal robot would have at the measured state.
 
 When the simulated robot is exactly nominal the two models compile from the same MJCF, and the
 nominal data equal the simulator's bit for bit (tested); :meth:`NominalModel.matches` says whether
@@ -22,9 +21,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.robot.description import RobotDescription
-from quad_uneven_env.robot.description_model import description_scene_mjcf
 from quad_uneven_env.robot.model import PhysicsOptions, scene_mjcf
 
 ROBOT_PARAMETER_FIELDS: tuple[str, ...] = (
@@ -37,23 +34,17 @@ ROBOT_PARAMETER_FIELDS: tuple[str, ...] = (
 class NominalModel:
     """A nominal robot model and its data, fed with the measured state.
 
-    :param robot: the nominal robot (the expert's own description of itself): the paper's Table-1 configuration,
-        or a robot description (a URDF robot's model is generated as the env generates it,
-        :mod:`quad_uneven_env.robot.description_model`).
+    :param robot: the nominal robot (the expert's own description of itself); its model is generated as the env
+        generates its own (:func:`quad_uneven_env.robot.model.scene_mjcf`).
     :param terrain: an object with ``hfield_asset_xml()`` and ``hfield_geom_xml(friction)`` (the env's
         :class:`~quad_uneven_env.terrain.Terrain`): only the height field's size enters the model, so
         that its ids match the simulator's; its elevations are never uploaded (contacts are off).
     :param timestep: s, physics timestep (recorded in the model; the nominal model is never stepped).
     """
 
-    def __init__(self, robot: RobotConfig | RobotDescription, terrain: Any, timestep: float) -> None:
-        if isinstance(robot, RobotDescription) and robot.config is not None:
-            robot = robot.config
+    def __init__(self, robot: RobotDescription, terrain: Any, timestep: float) -> None:
         hfield = (terrain.hfield_asset_xml(), terrain.hfield_geom_xml(robot.friction))
-        if isinstance(robot, RobotConfig):
-            xml = scene_mjcf(robot, *hfield, PhysicsOptions(timestep=timestep))
-        else:
-            xml = description_scene_mjcf(robot, *hfield, PhysicsOptions(timestep=timestep))
+        xml = scene_mjcf(robot, *hfield, PhysicsOptions(timestep=timestep))
         self.model = mujoco.MjModel.from_xml_string(xml)
         """the nominal MjModel (contacts disabled)."""
         self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT

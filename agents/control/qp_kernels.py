@@ -23,7 +23,7 @@ import math
 import numba as nb
 import numpy as np
 
-from agents.control import inverse_dynamics_kernels as K
+from agents.control import inverse_dynamics_kernels as IK
 from quad_uneven_env.jit import njit
 
 QP_SOLVED, QP_INFEASIBLE, QP_FAILED = 1, 0, -1
@@ -285,12 +285,12 @@ def distribute_qp(normals, mu, J, mask, r, lower, tau, F, cones):  # pragma: no 
     n, n_in = 3 * p, 5 * p
     H, g, A, b = np.empty((n, n)), np.empty(n), np.zeros((6, n)), np.empty(6)
     C, l, x = np.empty((n_in, n)), np.empty(n_in), np.empty(n)
-    if K.qp_fill_with_cones(normals, mu, J, mask, r, F, cones, lower, H, g, A, b, C, l):
+    if IK.qp_fill_with_cones(normals, mu, J, mask, r, F, cones, lower, H, g, A, b, C, l):
         return QP_INSIDE
     status = solve_qp(H, g, A, b, C, l, x)
     if status == QP_FAILED:
         return QP_FAILED
-    if status == QP_SOLVED and K.qp_apply(x, C, l, A, b, J, mask, r, tau, F):
+    if status == QP_SOLVED and IK.qp_apply(x, C, l, A, b, J, mask, r, tau, F):
         return QP_OPTIMAL
     # infeasible at the commanded base acceleration: the relaxed problem, cone rows with zero lower bound
     H_r, g_r = np.empty((n, n)), np.empty(n)
@@ -302,5 +302,5 @@ def distribute_qp(normals, mu, J, mask, r, lower, tau, F, cones):  # pragma: no 
     for i in range(n):
         if not math.isfinite(x[i]):
             return QP_FAILED
-    K.stance_forces_and_torques_into(x, J, mask, r, tau, F)
+    IK.stance_forces_and_torques_into(x, J, mask, r, tau, F)
     return QP_RELAXED

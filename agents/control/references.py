@@ -18,7 +18,6 @@ from agents.control.controller import ComputedTorqueController
 from planners.robot_geometry import robot_geometry
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
-from quad_uneven_env.config import RobotConfig
 from quad_uneven_env.robot.description import RobotDescription
 
 
@@ -42,14 +41,14 @@ class BaseWaveReference:
         self,
         p0: np.ndarray,
         feet_W: np.ndarray,
-        cfg: RobotConfig | RobotDescription,
+        cfg: RobotDescription,
         dz: float = 0.03,
         fz: float = 0.5,
         ang: float = 0.0872664626,
         fa: float = 0.3,
     ) -> None:
         """:param p0: (3,) base position at rest (m, world); :param feet_W: (4, 3) fixed foot sites (m, world);
-        :param cfg: the robot (a RobotConfig or any description); :param dz: z amplitude (m) at ``fz`` (Hz);
+        :param cfg: the robot's description; :param dz: z amplitude (m) at ``fz`` (Hz);
         :param ang: roll and pitch amplitude (rad) at ``fa`` (Hz). Zero amplitudes give a standing reference."""
         self.p0, self.feet, self.cfg = np.asarray(p0), np.asarray(feet_W), cfg
         self.dz, self.wz, self.ang, self.wa = dz, 2 * np.pi * fz, ang, 2 * np.pi * fa

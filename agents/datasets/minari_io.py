@@ -22,14 +22,20 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from agents.datasets.files import SUMMARY_FILE, read_summary
+from agents.evaluation.results_io import COUNT, STR, ResultsError, check_object, read_json
+from quad_uneven_env.fields import clip, excerpt
+
 __all__ = [
     "DATASETS_EXTRA_HINT",
+    "DatasetError",
     "DatasetsUnavailable",
     "dataset_id_for",
     "episode_env",
     "episode_metadata",
     "import_minari",
     "load_collected",
+    "open_dataset",
     "write_dataset",
 ]
 
@@ -126,13 +132,84 @@ def _attrs(meta: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+class DatasetError(ValueError):
+    """A collected dataset that Minari cannot read, or not the one its collection recorded; the message names its
+    folder and what is wrong."""
+
+
+DATASET_METADATA_FIELDS = {
+    "dataset_id": STR,
+    "minari_version": STR,
+    "data_format": ("'hdf5'", lambda v: v == "hdf5"),
+    "observation_space": STR,
+    "action_space": STR,
+    "env_spec": STR,
+    "total_episodes": COUNT,
+    "total_steps": COUNT,
+}
+"""Fields of a dataset's ``metadata.json`` checked before Minari reads it (its own loader asserts, or makes the env
+of ``env_spec``, where one is missing)."""
+
+
+def open_dataset(data_path: Path, dataset_id: str, episodes: int, steps: int) -> Any:
+    """The ``minari.MinariDataset`` in ``data_path``, verified against what its collection recorded.
+
+    Checked: ``metadata.json`` is strict JSON with the fields of :data:`DATASET_METADATA_FIELDS` and the id
+    ``dataset_id``; Minari's own loader opens the folder; ``main_data.hdf5`` opens (h5py refuses a truncated file)
+    and holds exactly ``episodes`` episode groups whose step counts (rows of ``actions``, one fewer than of
+    ``observations``) add up to ``steps``, as the metadata's totals do.
+
+    :param episodes: the episode count the collection recorded (``collect.json``).
+    :param steps: the step count the collection recorded.
+    :raises DatasetError: naming ``data_path`` and the first check that fails.
+    """
+    minari = import_minari("reading a collected dataset")
+    import h5py
+
+    where = str(data_path)
+    try:
+        meta = check_object(
+            read_json(data_path / "metadata.json"), where, DATASET_METADATA_FIELDS, DATASET_METADATA_FIELDS
+        )
+    except ResultsError as err:
+        raise DatasetError(f"{err}: not a dataset collect wrote") from None
+    recorded = {"dataset_id": dataset_id, "total_episodes": episodes, "total_steps": steps}
+    for key, value in recorded.items():
+        if meta[key] != value:
+            raise DatasetError(
+                f"{where}: metadata.json {key} is {excerpt(meta[key])}, its collection recorded {excerpt(value)}"
+            )
+    try:
+        dataset = minari.MinariDataset(data_path)
+        counts = []
+        with h5py.File(data_path / "main_data.hdf5", "r") as f:
+            if len(f.keys()) != episodes:
+                raise DatasetError(
+                    f"{where}: main_data.hdf5 holds {len(f.keys())} episodes, its collection recorded {episodes}"
+                )
+            for i in range(episodes):
+                group = f[f"episode_{i}"]
+                n, rows = group["actions"].shape[0], group["observations"].shape[0]
+                if rows != n + 1:
+                    raise DatasetError(f"{where}: main_data.hdf5 episode_{i} has {n} actions but {rows} observations")
+                counts.append(n)
+    except DatasetError:
+        raise
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, AssertionError, NotImplementedError) as err:
+        raise DatasetError(f"{where}: Minari cannot read it ({type(err).__name__}: {clip(str(err))})") from None
+    if sum(counts) != steps:
+        raise DatasetError(f"{where}: main_data.hdf5 holds {sum(counts)} steps, its collection recorded {steps}")
+    return dataset
+
+
 def load_collected(out: str | os.PathLike[str]) -> Any:
-    """The ``minari.MinariDataset`` that ``quad-uneven collect --out OUT`` wrote.
+    """The ``minari.MinariDataset`` that ``quad-uneven collect --out OUT`` wrote, verified (:func:`open_dataset`)
+    against the collection's summary ``OUT/collect.json``.
 
     :raises FileNotFoundError: if ``OUT`` holds no finished dataset (naming ``OUT``).
+    :raises DatasetError: if the summary is unreadable or the dataset is not the one it records (damaged, edited).
     """
     import_minari("load_collected")
-    import minari
 
     out = Path(out)
     found = sorted(p.parent for p in out.glob("*/data/metadata.json") if not p.parent.parent.name.startswith("."))
@@ -141,7 +218,21 @@ def load_collected(out: str | os.PathLike[str]) -> Any:
             f"{str(out)!r} holds {len(found)} finished datasets (DATASET_ID/data/metadata.json), expected one: "
             "run quad-uneven collect --out there (or --resume it) first"
         )
-    return minari.MinariDataset(found[0])
+    if not (out / SUMMARY_FILE).is_file():
+        raise FileNotFoundError(
+            f"{str(out)!r} holds no {SUMMARY_FILE} (the collection did not finish): rerun quad-uneven collect "
+            "--resume there first"
+        )
+    try:
+        summary = read_summary(out)
+    except ResultsError as err:
+        raise DatasetError(f"{err}; rerun quad-uneven collect --resume there to rebuild it") from None
+    if found[0] != out / summary["dataset_id"] / "data":
+        raise DatasetError(
+            f"{out / SUMMARY_FILE}: dataset_id is {excerpt(summary['dataset_id'])}, but the dataset in {str(out)!r} "
+            f"is {found[0].parent.name!r}"
+        )
+    return open_dataset(found[0], summary["dataset_id"], summary["episodes"], summary["steps"])
 
 
 def episode_metadata(dataset: Any, index: int) -> dict[str, Any]:

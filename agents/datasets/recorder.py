@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 
 from quad_uneven_env import constants as C
+from quad_uneven_env.fields import excerpt
 
 __all__ = ["INFO_FIELDS", "EpisodeRecorder", "TorqueRecorder", "TorqueReplay", "info_fields", "recorded_action"]
 
@@ -154,7 +155,9 @@ class EpisodeRecorder:
         if u.controller is not policy or not hasattr(policy, "planned_now"):
             raise ValueError(f"collect records the scripted expert only, got a {type(policy).__name__}")
         if u.action_mode != "torque":
-            raise ValueError(f"env_kwargs.action_mode must be 'torque' to collect the expert, got {u.action_mode!r}")
+            raise ValueError(
+                f"env_kwargs.action_mode must be 'torque' to collect the expert, got {excerpt(u.action_mode)}"
+            )
         self.env, self.expert = u, policy
         spec = env.spec
         steps = None if spec is None else spec.max_episode_steps

@@ -28,6 +28,7 @@ import importlib.metadata
 import json
 import os
 import shutil
+import sys
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -35,7 +36,16 @@ from typing import Any
 
 import numpy as np
 
-from agents.datasets.minari_io import dataset_id_for, import_minari, write_dataset
+from agents.datasets.files import (
+    SUMMARY_FILE,
+    TRANSITION_ARRAYS,
+    check_arrays,
+    npz_path,
+    read_records,
+    read_summary,
+    write_episode,
+)
+from agents.datasets.minari_io import DatasetError, dataset_id_for, import_minari, open_dataset, write_dataset
 from agents.datasets.recorder import INFO_FIELDS, EpisodeRecorder
 from agents.evaluation.episode import (
     DEFAULT_WALL_TIME_LIMIT,
@@ -48,10 +58,20 @@ from agents.evaluation.episode import (
 )
 from agents.evaluation.metrics import json_safe
 from agents.evaluation.policies import PolicyError
-from agents.evaluation.run import EvaluationInterrupted, preflight, run_tasks
-from agents.evaluation.store import IDENTITY_KEYS, RUN_FILE, check_resume, open_output_dir, run_identity
-from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite
+from agents.evaluation.results_io import ResultsError
+from agents.evaluation.run import EvaluationInterrupted, preflight, run_tasks, suite_episodes
+from agents.evaluation.store import (
+    IDENTITY_KEYS,
+    RESUME_HINT,
+    RUN_FILE,
+    check_resume,
+    open_output_dir,
+    read_npz,
+    run_identity,
+)
+from agents.evaluation.suites import EpisodeTask, Suite, load_suite
 from agents.outputs import OutputError, write_json_atomic
+from quad_uneven_env.fields import excerpt
 
 __all__ = ["COLLECT_FORMAT", "COLLECT_OUTPUTS", "CollectInterrupted", "CollectedEpisode", "collect", "collect_task"]
 
@@ -63,9 +83,6 @@ COLLECT_OUTPUTS = (RUN_FILE, "collect.json", "episodes", "quad-uneven-*", ".*.tm
 
 COLLECT_IDENTITY_KEYS = (*IDENTITY_KEYS, "entries")
 """Fields of ``run.json`` that must be equal for ``--resume`` to continue a collection."""
-
-SUMMARY_FILE = "collect.json"
-"""The summary written last (dataset id and path, episodes, steps, successes, speed)."""
 
 POLICIES = ("expert",)
 """What ``collect`` can record."""
@@ -97,52 +114,43 @@ class CollectInterrupted(EvaluationInterrupted):
         super().__init__(out, finished, total, unwritten="no dataset written")
 
 
-def _npz_path(out: Path, index: int) -> Path:
-    return out / "episodes" / f"ep{index:03d}.npz"
+def _resumed_episodes(
+    out: Path, dataset_id: str, tasks: list[EpisodeTask], spaces: tuple
+) -> tuple[dict[int, dict[str, Any]], dict[str, Any] | None]:
+    """The finished episodes of a collection to resume in ``out``, and its summary if it is finished.
 
+    Every record is read checked (:func:`agents.datasets.files.read_records`). A finished collection (a summary,
+    every record) is returned as such only if its dataset passes :func:`agents.datasets.minari_io.open_dataset`
+    against the summary; a damaged one is reported on stderr and built again, its episodes collected again where
+    their arrays are gone (after a finished collection they are in the dataset only). Otherwise an episode is
+    finished if its record and its arrays are there, the arrays checked against the record and the dataset's
+    spaces (:func:`agents.datasets.files.check_arrays`).
 
-def _record_path(out: Path, index: int) -> Path:
-    return out / "episodes" / f"ep{index:03d}.json"
-
-
-def _write_episode(out: Path, index: int, episode: CollectedEpisode) -> None:
-    """The episode's arrays, then its record (the commit); :raises OSError: if a file cannot be written."""
-    path = _npz_path(out, index)
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
-        with tmp.open("wb") as f:
-            np.savez(f, **episode.arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    steps = len(episode.arrays["actions"])
-    write_json_atomic(
-        _record_path(out, index), {"record": episode.record, "env_kwargs": episode.env_kwargs, "steps": steps}
-    )
-
-
-def _finished(out: Path, tasks: list[EpisodeTask], assembled: bool) -> dict[int, dict[str, Any]]:
-    """The records of the finished episodes of ``tasks`` in ``out`` (index -> {record, env_kwargs, steps}); a
-    missing, partial or foreign file counts as unfinished.
-
-    :param assembled: the dataset of these tasks is complete in ``out`` (the episodes' arrays are in it, their
-        ``.npz`` files deleted).
+    :return: (index -> {record, env_kwargs, steps} of the episodes not to run again, the summary or None).
+    :raises ResultsError: naming a record or array file that is not one this collection wrote.
     """
+    records = read_records(out, tasks)
+    if len(records) == len(tasks) and (out / SUMMARY_FILE).is_file():
+        try:
+            summary = read_summary(out)
+            steps = [r["steps"] for r in records.values()]
+            recorded = (dataset_id, len(steps) - steps.count(0), sum(steps))
+            if (summary["dataset_id"], summary["episodes"], summary["steps"]) != recorded:
+                raise DatasetError(
+                    f"{out / SUMMARY_FILE}: dataset_id, episodes and steps must be {list(recorded)} (the episode "
+                    f"records'), got {[summary['dataset_id'], summary['episodes'], summary['steps']]}"
+                )
+            open_dataset(out / dataset_id / "data", dataset_id, summary["episodes"], summary["steps"])
+        except (ResultsError, DatasetError) as err:
+            print(f"warning: --resume: {err}; the dataset is built again", file=sys.stderr)
+        else:
+            return records, summary
     done = {}
     for t in tasks:
-        path = _record_path(out, t.index)
-        if not path.is_file() or not (assembled or _npz_path(out, t.index).is_file()):
-            continue
-        try:
-            saved = json.loads(path.read_text())
-            r = saved["record"]
-            key = (r["index"], r["entry"], r["terrain"], r["seed"])
-        except (OSError, ValueError, KeyError, TypeError):
-            continue
-        if key == (t.index, t.entry, t.kind, t.seed):
-            done[t.index] = saved
-    return done
+        if t.index in records and npz_path(out, t.index).is_file():
+            check_arrays(npz_path(out, t.index), records[t.index]["steps"], spaces[1], spaces[2])
+            done[t.index] = records[t.index]
+    return done, None
 
 
 def _check_one_observation_space(tasks: list[EpisodeTask], cfg: EvalConfig) -> Any:
@@ -208,12 +216,21 @@ def _assemble(
     """
     spec, obs_space, act_space = spaces
     episodes, skipped = [], []
+    first: tuple[Path, dict[str, Any]] | None = None
     for t in tasks:
-        with np.load(_npz_path(out, t.index)) as z:
-            arrays = {k: z[k] for k in z.files}
+        path = npz_path(out, t.index)
+        arrays = read_npz(path, TRANSITION_ARRAYS)
         if len(arrays["actions"]) == 0:
             skipped.append(t.index)
             continue
+        layout = {k: (a.shape[1:], a.dtype) for k, a in arrays.items()}
+        if first is None:
+            first = (path, layout)
+        elif layout != first[1]:
+            raise ResultsError(
+                f"{path}: its arrays differ from those of {first[0]} in names, shapes or types (one dataset holds one "
+                f"layout); {RESUME_HINT}"
+            )
         episodes.append((arrays, t.seed, _episode_metadata(t, done[t.index], suite)))
     final, staging = out / dataset_id, out / f".{dataset_id}.tmp"
     shutil.rmtree(staging, ignore_errors=True)
@@ -265,21 +282,21 @@ def collect(
     import_minari()
     if policy not in POLICIES:
         raise PolicyError(
-            f"policy must be one of {list(POLICIES)} (collect records the scripted expert), got {policy!r}"
+            f"policy must be one of {list(POLICIES)} (collect records the scripted expert), got {excerpt(policy)}"
         )
     if not isinstance(suite, Suite):
         suite = load_suite(suite)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+        raise ValueError(f"workers must be an integer >= 1, got {excerpt(workers)}")
     if isinstance(wall_time_limit, bool) or not (isinstance(wall_time_limit, int | float) and wall_time_limit > 0):
-        raise ValueError(f"wall_time_limit must be a number > 0 (s), got {wall_time_limit!r}")
+        raise ValueError(f"wall_time_limit must be a number > 0 (s), got {excerpt(wall_time_limit)}")
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
     if env_kwargs.get("action_mode", "torque") != "torque":
         raise EnvArgumentError(
             f"env_kwargs.action_mode must be 'torque' (the expert's torques are the recorded actions), "
-            f"got {env_kwargs['action_mode']!r}"
+            f"got {excerpt(env_kwargs['action_mode'])}"
         )
-    tasks = episode_tasks(suite, episodes, seed)
+    suite, tasks = suite_episodes(suite, env_kwargs, episodes, seed)
     out = Path(out)
     with open_output_dir(out, resume, overwrite, COLLECT_OUTPUTS, "collect", "collect"):  # --overwrite: only ours
         entries = [
@@ -310,14 +327,11 @@ def collect(
             except OSError as err:
                 raise OutputError(f"--out {str(out)!r}: cannot write {RUN_FILE} ({err})") from None
         dataset_id = dataset_id_for(suite.name, policy)
-        assembled = (
-            resuming and (out / SUMMARY_FILE).is_file() and (out / dataset_id / "data" / "metadata.json").is_file()
-        )
-        done = _finished(out, tasks, assembled) if resuming else {}
-        if assembled:
-            if len(done) == len(tasks):  # a finished collection: nothing to do
-                return json.loads((out / SUMMARY_FILE).read_text())
-            done = _finished(out, tasks, False)  # records without their arrays do not count
+        done, finished = _resumed_episodes(out, dataset_id, tasks, spaces) if resuming else ({}, None)
+        if finished is not None:  # a finished collection: nothing to do
+            for t in tasks:
+                npz_path(out, t.index).unlink(missing_ok=True)  # left by an interrupt after the summary was written
+            return finished
         todo = [t for t in tasks if t.index not in done]
         new_steps = 0
 
@@ -325,10 +339,14 @@ def collect(
             nonlocal new_steps
             index = int(episode.record["index"])
             try:
-                _write_episode(out, index, episode)
+                write_episode(out, index, episode.arrays, episode.record, episode.env_kwargs)
             except OSError as err:
                 raise OutputError(f"--out {str(out)!r}: cannot write episode {index} ({err})") from None
-            done[index] = {"record": episode.record, "env_kwargs": episode.env_kwargs}
+            done[index] = {
+                "record": episode.record,
+                "env_kwargs": episode.env_kwargs,
+                "steps": len(episode.arrays["actions"]),
+            }
             new_steps += len(episode.arrays["actions"])
 
         wall0 = time.perf_counter()
@@ -372,7 +390,7 @@ def collect(
                 f"--out {str(out)!r}: cannot write the dataset ({err}); the finished episodes are kept in "
                 f"{out / 'episodes'} (fix the cause and rerun with --resume)"
             ) from None
-        steps = sum(int(json.loads(_record_path(out, t.index).read_text())["steps"]) for t in tasks)
+        steps = sum(int(done[t.index]["steps"]) for t in tasks)
         size = sum(p.stat().st_size for p in data_path.iterdir() if p.is_file())
         records = [done[t.index]["record"] for t in tasks]
         summary = {
@@ -395,5 +413,5 @@ def collect(
         }
         write_json_atomic(out / SUMMARY_FILE, json_safe(summary))
         for t in tasks:  # their arrays are in the dataset now
-            _npz_path(out, t.index).unlink(missing_ok=True)
+            npz_path(out, t.index).unlink(missing_ok=True)
         return summary

@@ -23,6 +23,7 @@ from agents.evaluation.machine import machines_differ
 from agents.evaluation.metrics import json_safe
 from agents.evaluation.results_io import load_results
 from agents.outputs import OutputError, output_dir, write_json_atomic
+from quad_uneven_env.fields import excerpt
 
 FAILURE_KINDS = ("fall", "diverged", "stall", "error")
 """How an episode that missed the goal ended: a fall (or leaving the terrain), a divergence, a stall (time or
@@ -100,7 +101,7 @@ def mcnemar_exact_p(fixed: int, broken: int) -> float:
     :param broken: episodes the baseline succeeded in and the candidate failed.
     """
     if fixed < 0 or broken < 0:
-        raise ValueError(f"fixed and broken must be counts >= 0, got {fixed!r} and {broken!r}")
+        raise ValueError(f"fixed and broken must be counts >= 0, got {excerpt(fixed)} and {excerpt(broken)}")
     n = fixed + broken
     if n == 0:
         return 1.0

@@ -24,10 +24,11 @@ from agents.evaluation.metrics import (
     stability_metrics,
     timing_metrics,
 )
-from agents.evaluation.policies import expert_model_of, make_policy, policy_env_kwargs
+from agents.evaluation.policies import expert_model_of, make_policy, make_policy_env
 from agents.evaluation.suites import EpisodeTask
 from agents.waypoints import WaypointFollower, load_waypoints
 from quad_uneven_env.constants import LEG_NAMES
+from quad_uneven_env.fields import clip, excerpt
 from quad_uneven_env.randomization import factor_values
 from quad_uneven_env.spatial import wrap_angle, yaw_of_quat
 
@@ -68,14 +69,16 @@ def check_env_kwargs(env_kwargs: Any) -> dict[str, Any]:
     from quad_uneven_env.env import QuadUnevenEnv
 
     if not isinstance(env_kwargs, dict) or not all(isinstance(k, str) for k in env_kwargs):
-        raise EnvArgumentError(f"env_kwargs must be a JSON object of QuadUneven-v0 arguments, got {env_kwargs!r}")
+        raise EnvArgumentError(
+            f"env_kwargs must be a JSON object of QuadUneven-v0 arguments, got {excerpt(env_kwargs)}"
+        )
     allowed = [n for n in inspect.signature(QuadUnevenEnv.__init__).parameters if n != "self"]
     for key in env_kwargs:
         if key in EVALUATION_ENV_KWARGS:
             raise EnvArgumentError(f"env_kwargs.{key} is set by {EVALUATION_ENV_KWARGS[key]}; remove it")
         if key not in allowed:
             settable = [n for n in allowed if n not in EVALUATION_ENV_KWARGS]
-            raise EnvArgumentError(f"env_kwargs.{key}: unknown QuadUneven-v0 argument; allowed: {settable}")
+            raise EnvArgumentError(f"env_kwargs.{clip(key, 40)}: unknown QuadUneven-v0 argument; allowed: {settable}")
     return dict(env_kwargs)
 
 
@@ -136,13 +139,14 @@ class EpisodeObserver(Protocol):
 
 
 def make_env(task: EpisodeTask, cfg: EvalConfig, render: bool = False) -> gym.Env:
-    """The QuadUneven-v0 env of ``task`` with the policy's arguments and a time limit of ``cfg.time_limit``.
+    """The env of ``task`` for the policy (:func:`~agents.evaluation.policies.make_policy_env`: for an SB3 model the
+    env it was trained in) with ``cfg.env_kwargs`` and a time limit of ``cfg.time_limit``.
 
     The entry's ``randomization`` and ``command`` (if any) override those given in ``cfg.env_kwargs``; an entry
     with waypoints and no command gets the command ``{}`` (all zero, steered by the waypoint follower) unless
     ``cfg.env_kwargs`` gives one.
     """
-    kwargs = {**policy_env_kwargs(cfg.policy), **cfg.env_kwargs}
+    kwargs = dict(cfg.env_kwargs)
     if task.randomization is not None:
         kwargs["randomization"] = task.randomization
     if task.command is not None:
@@ -156,7 +160,8 @@ def make_env(task: EpisodeTask, cfg: EvalConfig, render: bool = False) -> gym.En
         steps = 1  # invalid timestep or frame_skip: the env's own check below names the field
     if render:
         kwargs.update(render_mode="rgb_array", width=VIDEO_SIZE[0], height=VIDEO_SIZE[1])
-    return gym.make("QuadUneven-v0", terrain={"kind": task.kind, **task.params}, max_episode_steps=steps, **kwargs)
+    kwargs.update(terrain={"kind": task.kind, **task.params}, max_episode_steps=steps)
+    return make_policy_env(cfg.policy, **kwargs)
 
 
 def _factors(drawn: dict[str, float] | None, pushes: list[dict[str, Any]]) -> dict[str, float] | None:
@@ -235,7 +240,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig, observer: EpisodeObserver | Non
     state, start = None, np.ones(1, dtype=bool)
     work, success, end_reason, fall_reason, error = 0.0, False, "time_limit", None, None
     step = 0
-    residual_torque = getattr(u.controller, "residual_torque", None)  # a ResidualController's (N m)
+    residual = "residual_torque" in info  # a residual model's env reports its residual torque (N m)
     residual_sum = 0.0
     try:
         if observer is not None:
@@ -256,8 +261,8 @@ def run_task(task: EpisodeTask, cfg: EvalConfig, observer: EpisodeObserver | Non
             step += 1
             if observer is not None:
                 observer.step(action, obs, reward, terminated, truncated, info)
-            if residual_torque is not None:
-                residual_sum += residual_torque(action)
+            if residual:
+                residual_sum += float(info["residual_torque"])
             times.append(float(u.data.time))
             cogs.append(info["cog"])
             feet.append(info["feet_pos"])
@@ -316,7 +321,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig, observer: EpisodeObserver | Non
         "failure_log": [str(s) for s in failure_log[:MAX_FAILURE_LOG]] if failure_log is not None else None,
         "failure_count": len(failure_log) if failure_log is not None else None,
         "expert_model": expert_model_of(policy),
-        "mean_residual_torque": residual_sum / step if residual_torque is not None and step else None,
+        "mean_residual_torque": residual_sum / step if residual and step else None,
         "command": task.command,
         "waypoints_reached": follower.reached if follower is not None else None,
         "waypoints_total": len(follower.config.points) if follower is not None else None,

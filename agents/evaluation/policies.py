@@ -9,17 +9,17 @@ from typing import Any
 import gymnasium as gym
 
 from agents.policy import Policy, ZeroActionPolicy
+from quad_uneven_env import ENV_ID
+from quad_uneven_env.fields import excerpt
 
 POLICY_ENV_KWARGS: dict[str, dict[str, Any]] = {
     # The zero action in joint_pd mode holds the standing pose.
     "zero": {"action_mode": "joint_pd"},
     # The expert installs its computed-torque controller as the env's physics-rate hook.
     "expert": {"action_mode": "torque"},
-    # A learned agent: the env defaults plus the env_kwargs of its training run (rl_meta.json next to
-    # the model, see agents.rl.model_io), unless the user passes --env-kwargs.
-    "sb3": {},
 }
-"""Environment keyword arguments per policy kind (the one table; user env kwargs override it)."""
+"""QuadUneven-v0 keyword arguments per named policy (the one table; user env kwargs override it). A learned agent
+runs in the env it was trained in (:func:`agents.rl.model_io.make_model_env`)."""
 
 NAMED_POLICIES = ("zero", "expert")
 """Policy names; anything else must be the path of an SB3 model ``.zip``."""
@@ -41,21 +41,30 @@ def policy_kind(name: str) -> str:
         return name
     if str(name).endswith(".zip"):
         return "sb3"
-    raise PolicyError(f"policy must be one of {list(NAMED_POLICIES)} or the path of an SB3 model .zip, got {name!r}")
+    raise PolicyError(
+        f"policy must be one of {list(NAMED_POLICIES)} or the path of an SB3 model .zip, got {excerpt(name)}"
+    )
 
 
-def policy_env_kwargs(name: str) -> dict[str, Any]:
-    """Environment keyword arguments the policy ``name`` needs (a copy of its ``POLICY_ENV_KWARGS`` row).
+def make_policy_env(name: str, **kwargs: Any) -> gym.Env:
+    """The env the policy ``name`` runs in, with ``kwargs`` over its own arguments.
 
-    For an SB3 model, the ``env_kwargs`` recorded by its training run (``rl_meta.json``) are added.
+    ``"zero"`` and ``"expert"``: ``QuadUneven-v0`` with their :data:`POLICY_ENV_KWARGS` row. An SB3 model: the env
+    it was trained in, rebuilt from its ``rl_meta.json`` (:func:`agents.rl.model_io.make_model_env`: for a residual
+    model ``QuadUnevenResidual-v0`` with the expert and residual of its training).
+
+    :raises PolicyError: on an unknown name or unreadable model metadata; the env's ``ValueError`` or
+        ``TypeError`` on a bad argument.
     """
     kind = policy_kind(name)
-    kwargs = dict(POLICY_ENV_KWARGS[kind])
-    if kind == "sb3":
-        from agents.rl.model_io import metadata_env_kwargs
+    if kind != "sb3":
+        return gym.make(ENV_ID, **{**POLICY_ENV_KWARGS[kind], **kwargs})
+    from agents.rl.model_io import ModelError, make_model_env
 
-        kwargs.update(metadata_env_kwargs(name))
-    return kwargs
+    try:
+        return make_model_env(name, **kwargs)
+    except ModelError as err:
+        raise PolicyError(str(err)) from None
 
 
 def _expert(env: gym.Env, expert_config: Mapping[str, Any] | None) -> Policy:
@@ -87,7 +96,7 @@ def model_algo(path: str | Path, algo: str | None = None) -> str:
             raise PolicyError(str(err)) from None
         algo = (meta or {}).get("algo") or "ppo"
     if algo not in SB3_ALGOS:
-        raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {algo!r}")
+        raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {excerpt(algo)}")
     return algo
 
 
@@ -100,7 +109,7 @@ def _sb3(path: str, env: gym.Env, algo: str | None, allow_pickle: bool) -> Polic
     from agents.rl.model_io import ModelError, load_sb3_policy
 
     # One intra-op thread: the policy MLP is tiny, and with several threads each predict contends with the
-    # simulation (and with the other episode workers) for the cores: 22 ms instead of 1.3 ms a step on 2 cores.
+    # simulation (and with the other episode workers) for the cores.
     torch.set_num_threads(1)
     try:
         return load_sb3_policy(path, env, algo, allow_pickle)
@@ -115,16 +124,18 @@ def make_policy(
     allow_pickle: bool = False,
     expert_config: Mapping[str, Any] | None = None,
 ) -> Policy:
-    """A policy with SB3's ``predict`` for ``env`` (built with :func:`policy_env_kwargs` of ``name``).
+    """A policy with SB3's ``predict`` for ``env`` (built by :func:`make_policy_env` of ``name``).
 
     :param name: ``"zero"`` (the zero action), ``"expert"`` (``agents.expert.attach_expert(env)``: the expert,
-        installed as the physics-rate controller of ``env.unwrapped``), or the path of an SB3 model ``.zip`` (a residual
-        model, per its ``rl_meta.json``, installs the expert plus residual: :mod:`agents.rl.model_io`).
+        installed as the physics-rate controller of ``env.unwrapped``), or the path of an SB3 model ``.zip``, loaded
+        for the env it was trained in, which ``env`` must be (:func:`agents.rl.model_io.load_sb3_policy`: its robot,
+        and for a residual model ``QuadUnevenResidual-v0`` with the expert and residual of its training).
     :param algo: ``"ppo"`` or ``"sac"``: the class an SB3 model file is loaded with (None: :func:`model_algo`).
     :param allow_pickle: unpickle files of the model folder (trusted files only; default: refused).
     :param expert_config: fields of :class:`agents.expert.ExpertConfig` for ``"expert"`` (e.g.
         ``{"model": "oracle"}``); None: the defaults.
-    :raises PolicyError: on an unknown name, a missing model file or expert module, or an unknown algo.
+    :raises PolicyError: on an unknown name, a missing model file or expert module, an unknown algo, or an env the
+        model was not trained in.
     """
     kind = policy_kind(name)
     if kind == "zero":

@@ -22,6 +22,7 @@ from typing import Any
 
 from agents.evaluation.episode import EpisodeResult, EvalConfig, run_task
 from agents.evaluation.suites import EpisodeTask
+from quad_uneven_env.fields import excerpt
 
 __all__ = [
     "BACKENDS",
@@ -111,7 +112,7 @@ def ray_session(
     """
     ray = import_ray(what)
     if num_cpus is not None and (isinstance(num_cpus, bool) or not isinstance(num_cpus, int) or num_cpus < 1):
-        raise ValueError(f"num_cpus must be an integer >= 1, got {num_cpus!r}")
+        raise ValueError(f"num_cpus must be an integer >= 1, got {excerpt(num_cpus)}")
     if ray.is_initialized():
         yield ray
         return

@@ -1,7 +1,9 @@
 """The one reader of an evaluation's results: ``DIR/results.json`` and the episode records ``DIR/episodes/epNNN.json``.
 
 ``quad-uneven compare`` and ``select --reference`` read results.json, ``evaluate --resume`` reads the records
-of the finished episodes (and builds results.json and the report from them). Every field they use is checked
+of the finished episodes (and builds results.json and the report from them), ``collect --resume`` the episode
+files of a collection (a record with the episode's env arguments and step count, :func:`load_collected_episode`)
+and its summary. Every field they use is checked
 on the way in: a bool is a JSON bool (``"success": "yes"`` is refused, not counted), a number a finite number,
 a list a list, a required key present; the file is strict JSON (no NaN or Infinity, no key given twice).
 Anything else raises :class:`ResultsError`, whose message names the file and the field
@@ -17,6 +19,8 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from quad_uneven_env.fields import excerpt
+
 __all__ = [
     "END_REASONS",
     "EPISODE_FIELDS",
@@ -24,6 +28,8 @@ __all__ = [
     "RESULTS_FILE",
     "ResultsError",
     "check_episode",
+    "check_object",
+    "load_collected_episode",
     "load_record",
     "load_results",
     "read_json",
@@ -153,14 +159,9 @@ OVERALL_FIELDS: dict[str, Kind] = {
 """Fields of results.json's ``summary.overall`` that ``select --reference`` reads (required when asked for)."""
 
 
-def _show(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
 def _check(where: str, field: str, value: Any, kind: Kind) -> None:
     if not kind[1](value):
-        raise ResultsError(f"{where}: {field} must be {kind[0]}, got {_show(value)}")
+        raise ResultsError(f"{where}: {field} must be {kind[0]}, got {excerpt(value)}")
 
 
 def _check_fields(
@@ -190,7 +191,7 @@ def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     keys = [k for k, _ in pairs]
     repeated = sorted({k for k in keys if keys.count(k) > 1})
     if repeated:
-        raise ValueError(f"key {repeated[0]!r} given more than once in one object")
+        raise ValueError(f"key {excerpt(repeated[0])} given more than once in one object")
     return dict(pairs)
 
 
@@ -252,6 +253,35 @@ def load_results(folder: str | Path, summary: bool = False) -> dict[str, Any]:
         _check_fields(where, "", data, {"summary": OBJECT}, ("summary",))
         _check_fields(where, "summary.", data["summary"], {"overall": OBJECT}, ("overall",))
         _check_fields(where, "summary.overall.", data["summary"]["overall"], OVERALL_FIELDS, OVERALL_FIELDS)
+    return data
+
+
+COLLECTED_EPISODE_FIELDS: dict[str, Kind] = {"record": OBJECT, "env_kwargs": OBJECT, "steps": COUNT}
+"""Fields of a collection's episode file ``DIR/episodes/epNNN.json`` (all required; ``record`` as
+:func:`load_record` checks it)."""
+
+
+def check_object(data: Any, where: str, fields: Mapping[str, Kind], required: Iterable[str], prefix: str = "") -> dict:
+    """``data`` if it is a JSON object whose ``fields`` have their kinds and which has the ``required`` ones.
+
+    :param where: the file, for the message.
+    :param prefix: the object's name in that file followed by a dot (``"summary."``), or "" at the top level.
+    :raises ResultsError: naming ``where`` and the field.
+    """
+    _check(where, prefix[:-1] or "the top level", data, OBJECT)
+    _check_fields(where, prefix, data, fields, required)
+    return data
+
+
+def load_collected_episode(path: Path) -> dict[str, Any]:
+    """The checked episode file of a collection (``DIR/episodes/epNNN.json``): ``record`` (every field an episode
+    record read back needs, of its type), ``env_kwargs`` (an object) and ``steps`` (an integer >= 0).
+
+    :raises ResultsError: naming the file and the field.
+    """
+    where = str(path)
+    data = check_object(read_json(path), where, COLLECTED_EPISODE_FIELDS, COLLECTED_EPISODE_FIELDS)
+    check_episode(data["record"], where, "record")
     return data
 
 

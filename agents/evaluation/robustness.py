@@ -28,6 +28,7 @@ from agents.evaluation.run import evaluate
 from agents.evaluation.suites import Suite, suite_from_dict
 from agents.outputs import output_dir, write_json_atomic
 from agents.plotting import pyplot, save
+from quad_uneven_env.fields import excerpt
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,13 +107,13 @@ def robustness_sweep(
     :raises ValueError: on an unknown factor, no values, ``seeds`` < 1, or what :func:`evaluate` rejects.
     """
     if factor not in FACTORS:
-        raise ValueError(f"factor must be one of {list(FACTORS)}, got {factor!r}")
+        raise ValueError(f"factor must be one of {list(FACTORS)}, got {excerpt(factor)}")
     f = FACTORS[factor]
     values = tuple(float(v) for v in (f.values if values is None else values))
     if not values:
         raise ValueError("values must not be empty")
     if not (isinstance(seeds, int) and seeds >= 1):
-        raise ValueError(f"seeds must be an integer >= 1, got {seeds!r}")
+        raise ValueError(f"seeds must be an integer >= 1, got {excerpt(seeds)}")
     terrain = dict(terrain or DEFAULT_TERRAIN)
     out = Path(out)
     randomizations = [f.randomization(v) for v in values]

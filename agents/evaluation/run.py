@@ -48,8 +48,17 @@ from agents.evaluation.store import (
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite, scale_suite
 from agents.evaluation.targets import check_command_targets, check_targets
 from agents.outputs import OutputError, write_json_atomic
+from quad_uneven_env.fields import excerpt
 
-__all__ = ["EvaluationInterrupted", "evaluate", "make_policy", "preflight", "run_tasks", "write_results"]
+__all__ = [
+    "EvaluationInterrupted",
+    "evaluate",
+    "make_policy",
+    "preflight",
+    "run_tasks",
+    "suite_episodes",
+    "write_results",
+]
 
 
 def _ignore_sigint() -> None:
@@ -121,6 +130,8 @@ def preflight(tasks: list[EpisodeTask], cfg: EvalConfig) -> None:
     def build(task: EpisodeTask):
         try:
             return make_env(task, cfg)
+        except PolicyError:  # the model's metadata: named by the policy's own message
+            raise
         except (ValueError, TypeError) as err:
             msg = str(err).split(" was raised from the environment creator")[0]  # gymnasium's suffix repeats kwargs
             raise EnvArgumentError(msg if msg.startswith("env_kwargs") else f"env_kwargs: {msg}") from None
@@ -209,24 +220,21 @@ def evaluate(
     if kind == "sb3":
         algo = model_algo(policy, algo)
     elif algo is not None and algo not in SB3_ALGOS:
-        raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {algo!r}")
+        raise PolicyError(f"algo must be one of {list(SB3_ALGOS)}, got {excerpt(algo)}")
     else:
         algo = "ppo"  # unused by a named policy
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+        raise ValueError(f"workers must be an integer >= 1, got {excerpt(workers)}")
     if isinstance(wall_time_limit, bool) or not (isinstance(wall_time_limit, int | float) and wall_time_limit > 0):
-        raise ValueError(f"wall_time_limit must be a number > 0 (s), got {wall_time_limit!r}")
+        raise ValueError(f"wall_time_limit must be a number > 0 (s), got {excerpt(wall_time_limit)}")
     if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
+        raise ValueError(f"backend must be one of {list(BACKENDS)}, got {excerpt(backend)}")
     if (address is not None or ship_code) and backend != "ray":
-        raise ValueError(f"address and ship_code are for backend 'ray' only, got backend {backend!r}")
+        raise ValueError(f"address and ship_code are for backend 'ray' only, got backend {excerpt(backend)}")
     if backend == "ray":
         import_ray()  # without the extra, fail before anything is written
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
-    if suite.scale == "leg_length":
-        factor = robot_scale(env_kwargs.get("robot", "paper"))
-        suite = dataclasses.replace(suite, scale="none") if factor == 1.0 else scale_suite(suite, factor)
-    tasks = episode_tasks(suite, episodes, seed)
+    suite, tasks = suite_episodes(suite, env_kwargs, episodes, seed)
     out = Path(out)
     with open_output_dir(out, resume=resume, overwrite=overwrite) as manifest:
         identity = run_identity(
@@ -319,15 +327,33 @@ def write_results(out: Path, results: Mapping[str, Any]) -> Path:
     return write_json_atomic(out / "results.json", dict(results))
 
 
+def suite_episodes(
+    suite: Suite, env_kwargs: Mapping[str, Any], episodes: int | None, seed: int
+) -> tuple[Suite, list[EpisodeTask]]:
+    """The suite as run on the robot of ``env_kwargs`` and its episodes: what ``evaluate`` and ``collect`` run.
+
+    A suite with ``scale: leg_length`` is magnified by :func:`robot_scale` (:func:`scale_suite`; the result says
+    ``scale: none``); then :func:`~agents.evaluation.suites.episode_tasks` lists its episodes.
+
+    :param episodes: at most this many seeds per terrain entry (None: all).
+    :param seed: offset added to every seed of the suite.
+    :raises SuiteError: if the scaled suite is invalid; ``EnvArgumentError`` if the robot cannot be loaded.
+    """
+    if suite.scale == "leg_length":
+        factor = robot_scale(env_kwargs.get("robot", "paper"))
+        suite = dataclasses.replace(suite, scale="none") if factor == 1.0 else scale_suite(suite, factor)
+    return suite, episode_tasks(suite, episodes, seed)
+
+
 def robot_scale(robot: Any) -> float:
     """-: the leg length of ``robot`` (a name or a YAML path) over the paper robot's 0.42 m (1 for the paper's).
 
     :raises EnvArgumentError: naming ``env_kwargs.robot`` if it cannot be loaded.
     """
-    from quad_uneven_env.robot.description import PAPER_LEG_LENGTH, load_robot
+    from quad_uneven_env.robot.description import load_robot
 
     try:
         desc = load_robot(robot)
     except (ValueError, TypeError) as err:
         raise EnvArgumentError(f"env_kwargs.robot: {err}") from None
-    return 1.0 if desc.config is not None else desc.leg_length / PAPER_LEG_LENGTH
+    return desc.length_ratio

@@ -18,6 +18,7 @@ import hashlib
 import json
 import os
 import zipfile
+import zlib
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,7 @@ from agents.evaluation.episode import EpisodeResult
 from agents.evaluation.results_io import ResultsError, load_record, read_json
 from agents.evaluation.suites import EpisodeTask, Suite
 from agents.outputs import LOCK_FILE, MANIFEST_FILE, OutputError, OutputManifest, output_dir, write_json_atomic
+from quad_uneven_env.fields import clip, excerpt
 
 __all__ = [
     "EVAL_OUTPUTS",
@@ -169,8 +171,8 @@ def check_resume(
     for key in keys:
         if recorded.get(key, {} if key == "expert_config" else None) != identity.get(key):
             raise OutputError(
-                f"--resume: {key} differs from the run recorded in {path} (recorded {recorded.get(key)!r}, "
-                f"now {identity.get(key)!r}); pass --overwrite to start over or choose another --out"
+                f"--resume: {key} differs from the run recorded in {path} (recorded {excerpt(recorded.get(key))}, "
+                f"now {excerpt(identity.get(key))}); pass --overwrite to start over or choose another --out"
             )
     return True
 
@@ -254,14 +256,22 @@ def load_records(out: Path, tasks: Sequence[EpisodeTask]) -> dict[int, dict[str,
             record = load_record(path)
         except ResultsError as err:
             raise ResultsError(f"--resume: {err}; {RESUME_HINT}") from None
-        for field, expected in (("index", t.index), ("entry", t.entry), ("terrain", t.kind), ("seed", t.seed)):
-            if record[field] != expected:
-                raise ResultsError(
-                    f"--resume: {path}: {field} must be {expected!r} (episode {t.index} of the run), got "
-                    f"{record[field]!r}; {RESUME_HINT}"
-                )
+        check_task_record(path, record, t)
         done[t.index] = record
     return done
+
+
+def check_task_record(path: Path, record: Mapping[str, Any], task: EpisodeTask) -> None:
+    """Refuse the checked episode ``record`` read from ``path`` unless it is ``task``'s (index, entry, terrain, seed).
+
+    :raises ResultsError: naming the file and the first field that differs.
+    """
+    for field, expected in (("index", task.index), ("entry", task.entry), ("terrain", task.kind), ("seed", task.seed)):
+        if record[field] != expected:
+            raise ResultsError(
+                f"--resume: {path}: {field} must be {excerpt(expected)} (episode {task.index} of the run), got "
+                f"{excerpt(record[field])}; {RESUME_HINT}"
+            )
 
 
 TRACE_ARRAYS = ("time", "cog", "feet", "index", "contact", "yaw")
@@ -271,16 +281,16 @@ TERRAIN_ARRAYS = ("heights", "origin", "cell_size")
 """Arrays every terrain file holds."""
 
 
-def _read_npz(path: Path, required: Sequence[str]) -> dict[str, np.ndarray]:
+def read_npz(path: Path, required: Sequence[str]) -> dict[str, np.ndarray]:
     """The arrays of ``path`` (no pickled objects).
 
-    :raises ResultsError: if it is unreadable or lacks one of ``required``.
+    :raises ResultsError: if it is unreadable (a truncated or garbage file) or lacks one of ``required``.
     """
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
-        raise ResultsError(f"{path}: not an array file quad-uneven wrote ({err}); {RESUME_HINT}") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as err:
+        raise ResultsError(f"{path}: not an array file quad-uneven wrote ({clip(str(err))}); {RESUME_HINT}") from None
     missing = [k for k in required if k not in arrays]
     if missing:
         raise ResultsError(f"{path}: array {missing[0]!r} is missing (needed: {list(required)}); {RESUME_HINT}")
@@ -296,8 +306,8 @@ def load_results_for_report(out: Path, records: Sequence[Mapping[str, Any]], tas
     for t in tasks:
         if not t.first_of_entry:
             continue
-        trace = _read_npz(_trace_path(out, t.index), TRACE_ARRAYS)
-        z = _read_npz(_terrain_path(out, t.index), TERRAIN_ARRAYS)
+        trace = read_npz(_trace_path(out, t.index), TRACE_ARRAYS)
+        z = read_npz(_terrain_path(out, t.index), TERRAIN_ARRAYS)
         try:
             terrain = {"heights": z["heights"], "origin": tuple(z["origin"]), "cell_size": float(z["cell_size"])}
         except (TypeError, ValueError) as err:

@@ -45,7 +45,7 @@ import numpy as np
 from agents.waypoints import load_waypoints
 from quad_uneven_env.command import load_command
 from quad_uneven_env.config import CONFIG_DIR, read_yaml, resolve_config_path
-from quad_uneven_env.fields import REQUIRED, Param
+from quad_uneven_env.fields import REQUIRED, Param, excerpt
 from quad_uneven_env.randomization import load_randomization
 from quad_uneven_env.terrain import TERRAIN_KINDS, parse_terrain_spec
 from quad_uneven_env.terrain.kinds import KINDS
@@ -205,30 +205,30 @@ def _plain(value: Any) -> Any:
 
 def _seeds(value: Any, field: str) -> tuple[int, ...]:
     if not isinstance(value, list) or not value:
-        raise SuiteError(f"{field} must be a non-empty list of integers >= 0, got {value!r}")
+        raise SuiteError(f"{field} must be a non-empty list of integers >= 0, got {excerpt(value)}")
     value = [_check(dataclasses.replace(SEED, name=f"{field}[{k}]"), s) for k, s in enumerate(value)]
     if len(set(value)) != len(value):
-        raise SuiteError(f"{field} must not repeat a seed, got {value!r}")
+        raise SuiteError(f"{field} must not repeat a seed, got {excerpt(value)}")
     return tuple(int(s) for s in value)
 
 
 def _entry(raw: Any, i: int, goal_distance: float) -> TerrainEntry:
     where = f"terrains[{i}]"
     if not isinstance(raw, Mapping):
-        raise SuiteError(f"{where} must be a mapping with fields {list(ENTRY_FIELDS)}, got {raw!r}")
-    unknown = sorted(set(raw) - set(ENTRY_FIELDS))
+        raise SuiteError(f"{where} must be a mapping with fields {list(ENTRY_FIELDS)}, got {excerpt(raw)}")
+    unknown = sorted(set(raw) - set(ENTRY_FIELDS), key=str)
     if unknown:
-        raise SuiteError(f"{where}: unknown field(s) {unknown}; allowed: {list(ENTRY_FIELDS)}")
+        raise SuiteError(f"{where}: unknown field(s) {excerpt(unknown)}; allowed: {list(ENTRY_FIELDS)}")
     for key in ("kind", "seeds"):
         if key not in raw:
             raise SuiteError(f"{where}.{key} is required")
     kind = raw["kind"]
     if not isinstance(kind, str) or kind not in TERRAIN_KINDS:
-        raise SuiteError(f"{where}.kind must be one of {list(TERRAIN_KINDS)}, got {kind!r}")
+        raise SuiteError(f"{where}.kind must be one of {list(TERRAIN_KINDS)}, got {excerpt(kind)}")
     params = raw.get("params")
     params = {} if params is None else params
     if not isinstance(params, Mapping):
-        raise SuiteError(f"{where}.params must be a mapping of parameter names to values, got {params!r}")
+        raise SuiteError(f"{where}.params must be a mapping of parameter names to values, got {excerpt(params)}")
     if "kind" in params or "params" in params:
         raise SuiteError(f"{where}.params must not contain 'kind' or 'params'")
     try:
@@ -239,7 +239,7 @@ def _entry(raw: Any, i: int, goal_distance: float) -> TerrainEntry:
     randomization = raw.get("randomization")
     if randomization is not None:
         if not isinstance(randomization, str | Mapping):
-            raise SuiteError(f"{where}.randomization must be a preset name or a mapping, got {randomization!r}")
+            raise SuiteError(f"{where}.randomization must be a preset name or a mapping, got {excerpt(randomization)}")
         try:
             load_randomization(randomization, f"{where}.randomization")
         except ValueError as e:
@@ -288,23 +288,25 @@ def suite_from_dict(raw: Mapping[str, Any], source: str = "") -> Suite:
     """
     if not isinstance(raw, Mapping):
         raise SuiteError(f"a suite must be a mapping with fields {list(SUITE_FIELDS)}, got {type(raw).__name__}")
-    unknown = sorted(set(raw) - set(SUITE_FIELDS) - {"scale"})
+    unknown = sorted(set(raw) - set(SUITE_FIELDS) - {"scale"}, key=str)
     if unknown:
-        raise SuiteError(f"unknown field(s) {unknown}; allowed: {[*SUITE_FIELDS, 'scale']}")
+        raise SuiteError(f"unknown field(s) {excerpt(unknown)}; allowed: {[*SUITE_FIELDS, 'scale']}")
     scale = raw.get("scale", "none")
     if scale not in SUITE_SCALES:
-        raise SuiteError(f"scale must be one of {list(SUITE_SCALES)}, got {scale!r}")
+        raise SuiteError(f"scale must be one of {list(SUITE_SCALES)}, got {excerpt(scale)}")
     missing = [k for k in SUITE_FIELDS if k not in raw]
     if missing:
         raise SuiteError(f"missing field(s) {missing}; a suite needs {list(SUITE_FIELDS)}")
     name = raw["name"]
     if not isinstance(name, str) or not name.strip():
-        raise SuiteError(f"name must be a non-empty string, got {name!r}")
+        raise SuiteError(f"name must be a non-empty string, got {excerpt(name)}")
     goal = _check(GOAL_DISTANCE, raw["goal_distance"])
     limit = _check(TIME_LIMIT, raw["time_limit"])
     terrains = raw["terrains"]
     if not isinstance(terrains, list) or not terrains:
-        raise SuiteError(f"terrains must be a non-empty list of {{kind, params, seeds}} entries, got {terrains!r}")
+        raise SuiteError(
+            f"terrains must be a non-empty list of {{kind, params, seeds}} entries, got {excerpt(terrains)}"
+        )
     entries = tuple(_entry(t, i, goal) for i, t in enumerate(terrains))
     return Suite(name, goal, limit, entries, source, scale)
 
@@ -324,7 +326,7 @@ def scale_suite(suite: Suite, factor: float) -> Suite:
         m), if a heightmap's heights are a .npy path, or if the scaled goal lies beyond a grid's exit (naming it).
     """
     if not (factor > 0 and factor < 100):
-        raise SuiteError(f"scale factor must be a number in (0, 100), got {factor!r}")
+        raise SuiteError(f"scale factor must be a number in (0, 100), got {excerpt(factor)}")
     terrains = []
     for i, e in enumerate(suite.terrains):
         try:
@@ -368,7 +370,8 @@ def scale_terrain_params(kind: str, params: Mapping[str, Any], factor: float) ->
                 scaled = _magnified(value, factor)
             except TypeError:
                 raise ValueError(
-                    f"{p.name} cannot be scaled to the robot: give the values (m) in the suite, not a file ({value!r})"
+                    f"{p.name} cannot be scaled to the robot: give the values (m) in the suite, not a file "
+                    f"({excerpt(value)})"
                 ) from None
             if scaled is not None:
                 out[p.name] = scaled

@@ -47,8 +47,10 @@ Its parts, one job per module:
 - :mod:`~agents.expert.friction`: the friction the cones and footholds assume (footholds steeper than its
   pyramid holds are refused, :func:`foothold_limits_for_friction`), steep ground, and slips;
 - :mod:`~agents.expert.recovery`: replanning when the base is pushed off its plan;
-- :mod:`~agents.expert.hook`: the physics-rate control, by the controller's compiled step or its readable call;
-- :mod:`~agents.expert.policy`: :class:`ExpertPolicy`, composing them, and :func:`attach_expert`.
+- :mod:`~agents.expert.hook`: the physics-rate control, one method per physics step (the measurement, the checks,
+  the controller's compiled step or in its place its readable call, the adaptive gains);
+- :mod:`~agents.expert.policy`: :class:`ExpertPolicy`, composing them into the env's physics-rate controller, and
+  :func:`attach_expert`.
 
 It never raises out of a rollout: any failure of the planner is handled like a failed plan, and a failure of
 the controller at a physics step (logged with its reason) keeps the last good torques for that step.

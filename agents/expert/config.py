@@ -13,8 +13,8 @@ from agents.control.controller import Gains
 from agents.control.inverse_dynamics import DISTRIBUTIONS
 from planners.gait import validate_durations
 from planners.scenario import BODY_PITCH_MODES
-from quad_uneven_env.fields import check_fields, from_mapping, param
-from quad_uneven_env.robot.description import PAPER_MASS, RobotDescription
+from quad_uneven_env.fields import check_fields, excerpt, from_mapping, param
+from quad_uneven_env.robot.description import RobotDescription
 from quad_uneven_env.robot.dynamics import BACKENDS
 
 EXPERT_MODELS: tuple[str, ...] = ("nominal", "oracle")
@@ -87,11 +87,11 @@ class ExpertConfig:
     :data:`~agents.expert.friction.SLIP_CHECK_EVERY` physics steps) multiplies it by ``friction_decrease``, at
     most once per :data:`~agents.expert.friction.SLIP_COOLDOWN` s and never below ``friction_min``; the
     cones and the foothold slope limit follow at once, and every change is logged. It is never raised
-    again within the episode. Off by default: it walks floors of 0.3-0.45, but under hard randomization
-    pushed feet read as slips and it loses ``robust_hard`` episodes (docs/robustness.md#friction-adaptation)."""
+    again within the episode. Off by default: a foot shoved by a push or moved by a late torque reads as a slip
+    too (docs/robustness.md#friction-adaptation has the figures of both)."""
     slip_speed: float = param(0.05, "m/s", lo=0.0, lo_open=True)
-    """m/s, > 0: a stance foot's contact point moving faster than this (for ``SLIP_DURATION``) slips; one
-    that holds moves < 0.025 m/s on rough terrain."""
+    """m/s, > 0: a stance foot's contact point moving faster than this (for ``SLIP_DURATION``) slips (how fast a
+    holding foot moves: docs/robustness.md#friction-adaptation)."""
     friction_decrease: float = param(0.8, "-", lo=0.0, hi=1.0, lo_open=True, hi_open=True)
     """-, in (0, 1): the factor of one decrease of the assumed friction."""
     friction_min: float = param(0.25, "-", lo=0.0, hi=2.0, lo_open=True)
@@ -107,7 +107,7 @@ class ExpertConfig:
     share_nominal_world: bool = True
     """with "nominal": when the simulated robot's parameters equal the nominal ones exactly (checked at
     every reset), read the dynamics terms from the simulator's data instead of copying the measured
-    state into the nominal model: the same numbers bit for bit (tested), about 10 µs a step cheaper."""
+    state into the nominal model: the same numbers bit for bit (tested), without the copy and its stages."""
     adaptation: str = param("none", kind="choice", choices=ADAPTATIONS)
     """adaptive gains on the controller's joint torques (:mod:`agents.control.adaptation`), updated once per control
     step of the env from the plan's tracking error and the torques: "none", "knee" (the four knees' gains follow
@@ -122,14 +122,12 @@ class ExpertConfig:
     def for_robot(cls, robot: RobotDescription, overrides: Mapping[str, Any] | None = None) -> ExpertConfig:
         """The expert's settings on ``robot``: the defaults scaled from the paper robot's
         (docs/robots.md#scaling-rules), then the robot YAML's ``gait``, then ``overrides`` (fields of this class;
-        a ``gains`` mapping is merged into the scaled gains). The paper's robot gets the defaults:
-        ``ExpertConfig(**overrides)``.
+        a ``gains`` mapping is merged into the scaled gains). The paper's robot (its size ratios 1) gets the
+        defaults: ``ExpertConfig(**overrides)``.
 
         :raises ValueError: naming the field, as :func:`~quad_uneven_env.fields.from_mapping`.
         """
         given = dict(overrides or {})
-        if robot.config is not None:
-            return from_mapping(cls, given, "expert_config")
         scaled = scaled_settings(robot)
         gains = scaled.pop("gains")
         if "gains" in given and isinstance(given["gains"], Mapping):
@@ -140,18 +138,19 @@ class ExpertConfig:
         check_fields(self)
         validate_durations(self.durations)
         if not isinstance(self.gains, Gains):
-            raise ValueError(f"ExpertConfig.gains must be a Gains, got {self.gains!r}")
+            raise ValueError(f"ExpertConfig.gains must be a Gains, got {excerpt(self.gains)}")
         for name in ("recovery", "friction_adapt"):
             if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"ExpertConfig.{name} must be True or False, got {getattr(self, name)!r}")
+                raise ValueError(f"ExpertConfig.{name} must be True or False, got {excerpt(getattr(self, name))}")
         if not isinstance(self.share_nominal_world, bool):
             raise ValueError(
-                f"ExpertConfig.share_nominal_world must be True or False, got {self.share_nominal_world!r}"
+                f"ExpertConfig.share_nominal_world must be True or False, got {excerpt(self.share_nominal_world)}"
             )
 
 
 def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
-    """The fields of :class:`ExpertConfig` that depend on the robot, for a URDF robot (docs/robots.md#scaling-rules).
+    """The fields of :class:`ExpertConfig` that depend on the robot (docs/robots.md#scaling-rules); the paper
+    robot's are the defaults.
 
     With the leg-length ratio ``s = leg_length / 0.42 m`` and the mass ratio ``m = mass / 50 kg`` (the paper
     robot's): lengths (stride, swing clearance, touch-down depth, recovery distance, foothold search) scale
@@ -167,7 +166,7 @@ def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
 
     base = ExpertConfig()
     s = robot_geometry(robot).scale
-    m = robot.total_mass / PAPER_MASS
+    m = robot.mass_ratio
     t = math.sqrt(s)
     g = robot.gait
     ratio = t if g.cycle_time is None else g.cycle_time / sum(base.durations)
@@ -205,11 +204,12 @@ def standing_cog_height(robot: RobotDescription) -> float:
     from planners.robot_geometry import robot_geometry
     from planners.wholebody import WholeBody
 
-    return _standing_cog_height(WholeBody(robot_geometry(robot)), robot.standing_height, robot)
+    wb = WholeBody(robot_geometry(robot))
+    return float(robot.standing_height + wb.com_offset(robot.standing_joints.reshape(4, 3))[2])
 
 
-def _standing_cog_height(wb: Any, standing_height: float, robot: RobotDescription | None = None) -> float:
+def _standing_cog_height(wb: Any, standing_height: float) -> float:
+    """m, the COG above flat ground of ``wb``'s robot standing at ``standing_height`` (its feet under its
+    standing points)."""
     q = wb.geometry.standing_legs(standing_height - wb.geometry.foot_radius)
-    if robot is not None and robot.config is None:
-        q = robot.standing_joints.reshape(4, 3)
     return float(standing_height + wb.com_offset(q)[2])

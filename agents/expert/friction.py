@@ -27,11 +27,11 @@ SLIP_CHECK_EVERY = 2
 """physics steps between two slip checks (``ExpertConfig.friction_adapt``): 4 ms."""
 SLIP_MIN_TILT_COS = float(np.cos(np.radians(15.0)))
 """cos of the steepest stance foothold tilt at which a slip still lowers the assumed friction: on steeper
-ground a slipping foot is not read as a slippery floor (measured on ramps of friction 1: stance feet
-that land or are dragged on 20-25 deg slide for 5-12 ms)."""
+ground a slipping foot is not read as a slippery floor: on steep ramps feet that land or are dragged slide
+briefly on any floor (docs/robustness.md#friction-adaptation)."""
 SLIP_SPAWN_SETTLE = 0.1
 """s: no slip is read in the first this-long of an episode, while the robot settles on its spawn pose (its
-joints carry the reset noise; 6 of the 60 `targets` episodes read a slip at 0.01 s on floors of friction 1)."""
+joints carry the reset noise, and their feet slide while they settle, whatever the floor's friction)."""
 SLIP_COOLDOWN = 0.1
 """s: at most one decrease of the assumed friction in this time (a slip is seen at several checks)."""
 

@@ -5,10 +5,9 @@ from __future__ import annotations
 from typing import Any
 
 import gymnasium as gym
-import mujoco
 import numpy as np
 
-from agents.control.adaptation import AdaptiveGains, make_adaptation
+from agents.control.adaptation import make_adaptation
 from agents.control.controller import ComputedTorqueController
 from agents.control.nominal import NominalModel
 from agents.expert.config import ExpertConfig
@@ -17,24 +16,22 @@ from agents.expert.friction import FrictionAdaptation
 from agents.expert.hook import NOT_ATTACHED, PhysicsHook
 from agents.expert.log import FailureLog
 from agents.expert.recovery import DisturbanceRecovery
-from planners.types import ReferenceSample
 
 
-class ExpertPolicy:
+class ExpertPolicy(PhysicsHook):
     """Planner + inverse-dynamics controller as an SB3-style policy for ``QuadUneven-v0``.
 
-    The expert acts through the env's physics-rate hook, not through its actions: it must be the env's controller
-    (:func:`attach_expert` builds it and installs it; a controller that wraps it, like the residual RL agent's,
-    holds it as ``.expert`` and forwards the env's reset to it), installed before ``env.reset``. Otherwise
-    :meth:`predict` raises a ``RuntimeError`` instead of returning actions that would leave the robot without
-    torques.
+    The expert acts through the env's physics-rate hook, not through its actions: it is the env's physics-rate
+    controller itself (its :class:`~agents.expert.hook.PhysicsHook` side: ``reset``, the call and the fast lane
+    ``torques_into``), installed by :func:`attach_expert`, or held as ``.expert`` by a controller that wraps it (the
+    residual RL agent's) and forwards the env's reset to it, before ``env.reset``. Otherwise :meth:`predict` raises
+    a ``RuntimeError`` instead of returning actions that would leave the robot without torques.
 
     Its parts, one job each: :class:`~agents.expert.cycle.CyclePlanner` (:attr:`planner`: a plan per gait cycle,
     and its fallbacks), :class:`~agents.expert.friction.FrictionAdaptation` (:attr:`friction`: the friction its
     cones and footholds assume), :class:`~agents.expert.recovery.DisturbanceRecovery` (:attr:`recovery`: replans
-    when pushed) and :class:`~agents.expert.hook.PhysicsHook` (:attr:`hook`: the physics-rate control), around
-    one :class:`~agents.control.controller.ComputedTorqueController` (:attr:`controller`), with the adaptive gains
-    of ``ExpertConfig.adaptation`` on its torques (:attr:`adaptation`).
+    when pushed), around one :class:`~agents.control.controller.ComputedTorqueController` (:attr:`controller`), with
+    the adaptive gains of ``ExpertConfig.adaptation`` on its torques (:attr:`adaptation`).
 
     :param env: the environment (wrapped or not), on any robot.
     :param config: gait and control settings (None: :meth:`ExpertConfig.for_robot` of the env's robot, the
@@ -43,28 +40,27 @@ class ExpertPolicy:
 
     def __init__(self, env: gym.Env, config: ExpertConfig | None = None) -> None:
         self.env = env.unwrapped
-        self.config = config or ExpertConfig.for_robot(self.env.robot)
-        u, cfgx = self.env, self.config
-        self.nominal: NominalModel | None = None
-        """the expert's own model (None with ``model="oracle"``)."""
-        if cfgx.model == "nominal":
-            self.nominal = NominalModel(u.robot, u.terrain, u.physics_dt)
-        self.log = FailureLog()
-        self.friction = FrictionAdaptation(
-            cfgx, self.nominal is not None, u.robot.foot_radius, u.physics_dt, u.idx, self.log
-        )
-        self.planner = CyclePlanner(u, cfgx, self.friction, self.log)
-        self.recovery = DisturbanceRecovery(cfgx, self.planner, self.log)
-        self.controller = ComputedTorqueController(
-            reference=self.planner.reference,
+        u, cfgx = self.env, config or ExpertConfig.for_robot(self.env.robot)
+        nominal = NominalModel(u.robot, u.terrain, u.physics_dt) if cfgx.model == "nominal" else None
+        log = FailureLog()
+        friction = FrictionAdaptation(cfgx, nominal is not None, u.robot.foot_radius, u.physics_dt, u.idx, log)
+        planner = CyclePlanner(u, cfgx, friction, log)
+        controller = ComputedTorqueController(
+            reference=planner.reference,
             backend=cfgx.backend,
             distribution=cfgx.distribution,
             gains=cfgx.gains,
-            mu=cfgx.friction if self.nominal is not None else None,
+            mu=cfgx.friction if nominal is not None else None,
         )
-        adaptation = make_adaptation(cfgx.adaptation, u.dt, u.idx.torque_limit)
-        self.hook = PhysicsHook(
-            cfgx, self.controller, self.nominal, self.planner, self.recovery, self.friction, adaptation, self.log
+        super().__init__(
+            cfgx,
+            controller,
+            nominal,
+            planner,
+            DisturbanceRecovery(cfgx, planner, log),
+            friction,
+            make_adaptation(cfgx.adaptation, u.dt, u.idx.torque_limit),
+            log,
         )
         self._zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
 
@@ -92,33 +88,14 @@ class ExpertPolicy:
         controller = u.controller
         if controller is not self and getattr(controller, "expert", None) is not self:
             raise RuntimeError(f"ExpertPolicy is not its env's physics-rate controller: {NOT_ATTACHED}")
-        if not self.hook.reset_with(u.data):
+        if self._sim is not u.data:
             raise RuntimeError(f"ExpertPolicy was installed after the env's last reset: {NOT_ATTACHED}")
 
-    # -------------------------------------------------------------- env hook
-    def reset(self, model: mujoco.MjModel, data: mujoco.MjData, terrain: Any) -> None:
-        """Called by the env at every reset: plan the first cycle from the measured stand."""
-        self.hook.reset(model, data, terrain)
-
-    def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
-        """Joint torques (N m) at the measured state (:meth:`PhysicsHook.__call__`)."""
-        return self.hook(model, data, action)
-
-    def torques_into(
-        self, model: mujoco.MjModel, data: mujoco.MjData, action: Any, out: np.ndarray, limit: np.ndarray
-    ) -> bool:
-        """The hook's fast lane (:meth:`PhysicsHook.torques_into`)."""
-        return self.hook.torques_into(model, data, action, out, limit)
-
     @property
-    def adaptation(self) -> AdaptiveGains | None:
-        """the adaptive gains on the torques (:class:`agents.control.adaptation.AdaptiveGains`; None: "none");
-        another one may be set before the env's reset."""
-        return self.hook.adaptation
-
-    @adaptation.setter
-    def adaptation(self, adaptation: AdaptiveGains | None) -> None:
-        self.hook.adaptation = adaptation
+    def hook(self) -> ExpertPolicy:
+        """The physics-rate controller: this expert (its :class:`~agents.expert.hook.PhysicsHook` side, e.g.
+        ``hook.compiled``)."""
+        return self
 
     # -------------------------------------------------------------- diagnostics
     @property
@@ -142,12 +119,6 @@ class ExpertPolicy:
         return self.recovery.count
 
     @property
-    def shares_simulator_data(self) -> bool:
-        """this episode's dynamics terms are read from the simulator's data ("oracle", or "nominal" in an exactly
-        nominal world with ``share_nominal_world``); False: from the nominal model's copy."""
-        return self.hook.shares_simulator_data
-
-    @property
     def assumed_friction(self) -> float:
         """-: the friction coefficient the controller's cones assume now (``ExpertConfig.friction``, lowered
         by slips with ``friction_adapt``, or the steep-ground friction in a cycle that needs it; the
@@ -156,21 +127,10 @@ class ExpertPolicy:
 
     @property
     def last_torques(self) -> np.ndarray:
-        """(12,) N m: the torques of the last successful physics step (a read-only view)."""
-        view = self.hook.tau_ok.view()
+        """(12,) N m: the controller's torques of the last successful physics step (a read-only view)."""
+        view = self.tau_ok.view()
         view.setflags(write=False)
         return view
-
-    def planned_now(self, sim_time: float) -> tuple[ReferenceSample, float]:
-        """The current plan at simulator time ``sim_time`` (s), without planning anything new.
-
-        :return: the planned whole-robot motion (held at the plan's end once past it) and the phase of the
-            current cycle in [0, 1].
-        :raises RuntimeError: before the env's first reset reached the expert (no plan yet).
-        """
-        if self.planner.current_ref is None:
-            raise RuntimeError(f"ExpertPolicy has no plan yet: {NOT_ATTACHED}")
-        return self.hook.planned_now(sim_time)
 
 
 def attach_expert(env: gym.Env, config: ExpertConfig | None = None) -> ExpertPolicy:

@@ -18,8 +18,6 @@ from quad_uneven_env import physics
 
 DISTURBANCE_CHECK_EVERY = 5
 """physics steps between two checks of the base against its plan (``ExpertConfig.recovery``)."""
-NO_OFF_PLAN_CHECK = (-1.0, -1.0)
-"""``ComputedTorqueController.grid_step_into``'s off-plan tolerances that mean "no check"."""
 
 
 class DisturbanceRecovery:
@@ -35,8 +33,6 @@ class DisturbanceRecovery:
         self.planner = planner
         self.log = log
         self.enabled = config.recovery
-        self.tolerance2 = (config.recovery_position**2, config.recovery_velocity**2)
-        """(m^2, (m/s)^2): the squared tolerances of the base's horizontal position and velocity."""
         self.calm_after = 0.0
         """s (controller time): no disturbance replan before."""
         self.count = 0
@@ -46,11 +42,6 @@ class DisturbanceRecovery:
         """Start an episode."""
         self.calm_after = 0.0
         self.count = 0
-
-    def lane_tolerance(self, t: float) -> tuple[float, float]:
-        """The off-plan tolerances a compiled step checks at controller time ``t`` (s) on a check step:
-        :attr:`tolerance2` when a replan may happen, else :data:`NO_OFF_PLAN_CHECK`."""
-        return self.tolerance2 if self.enabled and t >= self.calm_after else NO_OFF_PLAN_CHECK
 
     def check(self, d: mujoco.MjData, t0: float) -> None:
         """Replan now from the measured state in ``d`` if the base is off its plan.
@@ -81,4 +72,4 @@ class DisturbanceRecovery:
         self.calm_after = t + planner.durations[0]
 
 
-__all__ = ["DISTURBANCE_CHECK_EVERY", "NO_OFF_PLAN_CHECK", "DisturbanceRecovery"]
+__all__ = ["DISTURBANCE_CHECK_EVERY", "DisturbanceRecovery"]

@@ -8,6 +8,7 @@ import numpy as np
 
 from agents.plotting import LEG_COLOURS, LEG_LINESTYLES, pyplot
 from quad_uneven_env.constants import LEG_NAMES
+from quad_uneven_env.fields import excerpt
 
 
 def frame_indices(time: np.ndarray, fps: float) -> np.ndarray:
@@ -16,7 +17,7 @@ def frame_indices(time: np.ndarray, fps: float) -> np.ndarray:
     if time.size == 0:
         return np.zeros(0, dtype=int)
     if not fps > 0:
-        raise ValueError(f"fps must be > 0, got {fps!r}")
+        raise ValueError(f"fps must be > 0, got {excerpt(fps)}")
     want = np.arange(time[0], time[-1] + 1e-9, 1.0 / fps)
     return np.unique(np.clip(np.searchsorted(time, want - 1e-9), 0, len(time) - 1))
 

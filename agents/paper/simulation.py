@@ -128,9 +128,10 @@ class PaperReference:
         return aim_feet_below_footholds(ref, self.plan, tp, late, self.depth, self._cfg)
 
 
-def plan_paper_cycle(terrain, robot_cfg, epsilon: float = 0.1) -> GaitCyclePlan:
-    """Plan the paper's §6 cycle on ``terrain`` (a height map, e.g. the env's) with margin ``epsilon`` (N m)."""
-    scenario = dataclasses.replace(paper_scenario(), terrain=terrain, robot=robot_cfg, epsilon=float(epsilon))
+def plan_paper_cycle(terrain, robot, epsilon: float = 0.1) -> GaitCyclePlan:
+    """Plan the paper's §6 cycle on ``terrain`` (a height map, e.g. the env's) for ``robot`` (a description) with
+    margin ``epsilon`` (N m)."""
+    scenario = dataclasses.replace(paper_scenario(), terrain=terrain, robot=robot, epsilon=float(epsilon))
     return plan_gait_cycle(scenario)
 
 
@@ -156,8 +157,8 @@ def run_paper_sim(config: PaperRunConfig | None = None, progress: bool = True) -
     env = _make_env(cfg.seed)
     u = env.unwrapped
     m, d, idx = u.model, u.data, u.idx
-    plan = plan_paper_cycle(u.terrain.heightfield, u.robot_cfg, cfg.epsilon)
-    reference = plan.reference(u.robot_cfg)
+    plan = plan_paper_cycle(u.terrain.heightfield, u.robot, cfg.epsilon)
+    reference = plan.reference(u.robot)
     s0 = reference.sample(0.0)
     mujoco.mj_resetData(m, d)
     d.qpos[:] = s0.qpos

@@ -14,20 +14,15 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from agents.rl.hyperparams import HYPERPARAMS, check_hyperparams, check_policy_kwargs
+from agents.rl.residual_config import RESIDUAL_BASES, RESIDUAL_LEGS, ResidualConfig, expert_config
 from quad_uneven_env.config import CONFIG_DIR, read_yaml
-from quad_uneven_env.fields import check_fields, param
+from quad_uneven_env.fields import check_fields, clip, excerpt, param
 from quad_uneven_env.randomization import load_randomization
 from quad_uneven_env.terrain import parse_terrain_spec
 
 RL_CONFIG_DIR = CONFIG_DIR / "rl"
 """Directory of the shipped training configs (``configs/rl/NAME.yaml``)."""
-
-RESIDUAL_LEGS = ("all", "stance")
-"""Which legs take the residual: every leg, or only those whose foot touches the ground (per physics step)."""
-
-RESIDUAL_BASES = ("torque_limit", "expert_torque")
-"""What one unit of residual action is: a fraction of the motor's torque limit (additive), or of the expert's
-own torque at that physics step (a gain on the expert: ``tau = tau_expert x (1 + residual_scale x action)``)."""
 
 ALGOS = ("ppo", "sac")
 """Stable-Baselines3 algorithms ``quad-uneven train`` supports."""
@@ -102,9 +97,11 @@ class TrainConfig:
     checkpoint_freq: int = param(50_000, "steps", kind="int", lo=0)
     """env steps (all envs) between checkpoints; 0: none."""
     hyperparams: dict[str, Any] = dataclasses.field(default_factory=dict)
-    """keyword arguments of the SB3 algorithm class (``learning_rate``, ``n_steps``, ...)."""
+    """keyword arguments of the SB3 algorithm class (``learning_rate``, ``n_steps``, ...), each checked against
+    :data:`agents.rl.hyperparams.HYPERPARAMS` (its type and range)."""
     policy_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
-    """SB3 ``policy_kwargs`` (``net_arch``, ``log_std_init``, ...)."""
+    """SB3 ``policy_kwargs`` (``net_arch``, ``log_std_init``, ...), checked against
+    :data:`agents.rl.hyperparams.POLICY_KWARGS`."""
     init_from: str | None = None
     """a warm start: a saved model (a training run's folder or its ``.zip``) whose weights, optimizer states and
     observation statistics this run starts from (:mod:`agents.rl.warm_start`); it must have been trained for the
@@ -127,13 +124,11 @@ class TrainConfig:
         """A JSON-serialisable copy."""
         return dataclasses.asdict(self)
 
-    def residual_config(self) -> Any:
-        """The residual env's :class:`~agents.rl.residual_env.ResidualConfig` of this run (``residual: true``).
+    def residual_config(self) -> ResidualConfig:
+        """The residual env's :class:`~agents.rl.residual_config.ResidualConfig` of this run (``residual: true``).
 
         :raises ValueError: naming ``expert.field`` on a bad expert setting (:func:`validate` checks it first).
         """
-        from agents.rl.residual_env import ResidualConfig  # deferred: the expert's kernels
-
         fields = ("residual_scale", "residual_legs", "residual_basis", "expert_features", "residual_penalty", "expert")
         return ResidualConfig.from_dict({name: getattr(self, name) for name in fields}, where="")
 
@@ -142,7 +137,7 @@ def _mapping(name: str, value: Any) -> dict[str, Any]:
     if value is None:
         return {}
     if not isinstance(value, Mapping) or not all(isinstance(k, str) for k in value):
-        raise TrainConfigError(f"{name} must be a mapping with string keys, got {value!r}")
+        raise TrainConfigError(f"{name} must be a mapping with string keys, got {excerpt(value)}")
     return dict(value)
 
 
@@ -183,43 +178,88 @@ def validate(cfg: TrainConfig) -> TrainConfig:
             "residual: false trains from scratch without the expert, so expert_features must be false, "
             "residual_penalty 0, residual_legs 'all', residual_basis 'torque_limit' and expert {}, got "
             f"expert_features={cfg.expert_features}, residual_penalty={cfg.residual_penalty}, "
-            f"residual_legs={cfg.residual_legs!r}, residual_basis={cfg.residual_basis!r}, expert={cfg.expert!r}"
+            f"residual_legs={excerpt(cfg.residual_legs)}, residual_basis={excerpt(cfg.residual_basis)}, "
+            f"expert={excerpt(cfg.expert)}"
         )
     if cfg.init_from is not None and (not isinstance(cfg.init_from, str) or not cfg.init_from):
         raise TrainConfigError(
-            f"init_from must be a path to a saved model (folder or .zip) or null, got {cfg.init_from!r}"
+            f"init_from must be a path to a saved model (folder or .zip) or null, got {excerpt(cfg.init_from)}"
         )
     for name, value, unset in (
         ("init_log_std", cfg.init_log_std, None),
         ("critic_warmup_steps", cfg.critic_warmup_steps, 0),
     ):
         if value != unset and cfg.algo != "ppo":
-            raise TrainConfigError(f"{name} applies to PPO only, got algo={cfg.algo!r} with {name}={value!r}")
+            raise TrainConfigError(
+                f"{name} applies to PPO only, got algo={excerpt(cfg.algo)} with {name}={excerpt(value)}"
+            )
     if cfg.freeze_obs_norm and (cfg.init_from is None or not cfg.normalize_obs):
         raise TrainConfigError(
             "freeze_obs_norm keeps the observation statistics of init_from, so it needs init_from and "
-            f"normalize_obs: true, got init_from={cfg.init_from!r}, normalize_obs={cfg.normalize_obs}"
+            f"normalize_obs: true, got init_from={excerpt(cfg.init_from)}, normalize_obs={cfg.normalize_obs}"
         )
     expert = _mapping("expert", cfg.expert)
     if expert:
-        from agents.rl.residual_env import expert_config  # deferred: the expert's kernels
-
         try:
             expert_config(expert, "expert")
         except ValueError as err:
             raise TrainConfigError(str(err)) from None
+    _check_sb3_arguments(cfg)
     if cfg.algo == "sac" and "log_std_init" in cfg.policy_kwargs and not cfg.hyperparams.get("use_sde"):
         warnings.warn(
             "policy_kwargs.log_std_init has no effect on SAC without use_sde (SB3): the untrained actor explores "
             "with a std of about 1",
             stacklevel=2,
         )
-    _mapping("hyperparams", cfg.hyperparams)
-    _mapping("policy_kwargs", cfg.policy_kwargs)
-    for key in ("policy_kwargs", "env", "seed", "verbose", "device", "policy"):
-        if key in cfg.hyperparams:
-            raise TrainConfigError(f"hyperparams may not set {key!r} (use the config field or option of that name)")
     return cfg
+
+
+OWN_FIELDS = ("policy_kwargs", "env", "seed", "verbose", "device", "policy", "tensorboard_log")
+"""SB3 arguments ``hyperparams`` may not set: the config fields or ``train`` options of that name set them."""
+
+
+def _check_sb3_arguments(cfg: TrainConfig) -> None:
+    """``hyperparams`` and ``policy_kwargs`` checked against the algorithm's tables (:mod:`agents.rl.hyperparams`),
+    then the ones that depend on each other or on the budget: PPO's ``batch_size`` within a rollout of
+    ``n_steps x n_envs`` steps, ``critic_warmup_steps`` and SAC's ``learning_starts`` below ``timesteps`` (else
+    the actor never trains).
+
+    :raises TrainConfigError: naming the field and its allowed values.
+    """
+    hyperparams = _mapping("hyperparams", cfg.hyperparams)
+    policy_kwargs = _mapping("policy_kwargs", cfg.policy_kwargs)
+    for key in OWN_FIELDS:
+        if key in hyperparams:
+            raise TrainConfigError(f"hyperparams may not set {key!r} (use the config field or option of that name)")
+    try:
+        check_hyperparams(cfg.algo, hyperparams)
+        check_policy_kwargs(cfg.algo, policy_kwargs)
+    except ValueError as err:
+        raise TrainConfigError(str(err)) from None
+    defaults = {p.name: p.default for p in HYPERPARAMS[cfg.algo]}
+    value = {**defaults, **hyperparams}.__getitem__
+    if cfg.algo == "ppo":
+        rollout = value("n_steps") * cfg.n_envs
+        if rollout < 2:
+            raise TrainConfigError(
+                f"hyperparams.n_steps must be an integer >= 2 with n_envs = 1 (SB3 needs a rollout of 2 steps or "
+                f"more), got {value('n_steps')}"
+            )
+        if value("batch_size") > rollout:
+            raise TrainConfigError(
+                f"hyperparams.batch_size must be an integer in [2, {rollout}] (a minibatch of the rollout's n_steps x "
+                f"n_envs = {value('n_steps')} x {cfg.n_envs} steps), got {value('batch_size')}"
+            )
+    if cfg.critic_warmup_steps >= cfg.timesteps:
+        raise TrainConfigError(
+            f"critic_warmup_steps must be an integer in [0, timesteps = {cfg.timesteps}) (the actor trains only after "
+            f"it), got {cfg.critic_warmup_steps}"
+        )
+    if cfg.algo == "sac" and value("learning_starts") >= cfg.timesteps:
+        raise TrainConfigError(
+            f"hyperparams.learning_starts must be an integer in [0, timesteps = {cfg.timesteps}) (SAC learns only "
+            f"after it), got {value('learning_starts')}"
+        )
 
 
 def terrain_list(terrain: Any) -> list[Any]:
@@ -252,16 +292,16 @@ def load_train_config(
     if path is None:
         algo = overrides.get("algo", "ppo")
         if algo not in ALGOS:
-            raise TrainConfigError(f"algo must be one of {list(ALGOS)}, got {algo!r}")
+            raise TrainConfigError(f"algo must be one of {list(ALGOS)}, got {excerpt(algo)}")
         path = default_config_path(algo)
     try:
         raw = read_yaml(path)
     except ValueError as err:
         raise TrainConfigError(f"config: {err}") from None
     names = {f.name for f in dataclasses.fields(TrainConfig)}
-    unknown = sorted((set(raw) | set(overrides)) - names)
+    unknown = sorted((set(raw) | set(overrides)) - names, key=str)
     if unknown:
-        raise TrainConfigError(f"{unknown[0]}: unknown field; allowed: {sorted(names)}")
+        raise TrainConfigError(f"{clip(str(unknown[0]), 40)}: unknown field; allowed: {sorted(names)}")
     if "algo" in raw and "algo" in overrides and raw["algo"] != overrides["algo"]:
         raise TrainConfigError(
             f"algo: the config {str(path)!r} is for {raw['algo']!r}, got {overrides['algo']!r} "

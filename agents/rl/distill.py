@@ -9,15 +9,15 @@ plans every cycle at yaw 0 and tracks its plan's base pose, so it turns a headin
 without these fields the student cannot see that error.
 
 **Labels.** A PD servo cannot follow the plan's joint angles alone: the stance legs carry the robot's weight, and
-at ``pd_kp`` = 100 N m/rad a 40 N m knee torque costs 0.4 rad of sag (tracking the plan's angles with the expert
-choosing them falls within 2.3 s, measured). The label folds the expert's torque into the target::
+at ``pd_kp`` = 100 N m/rad a 40 N m knee torque costs 0.4 rad of sag (docs/rl.md has what that does to a walk).
+The label folds the expert's torque into the target::
 
     label = clip((q_ref(t) + tau_expert(t) / pd_kp - q_home) / pd_action_scale, -1, 1)
 
 with ``q_ref`` the plan's joint angles at the observation's time and ``tau_expert`` the expert's joint torques
 (N m) at the observed state (its first physics step of the control step). Held over the step, the servo then
-applies the expert's torque plus a PD pull towards the plan: the expert choosing these targets walks every
-``targets`` terrain.
+applies the expert's torque plus a PD pull towards the plan (docs/rl.md: how the expert choosing these targets
+walks).
 
 **Rollouts.** The env runs in ``action_mode="torque"`` with :class:`DaggerTeacher` as its physics-rate controller:
 at every physics step it runs the expert's hook (so the expert's plan and state follow the robot, whoever acts)
@@ -55,6 +55,7 @@ from agents.outputs import output_dir
 from agents.rl.model_io import write_metadata
 from agents.rl.normalization import ObsNormalization, norm_path
 from quad_uneven_env import constants as C
+from quad_uneven_env.fields import excerpt
 
 DISTILL_OUTPUTS = ("model.zip", "model_obs_norm.npz", "rl_meta.json", "distill_summary.json", "distill_curve.png")
 """Top-level names ``distill`` writes in its ``--out`` (``--overwrite`` deletes what the manifest lists)."""
@@ -133,7 +134,7 @@ class DistillConfig:
         )
         for name, ok, allowed in checks:
             if not ok:
-                raise ValueError(f"distill.{name} must be {allowed}, got {getattr(self, name)!r}")
+                raise ValueError(f"distill.{name} must be {allowed}, got {excerpt(getattr(self, name))}")
         if self.height_scan is not None:
             from quad_uneven_env.config import HeightScanConfig
             from quad_uneven_env.fields import from_mapping
@@ -401,11 +402,13 @@ def fit_student(
     return losses
 
 
-def _metadata(cfg: DistillConfig, suite: Suite) -> dict[str, Any]:
+def _metadata(cfg: DistillConfig, suite: Suite, robot: str) -> dict[str, Any]:
+    """The student's ``rl_meta.json`` (:mod:`agents.rl.model_io`) on the robot named ``robot``."""
     import stable_baselines3
 
     return {
         "algo": "ppo",
+        "robot": robot,
         "residual": False,
         "env_id": "QuadUneven-v0",
         "env_kwargs": cfg.student_env_kwargs(),
@@ -457,7 +460,7 @@ def distill(
         out = manifest.out
         torch.set_num_threads(1)
         model = make_student(cfg, {"kind": tasks[0].kind, **tasks[0].params})
-        meta = _metadata(cfg, suite)
+        meta = _metadata(cfg, suite, model.get_env().envs[0].unwrapped.robot.name)
         data_obs: list[np.ndarray] = []
         data_labels: list[np.ndarray] = []
         norm: ObsNormalization | None = None

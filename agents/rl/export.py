@@ -11,7 +11,8 @@ residual action is added to the expert's torques as ``residual_scale x action x 
 "stance" only on the legs whose foot touches the ground), ``expert`` (the expert's config: its fields that
 differ from :class:`agents.expert.ExpertConfig`'s defaults; with ``adaptation`` "knee" or "learned" its torques are
 first multiplied by the adaptive gains of :mod:`agents.control.adaptation`, which a deployment must run too),
-``torque_limit`` (N m), ``algo``, ``env_id``, ``env_kwargs``, ``observation_normalization`` ("folded" or "none").
+``torque_limit`` (N m), ``algo``, ``env_id``, ``env_kwargs``, ``robot`` (the name of the robot the policy acts
+for), ``observation_normalization`` ("folded" or "none").
 """
 
 from __future__ import annotations
@@ -30,10 +31,10 @@ from agents.rl.model_io import (
     META_DEFAULTS,
     META_FILE,
     ModelError,
-    ModelSpaces,
+    check_model_env,
     load_obs_normalization,
     load_sb3_model,
-    metadata_env_kwargs,
+    make_model_env,
     read_metadata,
 )
 
@@ -102,7 +103,8 @@ def export_onnx(
 ) -> Path:
     """Write the ONNX file of the SB3 model ``model_path`` (with its ``rl_meta.json`` and statistics) to ``out``.
 
-    The model folder is read and checked by :mod:`agents.rl.model_io`; ``out`` is written once, at the end.
+    The model folder is read and checked by :mod:`agents.rl.model_io`, and the graph is traced in the env the model
+    was trained in (:func:`~agents.rl.model_io.make_model_env`, on its robot); ``out`` is written once, at the end.
 
     :param algo: ``"ppo"`` or ``"sac"`` (default: the metadata's, else ppo).
     :param allow_pickle: load pickled files of older runs (trusted files only; see :mod:`agents.rl.model_io`).
@@ -110,11 +112,8 @@ def export_onnx(
     :return: the path written.
     :raises ModelError: on an unusable model folder, or ``out`` that cannot be written (naming ``out_field``).
     """
-    import gymnasium as gym
     import onnx
     import torch
-
-    import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 
     model_path, out = Path(model_path), Path(out)
     if not model_path.is_file():
@@ -122,19 +121,22 @@ def export_onnx(
     meta = read_metadata(model_path) or {}
     algo = algo or meta.get("algo") or "ppo"
     try:
-        env = gym.make("QuadUneven-v0", **metadata_env_kwargs(model_path))
+        env = make_model_env(model_path)
     except (ValueError, TypeError) as err:  # the env's own checks of the recorded arguments
         msg = str(err).split(" was raised from the environment creator")[0]
         raise ModelError(f"policy: {model_path.parent / META_FILE}: env_kwargs: {msg}") from None
     try:
-        spaces = ModelSpaces(env, meta or None)
-        model = load_sb3_model(model_path, algo, spaces, allow_pickle)  # type: ignore[arg-type]
-        norm = load_obs_normalization(model_path, meta or None, allow_pickle, spaces.observation_space.shape)
+        if meta:
+            check_model_env(meta, env, model_path)
+        model = load_sb3_model(model_path, algo, env, allow_pickle)
+        norm = load_obs_normalization(model_path, meta or None, allow_pickle, env.observation_space.shape)
         space = env.action_space
         module = _policy_module(model, norm, np.asarray(space.low, float), np.asarray(space.high, float))
-        n_obs = spaces.observation_space.shape[0]
-        layout = {k: [s.start, s.stop] for k, s in spaces.observation_structure.items()}
+        n_obs = env.observation_space.shape[0]
+        structure = env.get_wrapper_attr("observation_structure")
+        layout = {k: [s.start, s.stop] for k, s in structure.items()}
         torque_limit = env.unwrapped.idx.torque_limit.tolist()
+        env_id, robot = env.spec.id, env.unwrapped.robot.name
     finally:
         env.close()
     dummy = torch.zeros(1, n_obs, dtype=torch.float32)
@@ -158,7 +160,8 @@ def export_onnx(
         },
         "torque_limit": json.dumps(torque_limit),
         "algo": algo,
-        "env_id": str(meta.get("env_id", "QuadUneven-v0")),
+        "env_id": env_id,
+        "robot": robot,
         "env_kwargs": json.dumps(meta.get("env_kwargs", {})),
     }
     onnx.helper.set_model_props(graph, props)

@@ -4,16 +4,20 @@ A training run writes ``DIR/rl_meta.json`` (and a copy in ``DIR/checkpoints/`` a
 
     {"format": "quad-uneven-rl/1", "algo": "ppo", "residual": true, "residual_scale": 0.1,
      "expert": {"adaptation": "knee"}, "env_id": "QuadUnevenResidual-v0", "env_kwargs": {...},
-     "normalize_obs": true, ...}
+     "robot": "paper", "normalize_obs": true, ...}
 
-A residual model's ``residual_*``, ``expert_features`` and ``expert`` fields are its
-:class:`~agents.rl.residual_env.ResidualConfig` (``expert``: the :class:`~agents.expert.ExpertConfig` fields that
-differ from the defaults; with ``adaptation: learned`` also ``strength_estimator_sha256``, the estimator it was
-made with). :func:`load_sb3_policy` reads it for a model ``.zip`` in the same folder: a residual model gets that
-expert plus residual installed as the env's physics-rate controller (so ``quad-uneven evaluate`` runs
-the expert in the loop), and observations are normalised with the saved statistics
-(:mod:`agents.rl.normalization`). Nothing from the folder is unpickled unless the user opts in.
-A model without metadata is loaded as a plain SB3 policy on the env as given.
+It says which env the model was trained in: ``env_id`` and ``env_kwargs``, ``robot`` (the name of the robot; a
+model without the field was trained on ``env_kwargs.robot``, else on the paper's robot: :func:`model_robot`) and,
+for a residual model, its :class:`~agents.rl.residual_config.ResidualConfig`: the ``residual_*``,
+``expert_features`` and ``expert`` fields (``expert``: the :class:`~agents.expert.ExpertConfig` fields that differ
+from the defaults; with ``adaptation: learned`` also ``strength_estimator_sha256``, the estimator it was made with).
+
+A model is evaluated in that env, as SB3's ``VecNormalize.load(path, venv)`` wraps an env rather than copying its
+transform: :func:`make_model_env` rebuilds it (``QuadUnevenResidual-v0`` with the expert and residual of the
+training, whose observation carries the expert features, or ``QuadUneven-v0``), and :func:`load_sb3_policy` loads
+the model for it, checking (never changing) the env it is given: the model's robot, its kind of env and its residual.
+Observations are normalised with the saved statistics (:mod:`agents.rl.normalization`). Nothing from the folder is
+unpickled unless the user opts in. A model without metadata is loaded as a plain SB3 policy on the env as given.
 """
 
 from __future__ import annotations
@@ -35,6 +39,10 @@ import gymnasium as gym
 import numpy as np
 
 from agents.rl.normalization import ObsNormalization, norm_path, pickle_path
+from agents.rl.residual_config import ResidualConfig
+from agents.rl.residual_env import RESIDUAL_ENV_ID, ResidualExpertEnv
+from quad_uneven_env import ENV_ID as PLAIN_ENV_ID
+from quad_uneven_env.fields import excerpt
 
 META_FILE = "rl_meta.json"
 """Name of the metadata file next to the model(s) of a training run."""
@@ -46,13 +54,25 @@ META_DEFAULTS: dict[str, Any] = {
     "residual_legs": "all",
     "residual_basis": "torque_limit",
     "expert_features": False,
+    "residual_penalty": 0.0,
     "expert": {},
     "env_kwargs": {},
 }
 """Values of the fields a model's metadata may leave out."""
 
-RESIDUAL_META_FIELDS = ("residual_scale", "residual_legs", "residual_basis", "expert_features", "expert")
-"""The metadata fields of a residual model that make its :class:`~agents.rl.residual_env.ResidualConfig`."""
+RESIDUAL_META_FIELDS = (
+    "residual_scale",
+    "residual_legs",
+    "residual_basis",
+    "expert_features",
+    "residual_penalty",
+    "expert",
+)
+"""The metadata fields of a residual model that make its :class:`~agents.rl.residual_config.ResidualConfig`."""
+
+UNRECORDED_ROBOT = "paper"
+"""The robot of a model whose metadata names none (neither ``robot`` nor ``env_kwargs.robot``): the env's default
+robot, which every such model was trained on (the shipped models among them)."""
 
 NOT_READ = {"gain_adaptation": "none", "adaptation_features": False}
 """Metadata fields this reader refuses unless they hold these values (which it can ignore): the adaptation is
@@ -71,10 +91,12 @@ META_FIELD_TYPES: dict[str, tuple[str, ...]] = {
     "residual_legs": ("string",),
     "residual_basis": ("string",),
     "expert_features": ("bool",),
+    "residual_penalty": ("number",),
     "expert": ("object",),
     "strength_estimator_sha256": ("string",),
     "env_id": ("string",),
     "env_kwargs": ("object",),
+    "robot": ("string",),
     "normalize_obs": ("bool",),
     "terrain": ("string", "object", "list"),
     "randomization": ("string", "object", "null"),
@@ -107,12 +129,7 @@ def check_json_type(value: Any, kinds: tuple[str, ...], where: str) -> None:
     """
     if not any(_JSON_TYPES[k][1](value) for k in kinds):
         allowed = " or ".join(_JSON_TYPES[k][0] for k in kinds)
-        raise ModelError(f"{where} must be {allowed}, got {_short(value)} of type {type(value).__name__}")
-
-
-def _short(value: Any, limit: int = 60) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit] + "..."
+        raise ModelError(f"{where} must be {allowed}, got {excerpt(value)} of type {type(value).__name__}")
 
 
 def read_metadata(model_path: str | Path) -> dict[str, Any] | None:
@@ -153,16 +170,23 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
     from agents.rl.config import ALGOS
 
     if meta.get("algo") not in (None, *ALGOS):
-        raise ModelError(f"{path}: algo must be one of {list(ALGOS)}, got {meta.get('algo')!r}")
+        raise ModelError(f"{path}: algo must be one of {list(ALGOS)}, got {excerpt(meta.get('algo'))}")
     if not isinstance(meta.get("residual", False), bool):
-        raise ModelError(f"{path}: residual must be true or false, got {meta.get('residual')!r}")
+        raise ModelError(f"{path}: residual must be true or false, got {excerpt(meta.get('residual'))}")
+    env_id = RESIDUAL_ENV_ID if meta.get("residual") else PLAIN_ENV_ID
+    if meta.get("env_id", env_id) != env_id:
+        raise ModelError(
+            f"{path}: env_id must be {env_id!r} for a model with residual: {str(meta.get('residual', False)).lower()}, "
+            f"got {excerpt(meta['env_id'])}"
+        )
     if meta.get("residual"):
         if "residual_scale" not in meta:
             raise ModelError(f"{path}: residual_scale is missing (a residual model needs a number in (0, 1])")
         for name, value in NOT_READ.items():
             if name in meta and meta[name] != value:
                 raise ModelError(
-                    f"{path}: {name} must be absent or {value!r}, got {meta[name]!r} (the expert's adaptation is "
+                    f"{path}: {name} must be absent or {excerpt(value)}, got {excerpt(meta[name])} "
+                    "(the expert's adaptation is "
                     "expert: {adaptation: ...})"
                 )
         config = residual_config_of(meta, path)
@@ -179,14 +203,12 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
     return meta
 
 
-def residual_config_of(meta: dict[str, Any], path: str | Path = META_FILE) -> Any:
-    """The :class:`~agents.rl.residual_env.ResidualConfig` a residual model's metadata records
+def residual_config_of(meta: dict[str, Any], path: str | Path = META_FILE) -> ResidualConfig:
+    """The :class:`~agents.rl.residual_config.ResidualConfig` a residual model's metadata records
     (:data:`RESIDUAL_META_FIELDS`, the absent ones from :data:`META_DEFAULTS`).
 
     :raises ModelError: naming ``path`` and the bad field (e.g. ``expert.adaptation``) with its allowed values.
     """
-    from agents.rl.residual_env import ResidualConfig
-
     raw = {name: meta.get(name, META_DEFAULTS.get(name)) for name in RESIDUAL_META_FIELDS}
     try:
         return ResidualConfig.from_dict(raw, where="")
@@ -202,35 +224,60 @@ def write_metadata(folder: Path, meta: dict[str, Any]) -> Path:
     return path
 
 
-def metadata_env_kwargs(model_path: str | Path) -> dict[str, Any]:
-    """QuadUneven-v0 arguments the model was trained with (``{}`` without metadata or model file)."""
-    try:
-        meta = read_metadata(model_path)
-    except ModelError:
-        return {}  # reported by load_sb3_policy
+def model_robot(meta: dict[str, Any]) -> str:
+    """The name of the robot a model with metadata ``meta`` was trained on: its ``robot`` field; without one (as in
+    the shipped models' metadata), the stem of its ``env_kwargs.robot``, else :data:`UNRECORDED_ROBOT`."""
+    if "robot" in meta:
+        return str(meta["robot"])
+    return Path(str((meta.get("env_kwargs") or {}).get("robot", UNRECORDED_ROBOT))).stem
+
+
+def model_env_spec(meta: dict[str, Any] | None, path: str | Path = META_FILE) -> tuple[str, dict[str, Any]]:
+    """The Gymnasium id and arguments of the env a model with metadata ``meta`` was trained in.
+
+    A residual model's env is ``QuadUnevenResidual-v0`` with the recorded ``env_kwargs`` and its
+    :class:`~agents.rl.residual_config.ResidualConfig` as ``config`` (the expert of its training, with its
+    residual); any other model's is ``QuadUneven-v0`` with the recorded ``env_kwargs``. Without metadata (a bare SB3
+    zip): ``QuadUneven-v0`` with its defaults.
+
+    :raises ModelError: naming ``path`` and the field, on a residual config the metadata cannot give.
+    """
     if meta is None:
-        return {}
+        return PLAIN_ENV_ID, {}
     kwargs = dict(meta.get("env_kwargs") or {})
     if meta.get("residual"):
-        kwargs["action_mode"] = "torque"
-    return kwargs
+        return RESIDUAL_ENV_ID, {**kwargs, "config": residual_config_of(meta, path)}
+    return PLAIN_ENV_ID, kwargs
+
+
+def make_model_env(model_path: str | Path, **kwargs: Any) -> gym.Env:
+    """The env the SB3 model ``model_path`` was trained in, rebuilt from its ``rl_meta.json``
+    (:func:`model_env_spec`): the observation the model was trained on is the env's own, expert features included.
+
+    :param kwargs: arguments over the recorded ones (``terrain``, ``max_episode_steps``, ``randomization``,
+        ``render_mode``, ...); ``robot`` other than the model's is refused when the policy is loaded
+        (:func:`load_sb3_policy`).
+    :raises ModelError: on unreadable metadata; the env's own ``ValueError`` or ``TypeError`` on a bad argument.
+    """
+    import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
+
+    env_id, recorded = model_env_spec(read_metadata(model_path), Path(model_path).parent / META_FILE)
+    return gym.make(env_id, **{**recorded, **kwargs})
 
 
 class SB3Policy:
-    """An SB3 model with its observation normalisation (and, for a residual model, the expert it rides on).
+    """An SB3 model with its observation normalisation, for the env it was trained in (:func:`make_model_env`).
 
     :param model: the loaded SB3 algorithm.
     :param obs_normalizer: the :class:`ObsNormalization` applied before ``model.predict``, or None.
-    :param expert: the :class:`agents.expert.ExpertPolicy` in the loop of a residual model, or None.
-    :param features_of: the env (unwrapped) whose simulator state the expert features are read from, for a
-        model trained with them (:mod:`agents.rl.expert_features`); None: the observation is used as given.
+    :param expert: the :class:`agents.expert.ExpertPolicy` of a residual model's env (for its plan times and failure
+        log in the evaluation's record), or None.
     """
 
-    def __init__(self, model: Any, obs_normalizer: Any = None, expert: Any = None, features_of: Any = None) -> None:
+    def __init__(self, model: Any, obs_normalizer: Any = None, expert: Any = None) -> None:
         self.model = model
         self.obs_normalizer = obs_normalizer
         self.expert = expert
-        self.features_of = features_of
 
     @property
     def planner_times_ms(self) -> list[float] | None:
@@ -249,14 +296,8 @@ class SB3Policy:
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
-        """SB3's predict on the (normalised) observation; :return: action in [-1, 1]^12 and the state.
-
-        For a model trained with the expert features, they are appended to ``observation`` (one env's) first.
-        """
-        if self.features_of is not None:
-            from agents.rl.expert_features import expert_features
-
-            observation = np.concatenate([observation, expert_features(self.expert, self.features_of.data)])
+        """SB3's predict on the (normalised) observation of the model's env; :return: action in [-1, 1]^12 and the
+        state."""
         obs = observation if self.obs_normalizer is None else self.obs_normalizer.normalize(observation)
         return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
 
@@ -270,7 +311,7 @@ def load_obs_normalization(
     format has SB3's pickled ``X_vecnormalize.pkl``: unpickling can run code from the file, so it is read only
     with ``allow_pickle`` (``quad-uneven evaluate --allow-pickle``), for files you trust.
 
-    :param shape: the model's observation shape (:class:`ModelSpaces`), which the statistics must have.
+    :param shape: the model's observation shape (its env's), which the statistics must have.
     :raises ModelError: when the statistics are missing, unreadable, of another shape, or a pickle without
         ``allow_pickle``.
     """
@@ -425,7 +466,7 @@ def _check_entries(infos: list[zipfile.ZipInfo], path: Path, where: str) -> None
     for info in infos:
         if info.filename not in ZIP_ENTRIES and not _PTH_ENTRY.fullmatch(info.filename):
             raise ModelError(
-                f"{where}: {path} holds an entry {_short(info.filename)}; an SB3 model zip holds "
+                f"{where}: {path} holds an entry {excerpt(info.filename)}; an SB3 model zip holds "
                 f"{', '.join(ZIP_ENTRIES)} and NAME.pth tensor files (NAME an attribute path such as policy.optimizer)"
             )
         if info.file_size > MAX_ENTRY_BYTES:
@@ -460,7 +501,7 @@ def _parse_data(blob: bytes, path: Path, where: str) -> dict[str, Any]:
         if key in data and not _is_serialized(value):
             check_json_type(value, kinds, f"{where}: {path} data.{key}")
             if key in _POSITIVE_DATA_FIELDS and value < 1:
-                raise ModelError(f"{where}: {path} data.{key} must be an integer >= 1, got {value!r}")
+                raise ModelError(f"{where}: {path} data.{key} must be an integer >= 1, got {excerpt(value)}")
     return data
 
 
@@ -506,7 +547,7 @@ def _torch_reason(err: Exception) -> str:
     first line)."""
     refused = _TORCH_REFUSAL.search(str(err))
     lines = str(err).strip().splitlines()
-    detail = refused[0] if refused else _short(lines[0], 120) if lines else ""
+    detail = refused[0] if refused else excerpt(lines[0], 120) if lines else ""
     return f"{type(err).__name__}: {detail}" if detail else type(err).__name__
 
 
@@ -523,7 +564,7 @@ def recorded_shape(data: dict[str, Any], key: str, path: Path, where: str = "pol
     entry = data.get(key)
     shape = entry.get("_shape") if _is_serialized(entry) else None
     if not (isinstance(shape, list) and all(type(n) is int and n >= 0 for n in shape)):
-        raise ModelError(f"{where}: {path} data.{key}._shape must be a list of integers, got {_short(shape)}")
+        raise ModelError(f"{where}: {path} data.{key}._shape must be a list of integers, got {excerpt(shape)}")
     return tuple(shape)
 
 
@@ -538,10 +579,10 @@ def _check_recorded_spaces(data: dict[str, Any], env: Any, path: Path) -> None:
     for key, label in _SPACE_TYPES.items():
         space, entry = getattr(env, key), data.get(key)
         if not _is_serialized(entry):
-            raise ModelError(f"policy: {path} data.{key} must be a recorded space, got {_short(entry)}")
+            raise ModelError(f"policy: {path} data.{key} must be a recorded space, got {excerpt(entry)}")
         recorded, want = entry.get(":type:"), type(space).__qualname__
         if not (isinstance(recorded, str) and recorded.endswith(f".{want}'>")):  # gym's or gymnasium's class
-            raise ModelError(f"policy: {path} data.{key} is a {_short(recorded)}, the env's {label} a {want}")
+            raise ModelError(f"policy: {path} data.{key} is a {excerpt(recorded)}, the env's {label} a {want}")
         shape = recorded_shape(data, key, path)
         if shape != tuple(space.shape):
             raise ModelError(
@@ -623,7 +664,7 @@ def load_sb3_model(path: str | Path, algo: str, env: gym.Env, allow_pickle: bool
     except _BUILD_ERRORS as err:
         first = (str(err).strip().splitlines() or [""])[0]
         raise ModelError(
-            f"policy: {path} cannot be loaded as {algo.upper()} ({type(err).__name__}: {_short(first, 160)})"
+            f"policy: {path} cannot be loaded as {algo.upper()} ({type(err).__name__}: {excerpt(first, 160)})"
         ) from None
 
 
@@ -654,54 +695,77 @@ def check_spaces(model: Any, env: gym.Env, path: Path) -> None:
             )
 
 
-class ModelSpaces:
-    """The observation and action spaces of a model trained on ``env`` (with ``meta``), and its layout.
+def _residual_wrapper(env: gym.Env) -> ResidualExpertEnv | None:
+    """The :class:`~agents.rl.residual_env.ResidualExpertEnv` among ``env``'s wrappers, or None."""
+    while isinstance(env, gym.Wrapper):
+        if isinstance(env, ResidualExpertEnv):
+            return env
+        env = env.env
+    return None
 
-    ``observation_space`` is ``env``'s, with the expert features appended when ``meta`` says
-    ``residual`` and ``expert_features``; ``observation_structure`` names the slices of every part.
+
+def check_model_env(meta: dict[str, Any], env: gym.Env, path: Path) -> ResidualExpertEnv | None:
+    """Refuse an env the model (with metadata ``meta``) was not trained in; :return: a residual model's
+    :class:`~agents.rl.residual_env.ResidualExpertEnv` (None for any other model).
+
+    The env's robot must be the model's (:func:`model_robot`); a residual model needs ``QuadUnevenResidual-v0`` with
+    its recorded residual and expert (:func:`make_model_env` builds it), any other model an env without an expert.
+
+    :raises ModelError: naming ``robot`` or the env, with what the model needs.
     """
-
-    def __init__(self, env: gym.Env, meta: dict[str, Any] | None) -> None:
-        self.expert_features = bool(meta and meta.get("residual") and meta.get("expert_features", False))
-        self.action_space = env.action_space
-        self.observation_space = env.observation_space
-        self.observation_structure: dict[str, slice] = dict(env.unwrapped.observation_structure)
-        if self.expert_features:
-            from agents.rl.expert_features import EXPERT_FEATURE_FIELDS, augmented_space
-
-            offset = int(env.observation_space.shape[0])
-            self.observation_space = augmented_space(env.observation_space)
-            for f in EXPERT_FEATURE_FIELDS:
-                self.observation_structure[f.name] = slice(offset, offset + f.size)
-                offset += f.size
+    robot = model_robot(meta)
+    env_robot = getattr(getattr(env.unwrapped, "robot", None), "name", None)
+    if env_robot is not None and env_robot != robot:
+        raise ModelError(
+            f"robot must be {excerpt(robot)}, the robot {path} was trained on, got {excerpt(env_robot)}: a policy "
+            "acts for the robot it was trained on (drop --robot, or give its robot)"
+        )
+    wrapper = _residual_wrapper(env)
+    if not meta.get("residual"):
+        if wrapper is not None:
+            raise ModelError(
+                f"policy: {path} was trained without the expert ({PLAIN_ENV_ID}), the env is {RESIDUAL_ENV_ID}"
+            )
+        return None
+    if wrapper is None:
+        raise ModelError(
+            f"policy: {path} is a residual model: it runs in {RESIDUAL_ENV_ID} with the expert of its training "
+            "(agents.rl.model_io.make_model_env builds it)"
+        )
+    want = residual_config_of(meta, path).to_dict()
+    got = wrapper.config.to_dict()
+    differ = [k for k in want if k != "residual_penalty" and want[k] != got[k]]
+    if differ:
+        name = differ[0]
+        raise ModelError(
+            f"policy: {path} was trained with {name}={excerpt(want[name])}, the env has {name}={excerpt(got[name])} "
+            "(agents.rl.model_io.make_model_env builds the model's env)"
+        )
+    return wrapper
 
 
 def load_sb3_policy(path: str | Path, env: gym.Env, algo: str, allow_pickle: bool = False) -> SB3Policy:
-    """Load the SB3 model ``path`` as a policy for ``env`` (a ``QuadUneven-v0`` env, before ``reset``).
+    """Load the SB3 model ``path`` as a policy for ``env``, the env it was trained in (:func:`make_model_env`).
 
-    With ``rl_meta.json`` saying ``residual``, installs the expert of its recorded config plus the residual
-    (:func:`agents.rl.residual_env.install_residual_controller`) on ``env.unwrapped``, and with
-    ``expert_features`` the policy appends the expert features to every observation, as the training env
-    did. Nothing in the model folder is unpickled unless ``allow_pickle`` (see :func:`load_sb3_model`).
+    The env is checked, not changed (:func:`check_model_env`): for a residual model it is ``QuadUnevenResidual-v0``,
+    whose expert and residual are its own physics-rate controller and whose observation has the expert features
+    the model was trained with. Nothing in the model folder is unpickled unless ``allow_pickle`` (see
+    :func:`load_sb3_model`). A model without metadata is loaded as a plain SB3 policy on the env as given.
 
     :param algo: ``"ppo"`` or ``"sac"``; must match the metadata's ``algo`` if there is one.
-    :raises ModelError: on an algo mismatch, bad metadata, missing or unreadable normalisation statistics, a
-        corrupt or truncated model file, or a model for another observation or action space.
+    :raises ModelError: on an algo mismatch, bad metadata, an env of another robot or kind, missing or unreadable
+        normalisation statistics, a corrupt or truncated model file, or a model for another observation or action
+        space.
     """
     path = Path(path)
     meta = read_metadata(path)
     if meta is not None and meta.get("algo") not in (None, algo):
         raise ModelError(f"algo: {path} was trained with {meta['algo']!r}; pass --algo {meta['algo']}, got {algo!r}")
-    spaces_of = ModelSpaces(env, meta)
-    normalizer = load_obs_normalization(path, meta, allow_pickle, spaces_of.observation_space.shape)
-    model = load_sb3_model(path, algo, spaces_of, allow_pickle)  # type: ignore[arg-type]
-    check_spaces(model, spaces_of, path)  # type: ignore[arg-type]
-    expert = None
-    if meta is not None and meta.get("residual"):
-        from agents.rl.residual_env import install_residual_controller
-
-        expert, _ = install_residual_controller(env, residual_config_of(meta, path))
-    return SB3Policy(model, normalizer, expert, env.unwrapped if spaces_of.expert_features else None)
+    wrapper = None if meta is None else check_model_env(meta, env, path)
+    normalizer = load_obs_normalization(path, meta, allow_pickle, env.observation_space.shape)
+    model = load_sb3_model(path, algo, env, allow_pickle)
+    check_spaces(model, env, path)
+    return SB3Policy(model, normalizer, None if wrapper is None else wrapper.expert)
 
 
 __all__ = [
@@ -715,15 +779,17 @@ __all__ = [
     "RESIDUAL_META_FIELDS",
     "ZIP_ENTRIES",
     "ModelError",
-    "ModelSpaces",
     "ModelZip",
     "SB3Policy",
     "check_json_type",
+    "check_model_env",
     "check_spaces",
     "load_obs_normalization",
     "load_sb3_model",
     "load_sb3_policy",
-    "metadata_env_kwargs",
+    "make_model_env",
+    "model_env_spec",
+    "model_robot",
     "read_metadata",
     "read_model_zip",
     "recorded_shape",

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from quad_uneven_env.fields import excerpt
+
 STAT_KEYS = ("mean", "var", "epsilon", "clip")
 """The arrays of a statistics ``.npz`` (:meth:`ObsNormalization.save`)."""
 
@@ -97,7 +99,7 @@ class ObsNormalization:
             )
         for key in ("epsilon", "clip"):
             if arrays[key].shape != () or not arrays[key] > 0:
-                raise ValueError(f"{where}: {key} must be a number > 0, got {arrays[key].tolist()!r}")
+                raise ValueError(f"{where}: {key} must be a number > 0, got {excerpt(arrays[key])}")
         return cls(mean, var, float(arrays["epsilon"]), float(arrays["clip"]))
 
 

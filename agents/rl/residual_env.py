@@ -47,138 +47,26 @@ import mujoco
 import numpy as np
 from gymnasium.envs.registration import register, registry
 
-from agents.control.controller import Gains
 from agents.expert import ExpertConfig, ExpertPolicy
 from agents.rl import residual_kernels as RK
-from agents.rl.config import RESIDUAL_BASES, RESIDUAL_LEGS
-from agents.rl.expert_features import augmented_space, expert_features
+from agents.rl.expert_features import EXPERT_FEATURE_FIELDS, augmented_space, expert_features
+from agents.rl.residual_config import (
+    DEFAULT_RESIDUAL_SCALE,
+    ResidualConfig,
+    check_residual_basis,
+    check_residual_legs,
+    check_residual_scale,
+    expert_overrides,
+)
 from quad_uneven_env.env import QuadUnevenEnv
-from quad_uneven_env.fields import check_fields, from_mapping, param
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.measurement_kernels import clip_finite_into
 
 RESIDUAL_ENV_ID = "QuadUnevenResidual-v0"
 """Gymnasium id of the residual env (registered when this module is imported)."""
 
-DEFAULT_RESIDUAL_SCALE = 0.1
-"""Default residual torque as a fraction of the torque limit (0.1 x 120 N m = 12 N m per joint)."""
-
 DEFAULT_MAX_EPISODE_STEPS = 1000
 """Control steps per episode of the registered env (20 s at the default 50 Hz)."""
-
-
-def check_residual_legs(residual_legs: Any) -> str:
-    """``residual_legs`` if it is one of :data:`RESIDUAL_LEGS`.
-
-    :raises ValueError: naming ``residual_legs`` and its allowed values otherwise.
-    """
-    if not isinstance(residual_legs, str) or residual_legs not in RESIDUAL_LEGS:
-        raise ValueError(f"residual_legs must be one of {list(RESIDUAL_LEGS)}, got {residual_legs!r}")
-    return residual_legs
-
-
-def check_residual_basis(residual_basis: Any) -> str:
-    """``residual_basis`` if it is one of :data:`RESIDUAL_BASES`.
-
-    :raises ValueError: naming ``residual_basis`` and its allowed values otherwise.
-    """
-    if not isinstance(residual_basis, str) or residual_basis not in RESIDUAL_BASES:
-        raise ValueError(f"residual_basis must be one of {list(RESIDUAL_BASES)}, got {residual_basis!r}")
-    return residual_basis
-
-
-def check_residual_scale(residual_scale: Any) -> float:
-    """``residual_scale`` as a float in (0, 1].
-
-    :raises ValueError: naming ``residual_scale`` otherwise.
-    """
-    try:
-        value = float(residual_scale)
-    except (TypeError, ValueError):
-        value = float("nan")
-    if isinstance(residual_scale, bool) or not (0.0 < value <= 1.0):
-        raise ValueError(f"residual_scale must be a number in (0, 1] (of the torque limit), got {residual_scale!r}")
-    return value
-
-
-def expert_config(raw: Mapping[str, Any] | ExpertConfig | None, where: str = "expert") -> ExpertConfig:
-    """An :class:`ExpertConfig` from a mapping of its fields (``gains`` a mapping of :class:`Gains` fields,
-    ``durations`` a list), as a training config or ``rl_meta.json`` says it; an ExpertConfig is returned as is.
-
-    :raises ValueError: naming ``where.field`` and its allowed values.
-    """
-    if raw is None or isinstance(raw, ExpertConfig):
-        return ExpertConfig() if raw is None else raw
-    values = dict(raw) if isinstance(raw, Mapping) else raw
-    if isinstance(values, dict):
-        if isinstance(values.get("gains"), Mapping):
-            values["gains"] = from_mapping(Gains, values["gains"], f"{where}.gains")
-        if isinstance(values.get("durations"), list):
-            values["durations"] = tuple(values["durations"])
-    return from_mapping(ExpertConfig, values, where)
-
-
-def expert_overrides(config: ExpertConfig) -> dict[str, Any]:
-    """The fields of ``config`` that differ from :class:`ExpertConfig`'s defaults, as JSON values (a mapping for
-    ``gains``, a list for ``durations``): what ``rl_meta.json`` records, and :func:`expert_config` reads back."""
-    default = ExpertConfig()
-    out: dict[str, Any] = {}
-    for f in dataclasses.fields(ExpertConfig):
-        value = getattr(config, f.name)
-        if value == getattr(default, f.name):
-            continue
-        if isinstance(value, Gains):
-            value = {g.name: getattr(value, g.name) for g in dataclasses.fields(Gains)}
-        elif isinstance(value, tuple):
-            value = list(value)
-        out[f.name] = value
-    return out
-
-
-@dataclasses.dataclass(frozen=True)
-class ResidualConfig:
-    """The residual env's settings (SI units): what one unit of action does, where, on top of which expert, and
-    what the agent sees. Frozen; bad values raise ``ValueError`` naming ``ResidualConfig.field``."""
-
-    residual_scale: float = param(DEFAULT_RESIDUAL_SCALE, "of the torque limit", lo=0.0, hi=1.0, lo_open=True)
-    """residual per unit action as a fraction of the torque limit (``torque_limit`` basis) or of the expert's
-    torque (``expert_torque`` basis), in (0, 1]."""
-    residual_legs: str = param("all", kind="choice", choices=RESIDUAL_LEGS)
-    """``all``: every leg takes the residual; ``stance``: only a leg whose foot touches the ground, at each
-    physics step (the residual then cannot move a swinging foot)."""
-    residual_basis: str = param("torque_limit", kind="choice", choices=RESIDUAL_BASES)
-    """``torque_limit``: residual = scale x action x the motor limit; ``expert_torque``: scale x action x the
-    expert's own torque (per joint and physics step: a gain on the expert)."""
-    expert_features: bool = param(True, kind="bool")
-    """append the expert features (:mod:`agents.rl.expert_features`) to the observation."""
-    residual_penalty: float = param(0.0, "per mean(action^2)", lo=0.0)
-    """>= 0: subtracted from the reward per unit of mean(action^2) over the 12 joints; 0 keeps the env's."""
-    expert: ExpertConfig = dataclasses.field(default_factory=ExpertConfig)
-    """the expert under the residual (its ``adaptation``: adaptive gains on its torques)."""
-
-    def __post_init__(self) -> None:
-        check_fields(self)
-        if not isinstance(self.expert, ExpertConfig):
-            raise ValueError(f"ResidualConfig.expert must be an ExpertConfig, got {self.expert!r}")
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON values of every field; ``expert`` as its fields that differ from the defaults
-        (:func:`expert_overrides`)."""
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "expert"}
-        return {**out, "expert": expert_overrides(self.expert)}
-
-    @classmethod
-    def from_dict(cls, raw: Mapping[str, Any], where: str = "ResidualConfig") -> ResidualConfig:
-        """A config from a mapping of its fields (``expert`` a mapping of :class:`ExpertConfig` fields; missing
-        fields take their defaults), the inverse of :meth:`to_dict`.
-
-        :raises ValueError: naming ``where.field`` (or ``where.expert.field``) and its allowed values.
-        """
-        if not isinstance(raw, Mapping):
-            raise ValueError(f"{where} must be a mapping of ResidualConfig fields, got {raw!r}")
-        values = dict(raw)
-        if "expert" in values:
-            values["expert"] = expert_config(values["expert"], f"{where}.expert" if where else "expert")
-        return from_mapping(cls, values, where)
 
 
 class ResidualController:
@@ -326,16 +214,18 @@ def install_residual_controller(
     """
     config = ResidualConfig() if config is None else config
     if not isinstance(config, ResidualConfig):
-        raise ValueError(f"config must be a ResidualConfig, got {config!r}")
+        raise ValueError(f"config must be a ResidualConfig, got {excerpt(config)}")
     base = env.unwrapped
     if not isinstance(base, QuadUnevenEnv):
         raise ValueError(f"the residual controller needs a QuadUneven-v0 env, got {type(base).__name__}")
     if base.action_mode != "torque":
         raise ValueError(
-            f"action_mode must be 'torque' for the residual env (expert torques), got {base.action_mode!r}"
+            f"action_mode must be 'torque' for the residual env (expert torques), got {excerpt(base.action_mode)}"
         )
+    # the given settings over the robot's scaled ones (docs/robots.md); where those are the defaults (the paper
+    # robot's), the given settings as they are
     settings = config.expert
-    if base.robot.config is None:  # a URDF robot: the given settings over the robot's scaled ones (docs/robots.md)
+    if ExpertConfig.for_robot(base.robot) != ExpertConfig():
         settings = ExpertConfig.for_robot(base.robot, expert_overrides(settings))
     expert = ExpertPolicy(env, settings)
     controller = ResidualController(
@@ -371,8 +261,14 @@ class ResidualExpertEnv(gym.Wrapper):
         self.residual_scale = self.controller.residual_scale
         self.residual_penalty = self.config.residual_penalty
         self.expert_features = self.config.expert_features
+        self.observation_structure: dict[str, slice] = dict(env.unwrapped.observation_structure)
+        """name -> slice of every part of the observation: the wrapped env's, then the expert features'."""
         if self.expert_features:
             self.observation_space = augmented_space(env.observation_space)
+            offset = int(env.observation_space.shape[0])
+            for f in EXPERT_FEATURE_FIELDS:
+                self.observation_structure[f.name] = slice(offset, offset + f.size)
+                offset += f.size
 
     def _observation(self, obs: np.ndarray) -> np.ndarray:
         if not self.expert_features:
@@ -433,16 +329,9 @@ if RESIDUAL_ENV_ID not in registry:
     )
 
 __all__ = [
-    "DEFAULT_RESIDUAL_SCALE",
     "RESIDUAL_ENV_ID",
-    "RESIDUAL_LEGS",
-    "ResidualConfig",
     "ResidualController",
     "ResidualExpertEnv",
-    "check_residual_basis",
-    "check_residual_legs",
-    "expert_config",
-    "expert_overrides",
     "install_residual_controller",
     "make_residual_env",
     "residual_torques",

@@ -26,6 +26,7 @@ from agents.control.adaptation.learned import (
     StrengthEstimator,
 )
 from quad_uneven_env import constants as C
+from quad_uneven_env.fields import excerpt
 
 
 class FixedGainRecorder:
@@ -123,7 +124,7 @@ def parse_seeds(text: str) -> list[int]:
     except ValueError:
         seeds = []
     if not seeds:
-        raise ValueError(f"--seeds must be FIRST-LAST with FIRST <= LAST (integers), got {text!r}")
+        raise ValueError(f"--seeds must be FIRST-LAST with FIRST <= LAST (integers), got {excerpt(text)}")
     return seeds
 
 
@@ -237,7 +238,7 @@ def fit_strength_estimator(
     if workers < 1 or test_every < 2 or not seconds > START_TIME + WARMUP:
         raise ValueError(
             f"workers must be >= 1, test_every >= 2 and seconds > {START_TIME + WARMUP:g}, got {workers}, "
-            f"{test_every} and {seconds!r}"
+            f"{test_every} and {excerpt(seconds)}"
         )
     t0 = time.perf_counter()
     if from_data is not None:

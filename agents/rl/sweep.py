@@ -44,7 +44,7 @@ from agents.outputs import output_dir, write_json_atomic
 from agents.plotting import pyplot, save
 from agents.rl.config import TrainConfig, TrainConfigError, load_train_config, terrain_list, validate
 from quad_uneven_env.config import read_yaml
-from quad_uneven_env.fields import check_fields, from_mapping, param
+from quad_uneven_env.fields import check_fields, clip, excerpt, from_mapping, param
 
 __all__ = [
     "SWEEP_OUTPUTS",
@@ -91,7 +91,7 @@ class SweepEvaluation:
     def __post_init__(self) -> None:
         check_fields(self, where="evaluation")
         if not isinstance(self.suite, str) or not self.suite:
-            raise SweepError(f"evaluation.suite must be a suite name or YAML path, got {self.suite!r}")
+            raise SweepError(f"evaluation.suite must be a suite name or YAML path, got {excerpt(self.suite)}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -133,7 +133,7 @@ def _run_config(config: Any, base: Mapping[str, Any], overrides: Mapping[str, An
     merged = {**base, **overrides}
     unknown = [k for k in merged if k not in _FIELDS]
     if unknown:
-        raise SweepError(f"{where}.{unknown[0]}: unknown TrainConfig field; allowed: {sorted(_FIELDS)}")
+        raise SweepError(f"{where}.{clip(str(unknown[0]), 40)}: unknown TrainConfig field; allowed: {sorted(_FIELDS)}")
     try:
         cfg = load_train_config(config, {k: v for k, v in merged.items() if v is not None})
         nones = {k: None for k, v in merged.items() if v is None}  # e.g. randomization: null
@@ -160,18 +160,18 @@ def sweep_from_dict(raw: Any, source: str = "<dict>") -> Sweep:
     """
     if not isinstance(raw, Mapping):
         raise SweepError(f"a sweep file must be a mapping with keys from {list(SWEEP_KEYS)}, got {type(raw).__name__}")
-    unknown = sorted(set(raw) - set(SWEEP_KEYS))
+    unknown = sorted(set(raw) - set(SWEEP_KEYS), key=str)
     if unknown:
-        raise SweepError(f"{unknown[0]}: unknown sweep key; allowed: {list(SWEEP_KEYS)}")
+        raise SweepError(f"{clip(str(unknown[0]), 40)}: unknown sweep key; allowed: {list(SWEEP_KEYS)}")
     name = raw.get("name", Path(source).stem)
     if not isinstance(name, str) or not name:
-        raise SweepError(f"name must be a non-empty string, got {name!r}")
+        raise SweepError(f"name must be a non-empty string, got {excerpt(name)}")
     config = raw.get("config")
     if config is not None and not isinstance(config, str):
-        raise SweepError(f"config must be the path of a training config YAML or null, got {config!r}")
+        raise SweepError(f"config must be the path of a training config YAML or null, got {excerpt(config)}")
     base = raw.get("base") or {}
     if not isinstance(base, Mapping):
-        raise SweepError(f"base must be a mapping of TrainConfig fields, got {base!r}")
+        raise SweepError(f"base must be a mapping of TrainConfig fields, got {excerpt(base)}")
     _run_config(config, base, {}, "base")
     if ("grid" in raw) == ("runs" in raw):
         raise SweepError("grid or runs: give exactly one (grid: field -> list of values; runs: list of field mappings)")
@@ -179,12 +179,14 @@ def sweep_from_dict(raw: Any, source: str = "<dict>") -> Sweep:
     if "grid" in raw:
         grid = raw["grid"]
         if not isinstance(grid, Mapping) or not grid:
-            raise SweepError(f"grid must be a non-empty mapping of TrainConfig field -> list of values, got {grid!r}")
+            raise SweepError(
+                f"grid must be a non-empty mapping of TrainConfig field -> list of values, got {excerpt(grid)}"
+            )
         for key, values in grid.items():
             if key not in _FIELDS:
-                raise SweepError(f"grid.{key}: unknown TrainConfig field; allowed: {sorted(_FIELDS)}")
+                raise SweepError(f"grid.{clip(str(key), 40)}: unknown TrainConfig field; allowed: {sorted(_FIELDS)}")
             if not isinstance(values, list) or not values:
-                raise SweepError(f"grid.{key} must be a non-empty list of values, got {values!r}")
+                raise SweepError(f"grid.{key} must be a non-empty list of values, got {excerpt(values)}")
             for i, v in enumerate(values):
                 _run_config(config, base, {key: v}, f"grid.{key}[{i}]")
         swept = tuple(grid)
@@ -195,10 +197,10 @@ def sweep_from_dict(raw: Any, source: str = "<dict>") -> Sweep:
     else:
         items = raw["runs"]
         if not isinstance(items, list) or not items:
-            raise SweepError(f"runs must be a non-empty list of TrainConfig field mappings, got {items!r}")
+            raise SweepError(f"runs must be a non-empty list of TrainConfig field mappings, got {excerpt(items)}")
         for i, item in enumerate(items):
             if not isinstance(item, Mapping):
-                raise SweepError(f"runs[{i}] must be a mapping of TrainConfig fields (and a name), got {item!r}")
+                raise SweepError(f"runs[{i}] must be a mapping of TrainConfig fields (and a name), got {excerpt(item)}")
             params = {k: v for k, v in item.items() if k != "name"}
             run_name = item.get("name", f"run{i:03d}")
             runs.append(SweepRun(run_name, params, _run_config(config, base, params, f"runs[{i}]")))
@@ -206,9 +208,11 @@ def sweep_from_dict(raw: Any, source: str = "<dict>") -> Sweep:
     names = [r.name for r in runs]
     for i, n in enumerate(names):
         if not isinstance(n, str) or not _NAME_OK.match(n):
-            raise SweepError(f"runs[{i}].name must be a folder name of letters, digits and ._=+- only, got {n!r}")
+            raise SweepError(
+                f"runs[{i}].name must be a folder name of letters, digits and ._=+- only, got {excerpt(n)}"
+            )
         if names.index(n) != i:
-            raise SweepError(f"runs[{i}].name: {n!r} is used by more than one run; run names must be distinct")
+            raise SweepError(f"runs[{i}].name: {excerpt(n)} is used by more than one run; run names must be distinct")
     try:
         evaluation = from_mapping(SweepEvaluation, raw.get("evaluation"), "evaluation")
     except SweepError:
@@ -221,7 +225,7 @@ def sweep_from_dict(raw: Any, source: str = "<dict>") -> Sweep:
         raise SweepError(f"evaluation.suite: {err}") from None
     cpus = raw.get("cpus_per_run")
     if cpus is not None and (isinstance(cpus, bool) or not isinstance(cpus, int | float) or not 0 < cpus < math.inf):
-        raise SweepError(f"cpus_per_run must be a number > 0 or null (its n_envs), got {cpus!r}")
+        raise SweepError(f"cpus_per_run must be a number > 0 or null (its n_envs), got {excerpt(cpus)}")
     return Sweep(name, source, tuple(runs), swept, evaluation, None if cpus is None else float(cpus))
 
 

@@ -16,6 +16,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from quad_uneven_env.fields import excerpt
+
 
 class TerrainMixEnv(gym.Env):
     """Episodes on terrains drawn from a list; ``info["terrain_index"]`` says which one runs.
@@ -47,7 +49,9 @@ class TerrainMixEnv(gym.Env):
         w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
         if w.shape != (n,) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
             self.close()
-            raise ValueError(f"terrain weights must be {n} non-negative numbers with a positive sum, got {weights!r}")
+            raise ValueError(
+                f"terrain weights must be {n} non-negative numbers with a positive sum, got {excerpt(weights)}"
+            )
         self.weights = w / w.sum()
         self.terrain_names = [str(i) for i in range(n)] if names is None else [str(x) for x in names]
         self.observation_space = first.observation_space

@@ -32,8 +32,10 @@ from agents.rl.learning_curve import plot_learning_curve
 from agents.rl.model_io import write_metadata
 from agents.rl.normalization import ObsNormalization, norm_path
 from agents.rl.residual_env import RESIDUAL_ENV_ID
+from agents.rl.terrain_mix import TerrainMixEnv
 from agents.rl.vec_env import EVAL_SEED_OFFSET, SCRATCH_ENV_KWARGS, build_vec_env, make_train_env, normalize
 from agents.rl.warm_start import check_init_model, warm_start
+from quad_uneven_env.fields import excerpt
 
 __all__ = [
     "TRAIN_OUTPUTS",
@@ -178,11 +180,13 @@ def _in_main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
 
 
-def _metadata(cfg: TrainConfig) -> dict[str, Any]:
+def _metadata(cfg: TrainConfig, robot: str) -> dict[str, Any]:
+    """The ``rl_meta.json`` of a run of ``cfg`` on the robot named ``robot`` (:mod:`agents.rl.model_io`)."""
     import stable_baselines3
 
     common = {
         "algo": cfg.algo,
+        "robot": robot,
         "terrain": cfg.terrain,
         "randomization": cfg.randomization if not isinstance(cfg.randomization, dict) else dict(cfg.randomization),
         "max_episode_steps": cfg.max_episode_steps,
@@ -210,6 +214,7 @@ def _metadata(cfg: TrainConfig) -> dict[str, Any]:
         "residual_scale": float(residual.residual_scale),
         "residual_legs": residual.residual_legs,
         "residual_basis": residual.residual_basis,
+        "residual_penalty": float(residual.residual_penalty),
         "expert": residual.to_dict()["expert"],
         "env_id": RESIDUAL_ENV_ID,
         "env_kwargs": dict(cfg.env_kwargs),
@@ -341,10 +346,11 @@ def _callbacks(cfg: TrainConfig, out: Path, progress: bool) -> tuple[list[BaseCa
     return callbacks, eval_env
 
 
-def _preflight_env(cfg: TrainConfig) -> None:
+def _preflight_env(cfg: TrainConfig) -> str:
     """Build one training env in this process, so that an env argument the env refuses (an unknown
     robot, a bad ``env_kwargs`` value) is reported before ``out`` is touched, not as a worker's traceback.
 
+    :return: the name of the env's robot.
     :raises TrainConfigError: naming ``env_kwargs`` and what the env refused.
     """
     try:
@@ -353,8 +359,13 @@ def _preflight_env(cfg: TrainConfig) -> None:
             cfg.residual_config() if cfg.residual else None,
         )  # fmt: skip
     except (ValueError, TypeError) as err:
-        raise TrainConfigError(f"env_kwargs {cfg.env_kwargs!r}: {err}") from None
+        raise TrainConfigError(f"env_kwargs {excerpt(cfg.env_kwargs)}: {err}") from None
+    base = env.unwrapped
+    if isinstance(base, TerrainMixEnv):  # one env per terrain, all on the config's robot
+        base = base.envs[0].unwrapped
+    robot = base.robot.name
     env.close()
+    return robot
 
 
 def train(
@@ -386,13 +397,12 @@ def train(
     """
     import torch
 
-    meta = _metadata(cfg)
+    meta = _metadata(cfg, _preflight_env(cfg))
     init = None
     if cfg.init_from is not None:
         init = check_init_model(cfg.init_from, meta)
         if init[0].resolve().is_relative_to(Path(out).resolve()):
             raise TrainConfigError(f"init_from: {init[0]} lies in --out {str(out)!r}, whose outputs this run replaces")
-    _preflight_env(cfg)
     with output_dir(out, "train", TRAIN_OUTPUTS, overwrite=overwrite) as manifest:
         out = manifest.out
         torch.set_num_threads(1)  # small networks: threads only contend with the env processes on 2 cores

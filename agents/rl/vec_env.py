@@ -15,7 +15,8 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
 from agents.rl.config import TrainConfig, terrain_label
-from agents.rl.residual_env import RESIDUAL_ENV_ID, ResidualConfig
+from agents.rl.residual_config import ResidualConfig
+from agents.rl.residual_env import RESIDUAL_ENV_ID
 from agents.rl.terrain_mix import TerrainMixEnv
 
 SCRATCH_ENV_KWARGS: dict[str, Any] = {"action_mode": "joint_pd"}

@@ -22,10 +22,20 @@ import numpy as np
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 
 from agents.rl.config import TrainConfigError
-from agents.rl.model_io import META_DEFAULTS, META_FILE, ModelError, read_metadata, read_model_zip, recorded_shape
+from agents.rl.model_io import (
+    META_DEFAULTS,
+    META_FILE,
+    ModelError,
+    model_robot,
+    read_metadata,
+    read_model_zip,
+    recorded_shape,
+)
 from agents.rl.normalization import ObsNormalization, norm_path
+from quad_uneven_env.fields import excerpt
 
 ENV_FIELDS = (
+    "robot",
     "algo",
     "residual",
     "residual_scale",
@@ -36,7 +46,8 @@ ENV_FIELDS = (
     "normalize_obs",
     "env_kwargs",
 )
-"""Metadata fields a warm start must share with its config (what the policy's inputs and outputs mean)."""
+"""Metadata fields a warm start must share with its config (what the policy's inputs and outputs mean, and for
+which robot); ``robot`` as :func:`~agents.rl.model_io.model_robot` reads it, ``env_kwargs`` without ``robot``."""
 
 
 def init_model_path(init_from: str | Path) -> Path:
@@ -77,17 +88,26 @@ def check_init_model(init_from: str | Path, expected: dict[str, Any]) -> tuple[P
         except ValueError as err:
             raise TrainConfigError(f"init_from: {err}") from None
     for name in ENV_FIELDS:
-        theirs = meta.get(name, META_DEFAULTS.get(name))
-        mine = expected.get(name, META_DEFAULTS.get(name))
+        theirs, mine = _env_field(meta, name), _env_field(expected, name)
         if name == "residual_scale" and theirs is not None and mine is not None:
             theirs, mine = float(theirs), float(mine)
         if theirs != mine:
             raise TrainConfigError(
-                f"init_from: {path} was trained with {name}={theirs!r}, the config has {name}={mine!r}; "
+                f"init_from: {path} was trained with {name}={excerpt(theirs)}, the config has {name}={excerpt(mine)}; "
                 f"a warm start needs the same {', '.join(ENV_FIELDS)}"
             )
     steps = data.get("num_timesteps", 0)
     return path, int(steps) if isinstance(steps, int) and steps > 0 else 0
+
+
+def _env_field(meta: dict[str, Any], name: str) -> Any:
+    """The value of the field ``name`` of :data:`ENV_FIELDS` in ``meta`` (its default when absent)."""
+    if name == "robot":
+        return model_robot(meta)
+    value = meta.get(name, META_DEFAULTS.get(name))
+    if name == "env_kwargs":
+        return {k: v for k, v in (value or {}).items() if k != "robot"}
+    return value
 
 
 class FrozenRunningMeanStd(RunningMeanStd):

@@ -1,4 +1,5 @@
-"""Closed-form leg kinematics of the HAA-HFE-KFE leg in the hip frame.
+"""Closed-form kinematics of a two-link HAA-HFE-KFE leg in the hip frame (the paper's Table-1 legs,
+:class:`~quad_uneven_env.robot.quadruped.TwoLinkLegs`).
 
 The hip frame is parallel to the body frame with its origin at the hip (the intersection
 of the HAA and HFE axes). At zero angles a leg hangs straight down (-z). Angles in rad,
@@ -8,15 +9,6 @@ lengths in m.
 from __future__ import annotations
 
 import numpy as np
-
-from quad_uneven_env.config import RobotConfig
-from quad_uneven_env.constants import KNEE_SIGN, LEG_NAMES, LEG_SIGN_X, LEG_SIGN_Y
-
-
-def hip_positions_B(cfg: RobotConfig) -> np.ndarray:
-    """Hip positions in the body frame (4 x 3, m, leg order): the body corners at mid height."""
-    half_l, half_w = cfg.body.size[0] / 2.0, cfg.body.size[1] / 2.0
-    return np.array([[LEG_SIGN_X[leg] * half_l, LEG_SIGN_Y[leg] * half_w, 0.0] for leg in LEG_NAMES])
 
 
 def leg_fk_hip(q_leg: np.ndarray, l1: float, l2: float) -> np.ndarray:
@@ -45,11 +37,3 @@ def leg_ik_hip(p_foot_H: np.ndarray, l1: float, l2: float, knee_sign: float) -> 
     phi = np.arctan2(-u, -w)
     alpha = np.arctan2(l2 * np.sin(q3), l1 + l2 * np.cos(q3))
     return np.stack([q1, phi - alpha, q3], axis=-1)
-
-
-def standing_joint_angles(cfg: RobotConfig, hip_height: float) -> np.ndarray:
-    """Joint angles (12, rad) with every foot point ``hip_height`` (m) straight below its hip."""
-    if not 0.0 < hip_height < cfg.leg_length:
-        raise ValueError(f"hip_height must be in (0, {cfg.leg_length}) m, got {hip_height}")
-    target = np.array([0.0, 0.0, -hip_height])
-    return np.concatenate([leg_ik_hip(target, cfg.thigh.length, cfg.shank.length, KNEE_SIGN[leg]) for leg in LEG_NAMES])

@@ -25,7 +25,7 @@ import numpy as np
 from quad_uneven_env import constants as C
 
 if TYPE_CHECKING:
-    from quad_uneven_env.robot.description import LegDescription, RobotDescription
+    from quad_uneven_env.robot.quadruped import LegDescription, RobotDescription
 
 
 def axis_rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:

@@ -1,7 +1,17 @@
-"""Build the MuJoCo model of the paper's robot (Table 1) as generated MJCF.
+"""The MuJoCo model of any :class:`~quad_uneven_env.robot.quadruped.RobotDescription`, as generated MJCF.
 
-``robot_mjcf`` gives the robot alone (what Pinocchio loads); ``scene_mjcf`` adds the
-terrain height field, actuators, lights and a tracking camera for the environment.
+:func:`robot_mjcf` gives the robot alone (what Pinocchio and the MuJoCo dynamics backend load); :func:`scene_mjcf`
+adds the terrain height field, actuators, contact sensors, lights and a tracking camera for the environment.
+
+The body tree is the description's: trunk -> hip link (HAA) -> thigh (HFE) -> shank (KFE), each body at its
+joint's placement, each with its link's full inertia tensor, so the model has the description's rigid-body
+dynamics (a URDF's, or Table 1's). A massless hip link at the HFE origin (the paper's robot) is no body of its own:
+HAA and HFE then move the thigh body, as a moving MuJoCo body needs mass. The geometry is primitive (URDF meshes
+are mostly ``.dae``, which MuJoCo cannot read): the trunk box (the description's, else the box spanned by the
+hips), a capsule from each HFE to its knee and from each knee to where its foot sphere begins, and a sphere at each
+foot point. Names, actuators (torque motors at the description's limits) and sensors are those of
+:mod:`quad_uneven_env.constants`, so the env and its measurements read every robot alike. Numbers are written at
+full precision (round-trip ``repr``), so the model has the description's exact values.
 """
 
 from __future__ import annotations
@@ -12,14 +22,8 @@ import mujoco
 import numpy as np
 
 from quad_uneven_env import constants as C
-from quad_uneven_env.config import LinkParams, RobotConfig, load_robot_config
-from quad_uneven_env.robot.kinematics import hip_positions_B, standing_joint_angles
-
-MIN_INERTIA = mujoco.mjMINVAL
-"""kg m^2: the smallest principal inertia MuJoCo accepts; replaces Table 1's zeros."""
-
-NOMINAL_HIP_HEIGHT = 0.34
-"""m: hip-to-foot-point height of the default standing pose (81 % of the leg length)."""
+from quad_uneven_env.robot.description import load_robot
+from quad_uneven_env.robot.quadruped import JointDescription, LinkInertia, RobotDescription
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,81 +75,145 @@ class PhysicsOptions:
         return 2.0 * self.timestep
 
 
-def _fmt(values) -> str:
-    return " ".join(f"{float(v):.10g}" for v in np.atleast_1d(values))
+def hip_link_body(leg: str) -> str:
+    """MJCF body moved by HAA of ``leg`` (the link between HAA and HFE)."""
+    return f"{leg}_hip_link"
 
 
-def _link_inertia(link: LinkParams) -> np.ndarray:
-    """(Ixx, Iyy, Izz) in the link frame whose z axis is the link's long axis."""
-    axial, other1, other2 = (max(v, MIN_INERTIA) for v in link.inertia)
-    return np.array([other1, other2, axial])
+def _v(values) -> str:
+    """Numbers at full precision (round-trip repr), so the model has the description's exact values."""
+    return " ".join(repr(float(v)) for v in np.ravel(values))
 
 
-def _leg_xml(cfg: RobotConfig, leg: str, hip_pos: np.ndarray, limb: str) -> str:
-    rng = cfg.joint_range
-    kfe = cfg.knee_range(leg)
-    l1, l2 = cfg.thigh.length, cfg.shank.length
+def _quat(R: np.ndarray) -> str:
+    q = np.zeros(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(R, dtype=float).ravel())
+    return _v(q)
+
+
+def _inertial(link: LinkInertia) -> str:
+    """The ``<inertial>`` element (none for a massless link); a diagonal tensor as ``diaginertia``, which keeps
+    MuJoCo's smallest principal inertias exact (its eigen-solver of ``fullinertia`` does not)."""
+    if link.mass == 0:
+        return ""
+    I = link.inertia
+    if np.count_nonzero(I - np.diag(np.diag(I))) == 0:
+        return f'<inertial pos="{_v(link.com)}" mass="{link.mass!r}" diaginertia="{_v(np.diag(I))}"/>'
+    full = (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])
+    return f'<inertial pos="{_v(link.com)}" mass="{link.mass!r}" fullinertia="{_v(full)}"/>'
+
+
+def _joint(leg: str, kind: str, j: JointDescription) -> str:
+    return (
+        f'<joint name="{C.joint_name(leg, kind)}" axis="{_v(j.axis)}" range="{_v(j.range)}" '
+        f'damping="{j.damping!r}" armature="{j.armature!r}"/>'
+    )
+
+
+def _capsule(name: str, a: np.ndarray, b: np.ndarray, radius: float, attrs: str, rgba: str) -> str:
+    if np.linalg.norm(b - a) < 1e-6:
+        return ""
+    return (
+        f'<geom name="{name}" type="capsule" fromto="{_v(a)} {_v(b)}" size="{radius:.6g}" mass="0" {attrs} '
+        f'rgba="{rgba}"/>'
+    )
+
+
+def shank_end(desc: RobotDescription, i: int) -> np.ndarray:
+    """(3,) m, shank frame: the end of leg ``i``'s shank capsule, where its foot sphere begins on the knee-foot
+    line (two-link legs: ``shank - foot_radius`` straight below the knee)."""
+    r = desc.foot_radius
+    if desc.two_link is not None:
+        return np.array([0.0, 0.0, -(desc.two_link.shank - r)])
+    foot = desc.legs[i].foot
+    return foot * (1.0 - min(r / max(np.linalg.norm(foot), 1e-9), 1.0))
+
+
+def _leg_xml(desc: RobotDescription, i: int, limb: str) -> str:
+    leg = desc.legs[i]
+    name = leg.name
     group = f'contype="{C.ROBOT_CONTYPE}" conaffinity="{C.ROBOT_CONAFFINITY}"'
-    limb_group = f"{group} {limb}".rstrip()
-    fr = f'friction="{cfg.friction:.6g} 0.005 0.0001"'
+    fr = f'friction="{desc.friction:.6g} 0.005 0.0001"'
+    limb_group = f"{group} {limb} {fr}".replace("  ", " ")
+    r = desc.link_radius
+    foot = leg.foot
+    thigh = _capsule(f"{name}_thigh_geom", np.zeros(3), leg.kfe.pos, r, limb_group, "0.3 0.3 0.35 1")
+    shank = _capsule(f"{name}_shank_geom", np.zeros(3), shank_end(desc, i), 0.7 * r, limb_group, "0.55 0.55 0.6 1")
+    inner = f"""
+          {_joint(name, "HFE", leg.hfe)}
+          {_inertial(leg.hfe.link)}
+          <site name="{C.hip_site(name)}" pos="0 0 0" size="0.01"/>
+          {thigh}
+          <body name="{C.shank_body(name)}" pos="{_v(leg.kfe.pos)}" quat="{_quat(leg.kfe.rot)}">
+            {_joint(name, "KFE", leg.kfe)}
+            {_inertial(leg.kfe.link)}
+            {shank}
+            <geom name="{C.foot_geom(name)}" type="sphere" pos="{_v(foot)}" size="{desc.foot_radius:.6g}" mass="0" {group} {fr} rgba="0.1 0.1 0.1 1"/>
+            <site name="{C.foot_site(name)}" pos="{_v(foot)}" size="0.012" rgba="1 0.2 0.2 1"/>
+          </body>"""
+    if leg.haa.link.mass == 0 and not np.any(leg.hfe.pos) and np.array_equal(leg.hfe.rot, np.eye(3)):
+        # a massless hip link at the HFE origin (the paper's robot): HAA and HFE move one body, as in MuJoCo
+        # a moving body needs mass
+        return f"""
+      <body name="{C.thigh_body(name)}" pos="{_v(leg.haa.pos)}" quat="{_quat(leg.haa.rot)}">
+        {_joint(name, "HAA", leg.haa)}{inner}
+      </body>"""
     return f"""
-      <body name="{C.thigh_body(leg)}" pos="{_fmt(hip_pos)}">
-        <joint name="{C.joint_name(leg, "HAA")}" axis="1 0 0" range="{_fmt(rng["HAA"])}" damping="{cfg.joint_damping:.6g}" armature="{cfg.joint_armature:.6g}"/>
-        <joint name="{C.joint_name(leg, "HFE")}" axis="0 1 0" range="{_fmt(rng["HFE"])}" damping="{cfg.joint_damping:.6g}" armature="{cfg.joint_armature:.6g}"/>
-        <inertial pos="0 0 {-cfg.thigh.com:.10g}" mass="{cfg.thigh.mass:.10g}" diaginertia="{_fmt(_link_inertia(cfg.thigh))}"/>
-        <site name="{C.hip_site(leg)}" pos="0 0 0" size="0.01"/>
-        <geom name="{leg}_thigh_geom" type="capsule" fromto="0 0 0 0 0 {-l1:.10g}" size="{cfg.link_radius:.6g}" mass="0" {limb_group} {fr} rgba="0.3 0.3 0.35 1"/>
-        <body name="{C.shank_body(leg)}" pos="0 0 {-l1:.10g}">
-          <joint name="{C.joint_name(leg, "KFE")}" axis="0 1 0" range="{_fmt(kfe)}" damping="{cfg.joint_damping:.6g}" armature="{cfg.joint_armature:.6g}"/>
-          <inertial pos="0 0 {-cfg.shank.com:.10g}" mass="{cfg.shank.mass:.10g}" diaginertia="{_fmt(_link_inertia(cfg.shank))}"/>
-          <geom name="{leg}_shank_geom" type="capsule" fromto="0 0 0 0 0 {-(l2 - cfg.foot_radius):.10g}" size="{0.7 * cfg.link_radius:.6g}" mass="0" {limb_group} {fr} rgba="0.55 0.55 0.6 1"/>
-          <geom name="{C.foot_geom(leg)}" type="sphere" pos="0 0 {-l2:.10g}" size="{cfg.foot_radius:.6g}" mass="0" {group} {fr} rgba="0.1 0.1 0.1 1"/>
-          <site name="{C.foot_site(leg)}" pos="0 0 {-l2:.10g}" size="0.012" rgba="1 0.2 0.2 1"/>
+      <body name="{hip_link_body(name)}" pos="{_v(leg.haa.pos)}" quat="{_quat(leg.haa.rot)}">
+        {_joint(name, "HAA", leg.haa)}
+        {_inertial(leg.haa.link)}
+        <body name="{C.thigh_body(name)}" pos="{_v(leg.hfe.pos)}" quat="{_quat(leg.hfe.rot)}">{inner}
         </body>
       </body>"""
 
 
-def _trunk_xml(cfg: RobotConfig, with_camera: bool, limb: str = "") -> str:
+def trunk_box(desc: RobotDescription) -> tuple[np.ndarray, np.ndarray]:
+    """(centre, half sizes) m of the trunk's collision box, trunk frame: the description's, else the box whose
+    corners are the HAA origins with a height of half the hips' spacing across."""
+    if desc.trunk_box is not None:
+        return desc.trunk_box
+    hips = desc.hip_positions_B
+    half = np.abs(hips).max(axis=0)
+    half[2] = max(half[2], 0.25 * half[1])
+    return np.array([0.0, 0.0, hips[:, 2].mean()]), half
+
+
+def _trunk_xml(desc: RobotDescription, with_camera: bool, limb: str = "") -> str:
     """The trunk body and its legs; ``limb``: extra MJCF attributes of the trunk, thigh and shank geoms."""
-    b = cfg.body
-    half = np.asarray(b.size) / 2.0
-    hips = hip_positions_B(cfg)
-    legs = "".join(_leg_xml(cfg, leg, hips[i], limb) for i, leg in enumerate(C.LEG_NAMES))
+    centre, half = trunk_box(desc)
+    legs = "".join(_leg_xml(desc, i, limb) for i in range(C.N_LEGS))
     camera = track_camera_xml() if with_camera else ""
-    h0 = NOMINAL_HIP_HEIGHT + cfg.foot_radius
     return f"""
-    <body name="{C.TRUNK_BODY}" pos="0 0 {h0:.10g}">
+    <body name="{C.TRUNK_BODY}" pos="0 0 {desc.standing_height!r}">
       <freejoint name="{C.ROOT_JOINT}"/>
-      <inertial pos="0 0 0" mass="{b.mass:.10g}" diaginertia="{_fmt(b.inertia)}"/>
-      <geom name="{C.TRUNK_GEOM}" type="box" size="{_fmt(half)}" mass="0" contype="{C.ROBOT_CONTYPE}" conaffinity="{C.ROBOT_CONAFFINITY}" {limb} rgba="0.85 0.55 0.15 1"/>
+      {_inertial(desc.trunk)}
+      <geom name="{C.TRUNK_GEOM}" type="box" pos="{_v(centre)}" size="{_v(half)}" mass="0" contype="{C.ROBOT_CONTYPE}" conaffinity="{C.ROBOT_CONAFFINITY}" {limb} rgba="0.85 0.55 0.15 1"/>
       {camera}{legs}
     </body>"""
 
 
-def robot_mjcf(cfg: RobotConfig | None = None) -> str:
-    """MJCF of the robot alone (no terrain, no actuators): loadable by ``pin.buildModelFromMJCF``.
+def robot_mjcf(desc: RobotDescription | None = None) -> str:
+    """MJCF of the robot alone (no terrain, no actuators), standing over the origin: loadable by
+    ``pin.buildModelFromMJCF``.
 
-    :param cfg: robot parameters; default ``configs/robot/paper.yaml`` (Table 1).
+    :param desc: the robot; default the paper's (``configs/robot/paper.yaml``, Table 1).
     :return: the MJCF document as a string (write it to a file for Pinocchio).
     """
-    cfg = cfg or load_robot_config()
-    return f"""<mujoco model="{cfg.name}_robot">
+    desc = load_robot("paper") if desc is None else desc
+    return f"""<mujoco model="{desc.name}_robot">
   <compiler angle="radian" autolimits="true"/>
-  <worldbody>{_trunk_xml(cfg, with_camera=False)}
+  <worldbody>{_trunk_xml(desc, with_camera=False)}
   </worldbody>
 </mujoco>
 """
 
 
-def actuators_xml(cfg: RobotConfig) -> str:
-    """Direct-drive torque motors (N m), one per joint, limited to the config's torque limits."""
-    lines = []
-    for leg in C.LEG_NAMES:
-        for kind in C.JOINT_KINDS:
-            lim = cfg.torque_limit[kind]
-            j = C.joint_name(leg, kind)
-            lines.append(f'    <motor name="{j}_motor" joint="{j}" gear="1" ctrlrange="{-lim:.6g} {lim:.6g}"/>')
-    return "\n".join(lines)
+def actuators_xml(desc: RobotDescription) -> str:
+    """Direct-drive torque motors (N m), one per joint, limited to the description's torque limits."""
+    return "\n".join(
+        f'    <motor name="{j}_motor" joint="{j}" gear="1" ctrlrange="{-lim:.6g} {lim:.6g}"/>'
+        for j, lim in zip(C.JOINT_NAMES, desc.torque_limits, strict=True)
+    )
 
 
 def contact_sensors_xml() -> str:
@@ -162,31 +230,20 @@ def contact_sensors_xml() -> str:
     <contact name="{C.TRUNK_CONTACT_SENSOR}" geom1="{C.TRUNK_GEOM}" geom2="{C.TERRAIN_GEOM}" num="1" data="found" reduce="netforce"/>"""
 
 
-def home_qpos(cfg: RobotConfig, ground_height: float = 0.0) -> np.ndarray:
-    """Standing configuration (19,) with the feet touching flat ground at ``ground_height`` (m)."""
-    q = np.zeros(C.NQ)
-    q[2] = ground_height + NOMINAL_HIP_HEIGHT + cfg.foot_radius
-    q[3] = 1.0
-    q[7:] = standing_joint_angles(cfg, NOMINAL_HIP_HEIGHT)
-    return q
-
-
 def scene_mjcf(
-    cfg: RobotConfig,
+    desc: RobotDescription,
     hfield_asset: str,
     hfield_geom: str,
     physics: PhysicsOptions | None = None,
 ) -> str:
-    """MJCF of the robot on a height-field terrain with actuators, lights and a tracking camera.
+    """MJCF of the robot on a height-field terrain with actuators, contact sensors, lights and a tracking camera.
 
     :param hfield_asset: the ``<hfield .../>`` asset element of the terrain.
     :param hfield_geom: the ``<geom type="hfield" .../>`` element of the terrain.
     """
     p = physics or PhysicsOptions()
-    return scene_document(
-        cfg.name, _trunk_xml(cfg, with_camera=True, limb=limb_attributes(p)), actuators_xml(cfg), hfield_asset,
-        hfield_geom, p,
-    )  # fmt: skip
+    trunk = _trunk_xml(desc, with_camera=True, limb=limb_attributes(p))
+    return scene_document(desc.name, trunk, actuators_xml(desc), hfield_asset, hfield_geom, p)
 
 
 def limb_attributes(physics: PhysicsOptions) -> str:

@@ -22,6 +22,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.terrain.heightfield_kernels import heights_into, normals_into, patch_stats_into
 
 MAX_CELLS = 4_000_000
@@ -68,10 +69,10 @@ class HeightField:
             raise ValueError("heights must be finite (found NaN or Inf)")
         cell = float(cell_size)
         if not np.isfinite(cell) or cell <= 0.0:
-            raise ValueError(f"cell_size must be a finite number > 0 (m), got {cell_size!r}")
+            raise ValueError(f"cell_size must be a finite number > 0 (m), got {excerpt(cell_size)}")
         o = np.array(origin, dtype=np.float64).reshape(-1)
         if o.shape != (2,) or not np.all(np.isfinite(o)):
-            raise ValueError(f"origin must be a finite world (x, y) pair (m), got {origin!r}")
+            raise ValueError(f"origin must be a finite world (x, y) pair (m), got {excerpt(origin)}")
         h.setflags(write=False)
         o.setflags(write=False)
         self._h = h
@@ -256,7 +257,7 @@ class HeightField:
     def _check_patch_radius(self, radius: float) -> float:
         radius = float(radius)
         if not np.isfinite(radius) or radius <= 0.0 or radius > 50 * self._cell:
-            raise ValueError(f"radius must be in (0, {50 * self._cell:g}] m (50 cells), got {radius!r}")
+            raise ValueError(f"radius must be in (0, {50 * self._cell:g}] m (50 cells), got {excerpt(radius)}")
         return radius
 
     def patch_stats_numpy(self, x: ArrayLike, y: ArrayLike, radius: float) -> PatchStats:

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from quad_uneven_env.config import CONFIG_DIR, read_yaml
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.terrain.kinds import KINDS
 
 TERRAIN_KINDS: tuple[str, ...] = tuple(KINDS)
@@ -49,9 +50,11 @@ class TerrainSpec:
 
     def __post_init__(self) -> None:
         if not isinstance(self.kind, str) or self.kind not in KINDS:
-            raise ValueError(f"terrain.kind must be one of {list(TERRAIN_KINDS)}, got {self.kind!r}")
+            raise ValueError(f"terrain.kind must be one of {list(TERRAIN_KINDS)}, got {excerpt(self.kind)}")
         if not isinstance(self.params, Mapping):
-            raise ValueError(f"terrain.params must be a mapping of parameter names to values, got {self.params!r}")
+            raise ValueError(
+                f"terrain.params must be a mapping of parameter names to values, got {excerpt(self.params)}"
+            )
         checked = KINDS[self.kind].validate(dict(self.params), f"terrain[{self.kind}]")
         object.__setattr__(self, "params", types.MappingProxyType(checked))
 
@@ -93,7 +96,7 @@ def _from_mapping(raw: Mapping[str, Any]) -> TerrainSpec:
     if nested is None:
         nested = {}
     if not isinstance(nested, Mapping):
-        raise ValueError(f"terrain.params must be a mapping of parameter names to values, got {nested!r}")
+        raise ValueError(f"terrain.params must be a mapping of parameter names to values, got {excerpt(nested)}")
     twice = sorted(set(nested) & set(raw))
     if twice:
         raise ValueError(f"terrain: parameter(s) {twice} given both at the top level and under 'params'")
@@ -120,7 +123,7 @@ def parse_terrain_spec(spec: str | os.PathLike[str] | Mapping[str, Any] | Terrai
             path = PRESET_DIR / f"{text}.yaml"
         if not path.is_file():
             raise ValueError(
-                f"terrain spec {text!r} is neither a kind {list(TERRAIN_KINDS)}, nor a preset {preset_names()} "
+                f"terrain spec {excerpt(text)} is neither a kind {list(TERRAIN_KINDS)}, nor a preset {preset_names()} "
                 "in configs/terrain/, nor an existing .yaml file"
             )
         return _from_mapping(read_yaml(path))

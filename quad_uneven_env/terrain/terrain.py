@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from quad_uneven_env import constants as C
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.terrain.grid import SPAWN_XY, Grid
 from quad_uneven_env.terrain.heightfield import HeightField
 from quad_uneven_env.terrain.kinds import KINDS
@@ -115,7 +116,7 @@ class Terrain:
             or not isinstance(friction, (int, float, np.floating))
             or not (np.isfinite(friction) and friction > 0)
         ):
-            raise ValueError(f"friction must be a finite number > 0, got {friction!r}")
+            raise ValueError(f"friction must be a finite number > 0, got {excerpt(friction)}")
         cx, cy = self.grid.center
         pos = " ".join(_num(v) for v in (cx, cy, self.z_min))
         return (

@@ -161,11 +161,11 @@ CASES: dict[str, Case] = {
     # -- a robot file missing a joint
     "robot missing HAA range": Case(
         lambda t, m: env_kwargs(t, json.dumps({"robot": str(robot_without(t, "joint_range", "HAA"))})),
-        ("robot.joint_range", "HAA"),
+        ("robot robot.yaml.joint_range.HAA", "required"),
     ),
     "robot missing KFE limit": Case(
         lambda t, m: env_kwargs(t, json.dumps({"robot": str(robot_without(t, "torque_limit", "KFE"))})),
-        ("robot.torque_limit", "KFE"),
+        ("robot robot.yaml.torque_limit.KFE", "required"),
     ),
     # -- model files
     "model zip corrupt": Case(lambda t, m: model_case(m, t, "corrupt.zip"), ("policy", "corrupt.zip")),

@@ -24,15 +24,15 @@ from agents.control.controller import (
 from agents.control.references import BaseWaveReference, track_in_env
 from planners.types import ReferenceSample
 from quad_uneven_env import constants as C
-from quad_uneven_env.robot.dynamics.base import BACKENDS, make_dynamics
-from quad_uneven_env.robot.model import home_qpos, robot_mjcf
+from quad_uneven_env.robot.dynamics import BACKENDS, make_dynamics
+from quad_uneven_env.robot.model import robot_mjcf
 
 ALL_STANCES = list(itertools.product((True, False), repeat=4))
 
 
 @pytest.fixture(scope="module")
-def mj_model(robot_cfg) -> mujoco.MjModel:
-    return mujoco.MjModel.from_xml_string(robot_mjcf(robot_cfg))
+def mj_model(paper_robot) -> mujoco.MjModel:
+    return mujoco.MjModel.from_xml_string(robot_mjcf(paper_robot))
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +42,7 @@ def dyn(mj_model):
 
 def perturbed_stand(cfg, rng, tilt=0.1):
     """Standing pose with random joint offsets, a tilted base and random velocities."""
-    qpos = home_qpos(cfg)
+    qpos = cfg.home_qpos()
     qpos[7:] += rng.normal(0.0, 0.1, C.N_JOINTS)
     axis = rng.normal(size=3)
     quat = np.empty(4)
@@ -53,9 +53,9 @@ def perturbed_stand(cfg, rng, tilt=0.1):
 
 
 # ----------------------------------------------------------------------------- elimination
-def test_elimination_constraint_and_spd(robot_cfg, dyn, rng):
+def test_elimination_constraint_and_spd(paper_robot, dyn, rng):
     for _ in range(5):
-        qpos, qvel = perturbed_stand(robot_cfg, rng)
+        qpos, qvel = perturbed_stand(paper_robot, rng)
         terms = dyn.terms(qpos, qvel)
         for stance in ALL_STANCES:
             proj = eliminate_constraints(terms, stance)
@@ -71,8 +71,8 @@ def test_elimination_constraint_and_spd(robot_cfg, dyn, rng):
             assert np.linalg.eigvalsh(proj.M_beta).min() > 1e-6
 
 
-def test_elimination_without_stance_is_the_full_dynamics(robot_cfg, dyn, rng):
-    qpos, qvel = perturbed_stand(robot_cfg, rng)
+def test_elimination_without_stance_is_the_full_dynamics(paper_robot, dyn, rng):
+    qpos, qvel = perturbed_stand(paper_robot, rng)
     terms = dyn.terms(qpos, qvel)
     proj = eliminate_constraints(terms, (False,) * 4)
     np.testing.assert_array_equal(proj.S, np.eye(C.NV))
@@ -81,9 +81,9 @@ def test_elimination_without_stance_is_the_full_dynamics(robot_cfg, dyn, rng):
     np.testing.assert_allclose(proj.V_beta + proj.G_beta, terms.h, atol=1e-12)
 
 
-def test_sdot_betadot_keeps_stance_feet_still(robot_cfg, dyn, rng):
+def test_sdot_betadot_keeps_stance_feet_still(paper_robot, dyn, rng):
     """With qvel = S beta_dot, d/dt (J S beta_dot) = 0 along the motion: J (S bdd + Sdot bd) + Jdot qdot = 0."""
-    qpos, qvel = perturbed_stand(robot_cfg, rng)
+    qpos, qvel = perturbed_stand(paper_robot, rng)
     stance = (True, False, True, True)
     proj0 = eliminate_constraints(dyn.terms(qpos, qvel), stance)
     qvel_c = proj0.S @ qvel[proj0.beta_index]  # a velocity satisfying the constraint
@@ -94,22 +94,22 @@ def test_sdot_betadot_keeps_stance_feet_still(robot_cfg, dyn, rng):
         assert np.abs(terms.J_feet[i] @ qacc + terms.Jdot_qdot_feet[i]).max() < 1e-10
 
 
-def test_bad_stance_is_refused(dyn, robot_cfg):
+def test_bad_stance_is_refused(dyn, paper_robot):
     ID = InverseDynamics(dyn)
     with pytest.raises(ValueError, match="stance must be 4 booleans"):
-        ID.solve(home_qpos(robot_cfg), np.zeros(C.NV), np.zeros(6), (True, True, True))
+        ID.solve(paper_robot.home_qpos(), np.zeros(C.NV), np.zeros(6), (True, True, True))
     with pytest.raises(ValueError, match="beta_ddot must have shape"):
-        ID.solve(home_qpos(robot_cfg), np.zeros(C.NV), np.zeros(5), (True,) * 4)
+        ID.solve(paper_robot.home_qpos(), np.zeros(C.NV), np.zeros(5), (True,) * 4)
     with pytest.raises(ValueError, match="distribution must be one of"):
         InverseDynamics(dyn, "lp")
 
 
 # ----------------------------------------------------------------------------- inverse dynamics
 @pytest.mark.parametrize("backend", BACKENDS)
-def test_pinv_is_the_papers_formula_and_satisfies_mujoco(backend, mj_model, robot_cfg, rng):
+def test_pinv_is_the_papers_formula_and_satisfies_mujoco(backend, mj_model, paper_robot, rng):
     ID = InverseDynamics(make_dynamics(backend, mj_model), "pinv")
     for _ in range(3):
-        qpos, qvel = perturbed_stand(robot_cfg, rng)
+        qpos, qvel = perturbed_stand(paper_robot, rng)
         for stance in ALL_STANCES:
             nb = C.NV - 3 * sum(stance)
             bdd = rng.normal(0.0, 2.0, nb)
@@ -148,12 +148,12 @@ def _cone_feasible(dyn, qpos, qvel, res, stance, mu, fmin) -> bool:
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-def test_qp_keeps_forces_in_cone_and_satisfies_mujoco(backend, mj_model, robot_cfg, rng):
+def test_qp_keeps_forces_in_cone_and_satisfies_mujoco(backend, mj_model, paper_robot, rng):
     ID = InverseDynamics(make_dynamics(backend, mj_model), "qp", min_normal_force=10.0)
     pinv = InverseDynamics(ID.dynamics, "pinv")
     n_pinv_outside = 0
     for _ in range(4):
-        qpos, qvel = perturbed_stand(robot_cfg, rng, tilt=0.05)
+        qpos, qvel = perturbed_stand(paper_robot, rng, tilt=0.05)
         qvel *= 0.2
         for stance in [s for s in ALL_STANCES if sum(s) >= 3]:
             bdd = np.zeros(C.NV - 3 * sum(stance))
@@ -181,10 +181,10 @@ def test_qp_keeps_forces_in_cone_and_satisfies_mujoco(backend, mj_model, robot_c
     assert n_pinv_outside > 0  # the cases include some where the paper's pinv leaves the cone
 
 
-def test_qp_infeasible_relaxes_to_physical_forces(dyn, robot_cfg):
+def test_qp_infeasible_relaxes_to_physical_forces(dyn, paper_robot):
     """Commanding the base down faster than free fall needs pulling feet: the "qp" keeps the forces in
     the cones (the base wrench closest to the command), where "pinv" would pull on the ground."""
-    qpos = home_qpos(robot_cfg)
+    qpos = paper_robot.home_qpos()
     bdd = np.zeros(6)
     bdd[2] = -20.0  # faster than free fall: needs pulling feet
     res = InverseDynamics(dyn, "qp").solve(qpos, np.zeros(C.NV), bdd, (True,) * 4)
@@ -206,8 +206,8 @@ def test_qp_infeasible_relaxes_to_physical_forces(dyn, robot_cfg):
         )
 
 
-def test_stretched_knee_gives_finite_damped_torques(dyn, robot_cfg):
-    qpos = home_qpos(robot_cfg)
+def test_stretched_knee_gives_finite_damped_torques(dyn, paper_robot):
+    qpos = paper_robot.home_qpos()
     qpos[7 + 2] = 0.0  # LF knee stretched: its 3x3 leg Jacobian is singular
     qpos[7 + 1] = 0.0
     for dist in ("pinv", "qp"):
@@ -231,10 +231,10 @@ def test_gains_and_stance_selection():
         ComputedTorqueController(lambda t: None, stance_mode="guess")
 
 
-def test_orientation_error_is_on_so3(robot_cfg):
+def test_orientation_error_is_on_so3(paper_robot):
     """A 170 deg yaw reference: the command turns the short way, with the rotation-vector magnitude."""
     ctrl = ComputedTorqueController(lambda t: None, gains=Gains(kd_rot=0.0, kp_rot=1.0))
-    qpos = home_qpos(robot_cfg)
+    qpos = paper_robot.home_qpos()
     quat = np.empty(4)
     mujoco.mju_axisAngle2Quat(quat, np.array([0.0, 0.0, 1.0]), np.deg2rad(-170.0))
     ref = ReferenceSample(0.0, qpos[:3], quat, *(np.zeros(3),) * 4, qpos[7:], np.zeros(12), np.zeros(12), (True,) * 4)
@@ -243,9 +243,9 @@ def test_orientation_error_is_on_so3(robot_cfg):
 
 
 # ----------------------------------------------------------------------------- acceptance in the env
-def test_base_wave_reference_derivatives_are_consistent(robot_cfg):
+def test_base_wave_reference_derivatives_are_consistent(paper_robot):
     feet = np.array([[0.25, 0.185, 0.0], [0.25, -0.185, 0.0], [-0.25, 0.185, 0.0], [-0.25, -0.185, 0.0]])
-    ref = BaseWaveReference(np.array([0.0, 0.0, 0.36]), feet, robot_cfg)
+    ref = BaseWaveReference(np.array([0.0, 0.0, 0.36]), feet, paper_robot)
     t, h = 0.7, 1e-5
     a, b, c = ref(t - h), ref(t), ref(t + h)
     omega_fd = np.empty(3)
@@ -301,11 +301,11 @@ def test_controller_runs_on_every_backend(backend):
 
 
 # ----------------------------------------------------------------------------- compiled hot path vs numpy
-def test_compiled_pinv_equals_numpy_path(mj_model, dyn, robot_cfg, rng):
+def test_compiled_pinv_equals_numpy_path(mj_model, dyn, paper_robot, rng):
     """The kernel (3 or 4 stance feet, or none) gives the numpy elimination's result; 1-2 feet use numpy."""
     ID = InverseDynamics(dyn, "pinv")
     for tilt in (0.1, 0.3):
-        qpos, qvel = perturbed_stand(robot_cfg, rng, tilt)
+        qpos, qvel = perturbed_stand(paper_robot, rng, tilt)
         terms = dyn.terms(qpos, qvel)
         for stance in ALL_STANCES:
             bdd = rng.normal(0.0, 2.0, C.NV - 3 * sum(stance))
@@ -317,7 +317,7 @@ def test_compiled_pinv_equals_numpy_path(mj_model, dyn, robot_cfg, rng):
             lay = eliminate_constraints(terms, stance).layout
             compiled = ID.solve_compiled(terms.M, terms.h, terms.J_feet, terms.Jdot_qdot_feet, lay, bdd)
             assert (compiled is not None) == (sum(stance) in (0, 3, 4))
-    qpos = home_qpos(robot_cfg)
+    qpos = paper_robot.home_qpos()
     qpos[7 + 1] = qpos[7 + 2] = 0.0  # stretched LF knee: damped inverse in both paths
     terms = dyn.terms(qpos, np.zeros(C.NV))
     fast = ID.solve_terms(terms, np.ones(6), (True,) * 4)
@@ -347,11 +347,11 @@ def _beta_ddot_reference(gains, qpos, qvel, ref, stance):
     return np.concatenate(out)
 
 
-def test_compiled_pd_command_equals_mujoco_quaternions(robot_cfg, rng):
+def test_compiled_pd_command_equals_mujoco_quaternions(paper_robot, rng):
     gains = Gains(kp_pos=300.0, kd_pos=30.0, kp_rot=200.0, kd_rot=20.0, kp_joint=800.0, kd_joint=50.0)
     ctrl = ComputedTorqueController(lambda t: None, gains=gains)
     for k in range(50):
-        qpos, qvel = perturbed_stand(robot_cfg, rng, tilt=0.5)
+        qpos, qvel = perturbed_stand(paper_robot, rng, tilt=0.5)
         quat = rng.normal(size=4)
         ref = ReferenceSample(
             0.0, *(rng.normal(size=3),), quat / np.linalg.norm(quat), *(rng.normal(size=(4, 3))),
@@ -377,7 +377,7 @@ def test_controller_call_equals_public_api_composition():
         mujoco.mj_step(m, d)
     mujoco.mj_step1(m, d)
     feet = d.site_xpos[[m.site(s).id for s in C.FOOT_SITES]].copy()
-    ref = BaseWaveReference(d.qpos[:3] + np.array([0.0, 0.0, 0.01]), feet, u.robot_cfg)
+    ref = BaseWaveReference(d.qpos[:3] + np.array([0.0, 0.0, 0.01]), feet, u.robot)
     for dist in ("pinv", "qp"):
         for planned in ((True,) * 4, (True, False, True, True), (True, False, False, True)):
             sample = dataclasses.replace(ref(0.3), stance=planned)
@@ -397,11 +397,11 @@ def test_controller_call_equals_public_api_composition():
     env.close()
 
 
-def test_warm_started_qp_equals_one_off_solve(dyn, robot_cfg, rng):
+def test_warm_started_qp_equals_one_off_solve(dyn, paper_robot, rng):
     """A sequence of different problems through the warm-started QP gives the cold one-off solutions."""
     warm = InverseDynamics(dyn, "qp", min_normal_force=10.0)
     for _ in range(12):
-        qpos, qvel = perturbed_stand(robot_cfg, rng, tilt=0.05)
+        qpos, qvel = perturbed_stand(paper_robot, rng, tilt=0.05)
         stance = ALL_STANCES[rng.integers(0, 5)]  # 3 or 4 stance feet
         bdd = np.zeros(C.NV - 3 * sum(stance))
         bdd[:6] = rng.normal(0.0, 0.5, 6)

@@ -11,13 +11,12 @@ import numpy as np
 import pytest
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
-from agents.control import controller_kernels as FK
+from agents.control import controller_kernels
 from agents.control import inverse_dynamics as ID
 from agents.control.controller import STANCE_MODES, ComputedTorqueController, contact_pairs
 from agents.control.controller_kernels import select_stance_mask
 from agents.expert import ExpertConfig, attach_expert
 from agents.expert.hook import PhysicsHook
-from agents.expert.recovery import NO_OFF_PLAN_CHECK
 from planners.types import PACKED_FIELDS
 
 
@@ -48,11 +47,11 @@ def _expert_states(terrain, config: ExpertConfig, steps: int, every: int):
             yield policy, u.model, u.data
 
 
-def _grid_step(policy, m, d, tau_ok, out, limit=None, off_plan=NO_OFF_PLAN_CHECK):
-    """The compiled step on the expert's current plan (its result code)."""
+def _grid_step(policy, m, d, tau_ok, out, limit=None):
+    """The compiled step on the expert's current plan (whether it took the step)."""
     p, ctrl = policy.planner, policy.controller
     limit = ctrl.torque_limit if limit is None else limit
-    args = (p.grid, p.t_start, p.t_end, d.sensordata, p.foot_sensor_adr, tau_ok, limit, out, off_plan)
+    args = (p.grid, p.t_start, p.t_end, d.sensordata, p.foot_sensor_adr, tau_ok, limit, out)
     return ctrl.grid_step_into(m, d, *args)
 
 
@@ -71,7 +70,7 @@ def test_the_compiled_step_gives_the_readable_calls_torques_and_diagnostics(dist
     for policy, m, d in _expert_states(terrain, ExpertConfig(distribution=distribution), steps=300, every=5):
         ctrl = policy.controller
         tau_ok, out, limit = np.zeros(12), np.full(12, np.nan), np.full(12, 20.0)
-        if _grid_step(policy, m, d, tau_ok, out, limit) != 1:
+        if not _grid_step(policy, m, d, tau_ok, out, limit):
             assert np.isnan(out).all() and not tau_ok.any()
             declined += 1
             continue
@@ -104,27 +103,18 @@ def test_the_compiled_step_gives_the_readable_calls_torques_and_diagnostics(dist
     assert distribution == "pinv" or len(daqp_solves) >= 3, "no compared step needed the QP"
 
 
-def test_the_compiled_steps_off_plan_check():
-    """With the off-plan tolerances the compiled step returns ``OFF_PLAN`` and writes nothing when the base is
-    farther than the tolerance from the grid row (as ``DisturbanceRecovery.check`` decides), else it steps."""
-    compared = off = 0
-    for policy, m, d in _expert_states("rough", ExpertConfig(), steps=200, every=5):
-        p = policy.planner
-        packed = p.row_of(float(d.time) - policy.controller.t0 - p.t_start)
-        if packed is None:
-            continue
-        row = packed[0]
-        dp2 = (d.qpos[0] - row[0]) ** 2 + (d.qpos[1] - row[1]) ** 2
-        out = np.full(12, np.nan)
-        if _grid_step(policy, m, d, np.zeros(12), out) != 1:
-            continue
-        for tol2, expected in ((dp2 * 1.01, 1), (dp2 * 0.99, FK.OFF_PLAN)):
-            out[:] = np.nan
-            assert _grid_step(policy, m, d, np.zeros(12), out, off_plan=(tol2, 1e6)) == expected
-            assert np.isnan(out).all() == (expected == FK.OFF_PLAN)
-            off += expected == FK.OFF_PLAN
-        compared += 1
-    assert compared >= 20 and off == compared
+def test_the_grid_codes_fields_read_back_as_written():
+    """:func:`decode_grid_code` reads back every field of a code laid out as ``grid_control_step`` writes it
+    (``control_step``'s code, then the planned stance and the grid row), over the fields' whole ranges: no two
+    fields overlap."""
+    ck = controller_kernels
+    rng = np.random.default_rng(0)
+    for stance, status, planned in itertools.product(range(16), range(8), range(16)):
+        n_beta, row, relaxed = int(rng.integers(6, 19)), int(rng.integers(0, 1 << 20)), bool(rng.integers(2))
+        code = stance | status << ck.STATUS_SHIFT | n_beta << ck.N_BETA_SHIFT | ck.INSIDE_CONES
+        code |= (ck.QP_DONE | ck.QP_RELAXED) if relaxed else 0
+        code |= planned << ck.GRID_PLANNED_SHIFT | row << ck.GRID_ROW_SHIFT
+        assert ck.decode_grid_code(code) == (stance, status, relaxed, planned, row)
 
 
 def test_lazy_last_result_refuses_overwritten_buffers():
@@ -138,9 +128,9 @@ def test_lazy_last_result_refuses_overwritten_buffers():
         obs, *_ = env.step(policy.predict(obs)[0])
         mujoco.mj_forward(m, d)
         done = _grid_step(policy, m, d, np.zeros(12), np.zeros(12))
-        if done == 1:
+        if done:
             break
-    assert done == 1, "the compiled step took no step"
+    assert done, "the compiled step took no step"
     stance = (True, True, True, True)
     ctrl.id.solve(d.qpos, d.qvel, np.zeros(6), stance)  # reuses the work buffers
     with pytest.raises(RuntimeError, match="reused"):
@@ -161,21 +151,21 @@ def test_a_failing_compiled_step_declines_and_is_not_retried(monkeypatch):
         obs, *_ = env.step(policy.predict(obs)[0])
     m, d = u.model, u.data
     mujoco.mj_forward(m, d)
-    assert _grid_step(policy, m, d, np.zeros(12), np.zeros(12)) == 1
+    assert _grid_step(policy, m, d, np.zeros(12), np.zeros(12))
     calls = []
 
     def refuse(*args):
         calls.append(1)
         raise TypeError("No matching definition for argument type(s)")
 
-    monkeypatch.setattr(FK, "grid_control_step", refuse)
+    monkeypatch.setattr(controller_kernels, "grid_control_step", refuse)
     ctrl._grid_calls.clear()  # the cached entry point would bypass the dispatcher patched above
     tau_ok = np.zeros(12)
-    assert _grid_step(policy, m, d, tau_ok, np.zeros(12)) == 0 and not tau_ok.any()
-    assert _grid_step(policy, m, d, tau_ok, np.zeros(12)) == 0
+    assert not _grid_step(policy, m, d, tau_ok, np.zeros(12)) and not tau_ok.any()
+    assert not _grid_step(policy, m, d, tau_ok, np.zeros(12))
     assert len(calls) == 1
     ctrl.set_friction(ctrl.mu)  # rebuilds the arguments: tried again
-    assert _grid_step(policy, m, d, tau_ok, np.zeros(12)) == 0
+    assert not _grid_step(policy, m, d, tau_ok, np.zeros(12))
     assert len(calls) == 2
     np.testing.assert_array_equal(policy(m, d, None), ctrl(m, d))  # the hook's readable call
 
@@ -190,58 +180,102 @@ def test_a_failing_compiled_step_declines_and_is_not_retried(monkeypatch):
     ],
 )
 def test_the_expert_walks_exactly_as_with_the_readable_step(distribution, terrain, share, push, monkeypatch):
-    """The expert with its compiled step (the env's fast lane, ``PhysicsHook.torques_into``, and the compiled step in
-    its full call, the disturbance check compiled in) against the same expert with the readable controller call
-    at every physics step (``hook.compiled = False``): the same torques, trajectory, log and recoveries, bit for
-    bit, in the simulator's data and in the nominal model's copy (measured contacts handed in). Both branches
-    are taken: the lane and the full call, and in the full call the compiled step and the readable path (late
-    touch-downs, plan ends, QPs left to DAQP); with ``push`` the base is knocked off its plan (0.3 m/s sideways)
-    so that a check inside the lane finds it off and the full call replans."""
+    """The expert with its compiled step (``grid_step_into``, tried once per physics step, the readable call in its
+    place where it declines) against the same expert with the readable controller call at every physics step
+    (``hook.compiled = False``): the same torques, trajectory, log and recoveries, bit for bit, in the simulator's
+    data and in the nominal model's copy (measured contacts handed in). The env's fast lane
+    (``PhysicsHook.torques_into``) answers every physics step; each step is one compiled step or one readable call;
+    both kinds are taken (late touch-downs, plan ends, QPs left to DAQP); with ``push`` the base is knocked off its
+    plan (0.3 m/s sideways) so that the disturbance check replans."""
     runs = []
     for compiled in (True, False):
         env = gym.make("QuadUneven-v0", terrain=terrain)
         policy = attach_expert(env, ExpertConfig(distribution=distribution, share_nominal_world=share))
         policy.hook.compiled = compiled
-        answers, readable = [], []
-        lane, call = PhysicsHook.torques_into, ComputedTorqueController.__call__
+        answers, tries, readable = [], [], []
+        lane, step, call = (
+            PhysicsHook.torques_into,
+            ComputedTorqueController.grid_step_into,
+            ComputedTorqueController.__call__,
+        )
 
         def counted_lane(self, *args, _lane=lane, _answers=answers):
             _answers.append(_lane(self, *args))
             return _answers[-1]
+
+        def counted_step(self, *args, _step=step, _tries=tries):
+            _tries.append(_step(self, *args))
+            return _tries[-1]
 
         def counted_call(self, *args, _call=call, _readable=readable):
             _readable.append(1)
             return _call(self, *args)
 
         monkeypatch.setattr(PhysicsHook, "torques_into", counted_lane)
+        monkeypatch.setattr(ComputedTorqueController, "grid_step_into", counted_step)
         monkeypatch.setattr(ComputedTorqueController, "__call__", counted_call)
         obs, _ = env.reset(seed=0)
         assert policy.shares_simulator_data is share
         d = env.unwrapped.data
         qpos, torques = [], []
-        for step in range(260):
-            if push and step == 150:
+        for i in range(260):
+            if push and i == 150:
                 d.qvel[1] += 0.3
             obs, _, fell, *_ = env.step(policy.predict(obs)[0])
             qpos.append(d.qpos.copy())
             torques.append(d.ctrl.copy())
             if fell:  # the "pinv" expert tips over after ~2.2 s, either way
                 break
-        if compiled:  # the lane's later calls went to the kernel's compiled entry point, past numba's dispatcher
+        if compiled:  # the later steps went to the kernel's compiled entry point, past numba's dispatcher
             assert policy.controller._grid_calls
-        runs.append((np.array(qpos), np.array(torques), answers, readable, list(policy.failure_log), policy.recoveries))
+        runs.append(
+            (np.array(qpos), np.array(torques), answers, tries, readable, list(policy.failure_log), policy.recoveries)
+        )
         monkeypatch.undo()
-    (q_fast, u_fast, answers, readable, log_fast, rec_fast), (q_ref, u_ref, _, readable_ref, log_ref, rec_ref) = runs
+    (q_fast, u_fast, answers, tries, readable, log_fast, rec_fast), reference = runs
+    q_ref, u_ref, answers_ref, tries_ref, readable_ref, log_ref, rec_ref = reference
     np.testing.assert_array_equal(u_fast, u_ref)
     np.testing.assert_array_equal(q_fast, q_ref)
     assert log_fast == log_ref and rec_fast == rec_ref
     assert rec_fast >= 1 or not push
     n = len(answers)
-    assert 0.5 * n < sum(answers) < n, "the lane and the full call must both run"
-    assert 0 < len(readable) <= n - sum(answers)
+    assert all(answers) and all(answers_ref) and len(answers_ref) == n == len(q_fast) * env.unwrapped.frame_skip
+    taken = sum(tries)
+    assert len(tries) <= n and taken + len(readable) == n, "one compiled step or one readable call per physics step"
+    assert 0.5 * n < taken < n
     if distribution == "qp":  # (the "pinv" walk ends before its first plan's end)
-        assert len(readable) < n - sum(answers), "the full call must take both the compiled step and the readable one"
-    assert len(readable_ref) == n
+        assert len(tries) > taken, "the readable call must also run where the compiled step declined"
+    assert len(readable_ref) == n and not tries_ref
+
+
+@pytest.mark.parametrize("share", [True, False])
+def test_the_lane_and_the_call_are_one_path(share, monkeypatch):
+    """The expert through the env's fast lane (``torques_into``) and with the lane removed (the env's call at every
+    physics step): the same motor commands, trajectory, log and recoveries bit for bit, pushed off its plan, in the
+    simulator's data and in the nominal model's copy; both count one step per physics step."""
+    runs = []
+    for lane in (True, False):
+        env = gym.make("QuadUneven-v0", terrain="rough")
+        policy = attach_expert(env, ExpertConfig(share_nominal_world=share))
+        if not lane:
+            monkeypatch.setattr(policy, "torques_into", lambda *args: False, raising=False)
+        obs, _ = env.reset(seed=4)
+        d = env.unwrapped.data
+        trace = []
+        for i in range(200):
+            if i == 120:
+                d.qvel[1] += 0.3
+            obs, _, fell, *_ = env.step(policy.predict(obs)[0])
+            trace.append((d.qpos.copy(), d.ctrl.copy()))
+            assert not fell
+        assert policy._steps == 200 * env.unwrapped.frame_skip
+        runs.append((trace, list(policy.failure_log), policy.recoveries))
+        monkeypatch.undo()
+    (with_lane, log_lane, rec_lane), (without, log_call, rec_call) = runs
+    for (q1, u1), (q2, u2) in zip(with_lane, without, strict=True):
+        np.testing.assert_array_equal(u1, u2)
+        np.testing.assert_array_equal(q1, q2)
+    assert log_lane == log_call and rec_lane == rec_call >= 1
 
 
 def test_the_contact_pairs_have_one_numba_type_whatever_the_contact_count():

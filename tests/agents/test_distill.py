@@ -151,7 +151,7 @@ def tiny_run(tmp_path_factory):
 
 def test_a_tiny_run_writes_a_train_folder_that_evaluate_and_export_read(tiny_run, tmp_path, capsys):
     from agents.evaluation.run import evaluate
-    from agents.rl.model_io import load_sb3_policy, read_metadata
+    from agents.rl.model_io import load_sb3_policy, make_model_env, read_metadata
 
     out, summary = tiny_run
     for name in ("model.zip", "model_obs_norm.npz", "rl_meta.json", "distill_summary.json", "distill_curve.png"):
@@ -172,7 +172,8 @@ def test_a_tiny_run_writes_a_train_folder_that_evaluate_and_export_read(tiny_run
     # the loaded policy acts as the student did in the rollouts (numpy forward == SB3 predict)
     from agents.rl.distill import mlp_forward, policy_params
 
-    env = gym.make("QuadUneven-v0", terrain="flat", **meta["env_kwargs"])
+    assert meta["robot"] == "paper"
+    env = make_model_env(out / "model.zip", terrain="flat")
     policy = load_sb3_policy(out / "model.zip", env, "ppo")
     obs, _ = env.reset(seed=0)
     action, _ = policy.predict(obs, deterministic=True)

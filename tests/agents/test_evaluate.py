@@ -21,7 +21,7 @@ from agents.evaluation.metrics import (
     stability_metrics,
     timing_metrics,
 )
-from agents.evaluation.policies import PolicyError, make_policy, policy_env_kwargs
+from agents.evaluation.policies import PolicyError, make_policy, make_policy_env
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import EpisodeTask
 
@@ -143,9 +143,9 @@ def test_reason_category_and_group_summary():
 
 # ------------------------------------------------------------------ policies
 def test_make_policy_errors_and_env_kwargs(tmp_path):
-    assert policy_env_kwargs("zero") == {"action_mode": "joint_pd"}
+    assert make_policy_env("zero", terrain="flat").unwrapped.action_mode == "joint_pd"
     with pytest.raises(PolicyError, match="one of"):
-        policy_env_kwargs("random")
+        make_policy_env("random")
     with pytest.raises(PolicyError, match="does not exist"):
         make_policy(str(tmp_path / "missing.zip"), env=None)
     with pytest.raises(PolicyError, match="algo"):
@@ -153,11 +153,10 @@ def test_make_policy_errors_and_env_kwargs(tmp_path):
 
 
 def test_expert_policy_installs_its_controller():
-    import gymnasium as gym
 
     from agents.expert import ExpertPolicy
 
-    env = gym.make("QuadUneven-v0", terrain="flat", **policy_env_kwargs("expert"))
+    env = make_policy_env("expert", terrain="flat")
     policy = make_policy("expert", env)
     assert isinstance(policy, ExpertPolicy)
     assert env.unwrapped.controller is policy

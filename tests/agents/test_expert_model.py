@@ -48,7 +48,7 @@ def test_nominal_model_equals_the_simulator_bit_for_bit_in_a_nominal_world():
     for _ in range(20):
         env.step(rng.uniform(-0.3, 0.3, C.N_JOINTS))
     mujoco.mj_step1(u.model, u.data)
-    nominal = NominalModel(u.robot_cfg, u.terrain, u.physics_dt)
+    nominal = NominalModel(u.robot, u.terrain, u.physics_dt)
     assert nominal.matches(u.model)
     own = nominal.measure(u.data.qpos, u.data.qvel, u.data.time)
     for name in ("M", "qfrc_bias", "xpos", "xmat", "xanchor", "xaxis", "site_xpos", "subtree_com"):
@@ -58,9 +58,9 @@ def test_nominal_model_equals_the_simulator_bit_for_bit_in_a_nominal_world():
 def test_nominal_model_sees_a_changed_simulator():
     env = make_env(payload=True)
     u = env.unwrapped
-    nominal = NominalModel(u.robot_cfg, u.terrain, u.physics_dt)
+    nominal = NominalModel(u.robot, u.terrain, u.physics_dt)
     assert not nominal.matches(u.model)
-    assert nominal.model.body_subtreemass[nominal.model.body(C.TRUNK_BODY).id] == pytest.approx(u.robot_cfg.total_mass)
+    assert nominal.model.body_subtreemass[nominal.model.body(C.TRUNK_BODY).id] == pytest.approx(u.robot.total_mass)
     assert "body_mass" in ROBOT_PARAMETER_FIELDS
 
 

@@ -10,7 +10,7 @@ import pytest
 import quad_uneven_env  # noqa: F401
 from agents.control.inverse_dynamics import InverseDynamics
 from agents.expert import ExpertConfig, attach_expert
-from quad_uneven_env.robot.dynamics.base import make_dynamics
+from quad_uneven_env.robot.dynamics import make_dynamics
 
 ROUGH = {"kind": "rough", "amplitude": 0.05, "wavelength": 0.6}
 ADAPT = {"friction": 0.6, "friction_adapt": True}
@@ -152,7 +152,7 @@ def test_contact_point_speed_against_finite_differences(rng):
     d.qpos[:] = u.data.qpos
     d.qvel[:] = rng.normal(0.0, 1.0, m.nv)
     mujoco.mj_forward(m, d)
-    r = u.robot_cfg.foot_radius
+    r = u.robot.foot_radius
     det = SlipDetector(speed=1e-9, foot_radius=r, check_dt=0.004)
     det.reset(m)
     det.update(m, d, stance=15, touch=np.ones(4), loads=lambda: np.full(4, 100.0))

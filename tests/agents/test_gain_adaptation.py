@@ -132,9 +132,9 @@ def test_the_gains_update_at_each_control_steps_first_physics_step_and_scale_the
 
 @pytest.mark.parametrize("adaptation", ["knee", "learned"])
 def test_the_adaptive_expert_walks_the_same_in_its_call_and_its_fast_lane(adaptation, monkeypatch):
-    """An attached expert with ``adaptation``, in the extreme world: with its fast lane (``torques_into``: the lane
-    unclipped, the gains and the clip in Python) and with the lane removed (the call every physics step), the same
-    motor commands, trajectory and gains bit for bit; the gains moved, and the lane answered most steps."""
+    """An attached expert with ``adaptation``, in the extreme world: with its fast lane (``torques_into``, which
+    answers every physics step) and with the lane removed (the call every physics step), the same motor commands,
+    trajectory and gains bit for bit; the gains moved."""
     runs = []
     for lane in (True, False):
         env = gym.make("QuadUneven-v0", terrain="rough", randomization="extreme")
@@ -163,7 +163,7 @@ def test_the_adaptive_expert_walks_the_same_in_its_call_and_its_fast_lane(adapta
         np.testing.assert_array_equal(q1, q2)
         np.testing.assert_array_equal(g1, g2)
     assert np.abs(with_lane[-1][2] - 1.0).max() > 0.05
-    assert 0.8 * len(answers) < sum(answers) < len(answers)
+    assert all(answers) and len(answers) == 120 * env.unwrapped.frame_skip
 
 
 def test_the_gains_multiply_the_controllers_torques_before_the_motor_limit():
@@ -232,7 +232,7 @@ def test_zero_residual_over_an_adaptive_expert_is_that_expert(adaptation):
 
 @pytest.mark.parametrize("adaptation", ["knee", "learned"])
 def test_a_model_folder_brings_its_expert_to_evaluate_and_onnx(tmp_path, adaptation):
-    """``expert: {adaptation: ...}`` in rl_meta.json: the loader installs the expert with that adaptation under
+    """``expert: {adaptation: ...}`` in rl_meta.json: the model's env has the expert with that adaptation under
     the residual, the ONNX metadata records the expert config, and a bad value or a field this reader does not
     take is refused by name."""
     import json
@@ -240,7 +240,7 @@ def test_a_model_folder_brings_its_expert_to_evaluate_and_onnx(tmp_path, adaptat
     import onnx
     import stable_baselines3
 
-    from agents.evaluation.policies import make_policy, policy_env_kwargs
+    from agents.evaluation.policies import make_policy, make_policy_env
     from agents.rl.export import export_onnx
     from agents.rl.model_io import ModelError, read_metadata, write_metadata
 
@@ -255,7 +255,7 @@ def test_a_model_folder_brings_its_expert_to_evaluate_and_onnx(tmp_path, adaptat
         meta["strength_estimator_sha256"] = estimator_digest()
     write_metadata(tmp_path, meta)
     path = tmp_path / "model.zip"
-    env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(str(path)), "terrain": "flat"})
+    env = make_policy_env(str(path), terrain="flat")
     policy = make_policy(str(path), env)
     assert policy.expert is env.unwrapped.controller.expert
     assert policy.expert.config == ExpertConfig(adaptation=adaptation)
@@ -286,7 +286,7 @@ def test_a_training_run_records_its_expert_config_and_evaluate_rebuilds_it(tmp_p
 
     import yaml
 
-    from agents.evaluation.policies import make_policy, policy_env_kwargs
+    from agents.evaluation.policies import make_policy, make_policy_env
     from agents.rl.config import default_config_path
     from agents.rl.training import train
 
@@ -303,7 +303,7 @@ def test_a_training_run_records_its_expert_config_and_evaluate_rebuilds_it(tmp_p
     assert "strength_estimator_sha256" not in meta and "gain_adaptation" not in meta
     assert json.loads((tmp_path / "run" / "train_config.json").read_text())["expert"] == raw["expert"]
     path = str(tmp_path / "run" / "model.zip")
-    env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(path), "terrain": "flat"})
+    env = make_policy_env(path, terrain="flat")
     policy = make_policy(path, env)
     assert policy.expert.config == ExpertConfig(adaptation="knee", friction=0.6)
     obs, _ = env.reset(seed=0)

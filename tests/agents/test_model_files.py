@@ -6,6 +6,7 @@ import base64
 import json
 import pickle
 import zipfile
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -177,15 +178,43 @@ def test_onnx_export_of_a_residual_model_with_expert_features(tmp_path):
     """The exported graph takes env observation + expert features, and equals the evaluation's predict."""
     import onnx
     import onnxruntime as ort
-    import stable_baselines3
-    import torch
 
-    from agents.evaluation.policies import make_policy, policy_env_kwargs
-    from agents.rl.expert_features import EXPERT_FEATURE_SIZE
+    from agents.evaluation.policies import make_policy, make_policy_env
+    from agents.rl.expert_features import EXPERT_FEATURE_SIZE, expert_features
     from agents.rl.export import export_onnx
     from agents.rl.residual_env import RESIDUAL_ENV_ID
 
-    train_env = gym.make(RESIDUAL_ENV_ID, terrain="flat")
+    path = _residual_model_folder(tmp_path)
+    export_onnx(path, tmp_path / "p.onnx")
+    props = {p.key: p.value for p in onnx.load(str(tmp_path / "p.onnx")).metadata_props}
+    assert json.loads(props["residual_basis"]) == "expert_torque" and json.loads(props["residual_legs"]) == "all"
+    assert props["env_id"] == RESIDUAL_ENV_ID and props["robot"] == "paper"
+    layout = json.loads(props["observation_layout"])
+    n_env = gym.make("QuadUneven-v0", terrain="flat").observation_space.shape[0]
+    assert layout["expert_base_pos_error"][0] == n_env and layout["expert_torque"][1] == n_env + EXPERT_FEATURE_SIZE
+
+    env = make_policy_env(str(path), terrain="flat")
+    policy = make_policy(str(path), env)
+    assert env.unwrapped.controller.residual_basis == "expert_torque"
+    obs, _ = env.reset(seed=0)
+    session = ort.InferenceSession(str(tmp_path / "p.onnx"), providers=["CPUExecutionProvider"])
+    for _ in range(20):
+        # the env's observation carries the expert features, as the expert reports them
+        np.testing.assert_array_equal(obs[n_env:], expert_features(policy.expert, env.unwrapped.data))
+        action, _ = policy.predict(obs)
+        np.testing.assert_allclose(session.run(None, {"obs": obs[None].astype(np.float32)})[0][0], action, atol=1e-5)
+        obs, *_ = env.step(action)
+    assert np.abs(action).max() > 0.05
+
+
+def _residual_model_folder(tmp_path, **meta) -> Path:
+    """An untrained residual PPO (expert features, ``expert_torque`` basis) with random weights, its metadata."""
+    import stable_baselines3
+    import torch
+
+    from agents.rl.residual_env import RESIDUAL_ENV_ID
+
+    train_env = gym.make(RESIDUAL_ENV_ID, terrain="flat", residual_basis="expert_torque")
     model = stable_baselines3.PPO("MlpPolicy", train_env, n_steps=64, batch_size=32, device="cpu", seed=0,
                                   policy_kwargs={"net_arch": [32, 32]})  # fmt: skip
     with torch.no_grad():
@@ -194,29 +223,53 @@ def test_onnx_export_of_a_residual_model_with_expert_features(tmp_path):
     model.save(tmp_path / "model.zip")
     write_metadata(tmp_path, {"algo": "ppo", "residual": True, "residual_scale": 0.1, "expert_features": True,
                               "normalize_obs": False, "env_kwargs": {"terrain": "flat"},
-                              "residual_basis": "expert_torque"})  # fmt: skip
-    path = tmp_path / "model.zip"
-    export_onnx(path, tmp_path / "p.onnx")
-    props = {p.key: p.value for p in onnx.load(str(tmp_path / "p.onnx")).metadata_props}
-    assert json.loads(props["residual_basis"]) == "expert_torque" and json.loads(props["residual_legs"]) == "all"
-    layout = json.loads(props["observation_layout"])
-    n_env = gym.make("QuadUneven-v0", terrain="flat").observation_space.shape[0]
-    assert layout["expert_base_pos_error"][0] == n_env and layout["expert_torque"][1] == n_env + EXPERT_FEATURE_SIZE
-
-    env = gym.make("QuadUneven-v0", **{**policy_env_kwargs(str(path)), "terrain": "flat"})
-    policy = make_policy(str(path), env)
-    assert env.unwrapped.controller.residual_basis == "expert_torque"
-    obs, _ = env.reset(seed=0)
-    session = ort.InferenceSession(str(tmp_path / "p.onnx"), providers=["CPUExecutionProvider"])
-    for _ in range(20):
-        action, _ = policy.predict(obs)
-        full = np.concatenate([obs, _policy_features(policy)])[None].astype(np.float32)
-        np.testing.assert_allclose(session.run(None, {"obs": full})[0][0], action, atol=1e-5)
-        obs, *_ = env.step(action)
-    assert np.abs(action).max() > 0.05
+                              "residual_basis": "expert_torque", **meta})  # fmt: skip
+    return tmp_path / "model.zip"
 
 
-def _policy_features(policy) -> np.ndarray:
-    from agents.rl.expert_features import expert_features
+def test_a_residual_model_is_evaluated_in_the_env_it_was_trained_in(tmp_path):
+    """The model's env, rebuilt from rl_meta.json, gives the observations of the training env
+    (:func:`agents.rl.vec_env.make_train_env` with the run's residual config), bit for bit."""
+    from agents.rl.model_io import make_model_env
+    from agents.rl.residual_config import ResidualConfig
+    from agents.rl.vec_env import make_train_env
 
-    return expert_features(policy.expert, policy.features_of.data)
+    path = _residual_model_folder(tmp_path, residual_legs="stance")
+    config = ResidualConfig(residual_scale=0.1, residual_legs="stance", residual_basis="expert_torque")
+    trained_in = make_train_env("rough", 1000, {}, None, config)
+    evaluated_in = make_model_env(path, terrain="rough", max_episode_steps=1000)
+    rng = np.random.default_rng(3)
+    obs_a, _ = trained_in.reset(seed=11)
+    obs_b, _ = evaluated_in.reset(seed=11)
+    np.testing.assert_array_equal(obs_a, obs_b)
+    for _ in range(60):
+        action = rng.uniform(-1, 1, 12).astype(np.float32)
+        obs_a, reward_a, *_ = trained_in.step(action)
+        obs_b, reward_b, *_ = evaluated_in.step(action)
+        np.testing.assert_array_equal(obs_a, obs_b)
+        assert reward_a == reward_b
+
+
+def test_loading_a_model_never_installs_a_controller_on_the_callers_env(tmp_path):
+    """A residual model given a plain QuadUneven-v0 env is refused, the env left as it was; an env with another
+    residual, a plain model given a residual env and an env on another robot are refused by name."""
+    from agents.rl.residual_env import RESIDUAL_ENV_ID
+
+    path = _residual_model_folder(tmp_path)
+    plain = gym.make("QuadUneven-v0", terrain="flat")
+    with pytest.raises(ModelError, match=f"is a residual model: it runs in {RESIDUAL_ENV_ID}"):
+        load_sb3_policy(path, plain, "ppo")
+    assert plain.unwrapped.controller is None
+    other = gym.make(RESIDUAL_ENV_ID, terrain="flat", residual_basis="torque_limit")
+    controller = other.unwrapped.controller
+    with pytest.raises(ModelError, match="trained with residual_basis='expert_torque', the env has residual_basis="):
+        load_sb3_policy(path, other, "ppo")
+    assert other.unwrapped.controller is controller
+    go1 = gym.make(RESIDUAL_ENV_ID, terrain="flat", residual_basis="expert_torque", robot="go1")
+    with pytest.raises(ModelError, match=r"^robot must be 'paper', the robot .* was trained on, got 'go1'"):
+        load_sb3_policy(path, go1, "ppo")
+
+    (tmp_path / "scratch").mkdir()
+    scratch, _, _ = _model_folder(tmp_path / "scratch", "ppo", np.random.default_rng(0))
+    with pytest.raises(ModelError, match="trained without the expert"):
+        load_sb3_policy(scratch, gym.make(RESIDUAL_ENV_ID, terrain="flat"), "ppo")

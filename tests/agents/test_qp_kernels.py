@@ -9,7 +9,7 @@ import pytest
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.control import inverse_dynamics as ID
-from agents.control import inverse_dynamics_kernels as K
+from agents.control import inverse_dynamics_kernels as IK
 from agents.control import qp_kernels as QK
 from agents.expert import ExpertConfig, attach_expert
 
@@ -39,7 +39,7 @@ def _problem(rng, p, wrench_scale=1.0, tilt=0.3, mu=0.5, feet=None):
     normals = rng.normal(0.0, tilt, (p, 3))
     normals[:, 2] = 1.0
     cones = np.empty((p, 5, 3))
-    K.friction_pyramid_into(normals, mu, cones)
+    IK.friction_pyramid_into(normals, mu, cones)
     C, l = np.zeros((5 * p, n)), np.tile(LOWER, p)
     for k in range(p):
         C[5 * k : 5 * k + 5, 3 * k : 3 * k + 3] = cones[k]
@@ -193,7 +193,7 @@ def test_problems_recorded_from_the_expert_match_daqp(terrain, monkeypatch):
 
 def test_a_failed_compiled_solve_falls_back_to_daqp(monkeypatch):
     """QP_FAILED (e.g. the iteration cap): InverseDynamics solves the same problem with DAQP."""
-    from quad_uneven_env.robot.dynamics.base import make_dynamics
+    from quad_uneven_env.robot.dynamics import make_dynamics
 
     env = gym.make("QuadUneven-v0", terrain="flat")
     env.reset(seed=0)

@@ -417,7 +417,7 @@ def test_the_residual_lane_walks_exactly_as_the_call_it_replaces(randomization, 
         np.testing.assert_array_equal(u1, u2)
         np.testing.assert_array_equal(o1, o2)
         assert r1 == r2
-    assert 0.8 * len(answers) < sum(answers) < len(answers)
+    assert all(answers) and len(answers) == len(with_lane) * env.unwrapped.frame_skip
 
 
 @pytest.mark.parametrize(

@@ -10,12 +10,11 @@ import json
 import re
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
-from agents.evaluation.policies import make_policy, policy_env_kwargs
+from agents.evaluation.policies import make_policy, make_policy_env
 from agents.rl.config import load_train_config
 from agents.rl.expert_features import EXPERT_FEATURE_SIZE
 from agents.rl.model_io import SB3Policy, read_metadata
@@ -112,15 +111,16 @@ def test_the_shipped_model_was_trained_with_the_shipped_config(name):
 def test_the_shipped_model_drives_the_expert_in_a_randomized_world(name):
     world, legs, basis = RESIDUAL_MODELS[name]
     model = ROOT / "models" / name / "model.zip"
-    env = gym.make("QuadUneven-v0", terrain="rough", randomization=world, **policy_env_kwargs(str(model)))
+    env = make_policy_env(str(model), terrain="rough", randomization=world)  # the env of its training
     policy = make_policy(str(model), env)  # the safe loader: nothing unpickled
     assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
+    assert env.spec.id == "QuadUnevenResidual-v0" and env.observation_space == policy.model.observation_space
     assert env.unwrapped.controller.residual_legs == legs
     assert env.unwrapped.controller.residual_basis == basis
     assert policy.expert is env.unwrapped.controller.expert
     assert policy.expert.config.adaptation == ("knee" if "_adaptive" in name else "none")
     assert type(policy.model).__name__ == name.split("_")[0].upper()  # the class rl_meta.json records
-    assert policy.model.observation_space.shape == (env.observation_space.shape[0] + EXPERT_FEATURE_SIZE,)
+    assert policy.model.observation_space.shape == (env.unwrapped.observation_space.shape[0] + EXPERT_FEATURE_SIZE,)
     obs, _ = env.reset(seed=100)
     x0 = env.unwrapped.data.qpos[0]
     actions = []
@@ -145,7 +145,7 @@ def test_the_distilled_model_walks_the_plain_env_straight():
     meta = read_metadata(DISTILLED_MODEL)
     assert meta["residual"] is False and meta["env_kwargs"]["course_frame"] is True
     assert meta["env_kwargs"]["action_mode"] == "joint_pd" and meta["env_kwargs"]["gait_period"] == pytest.approx(3.1)
-    env = gym.make("QuadUneven-v0", terrain="flat", **policy_env_kwargs(str(DISTILLED_MODEL)))
+    env = make_policy_env(str(DISTILLED_MODEL), terrain="flat")
     policy = make_policy(str(DISTILLED_MODEL), env)  # the safe loader: nothing unpickled
     assert isinstance(policy, SB3Policy) and env.unwrapped.controller is None
     assert meta["env_kwargs"]["height_scan"] == {"resolution": 0.05}
@@ -167,7 +167,7 @@ def test_the_shipped_from_scratch_model_runs_on_the_plain_env():
     recorded = load_train_config(SCRATCH.parent / "train_config.json")
     assert recorded.residual is False and recorded.time_limit_min == 35
     assert recorded == load_train_config(ROOT / "configs/rl/ppo_scratch.yaml")  # make rl-scratch retrains it
-    env = gym.make("QuadUneven-v0", terrain="rough", **policy_env_kwargs(str(SCRATCH)))
+    env = make_policy_env(str(SCRATCH), terrain="rough")
     policy = make_policy(str(SCRATCH), env)
     assert isinstance(policy, SB3Policy) and env.unwrapped.controller is None
     obs, _ = env.reset(seed=0)

@@ -191,10 +191,12 @@ def test_a_training_run_records_the_estimator_it_adapts_with():
     from agents.rl.config import load_train_config
     from agents.rl.training import _metadata
 
-    meta = _metadata(load_train_config(None, {"expert": {"adaptation": "learned"}}))
+    meta = _metadata(load_train_config(None, {"expert": {"adaptation": "learned"}}), "paper")
     assert meta["expert"] == {"adaptation": "learned"}
     assert meta["strength_estimator_sha256"] == SE.estimator_digest() and len(meta["strength_estimator_sha256"]) == 64
-    assert "strength_estimator_sha256" not in _metadata(load_train_config(None, {"expert": {"adaptation": "knee"}}))
+    assert "strength_estimator_sha256" not in _metadata(
+        load_train_config(None, {"expert": {"adaptation": "knee"}}), "paper"
+    )
 
 
 def test_the_estimator_ships_as_package_data():

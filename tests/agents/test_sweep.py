@@ -60,9 +60,12 @@ def test_grid_runs_get_the_base_and_their_values():
 
 
 def test_a_runs_list_names_its_runs():
-    sweep = sweep_from_dict(tiny_sweep(grid=None, runs=[{"name": "a", "seed": 3}, {"algo": "sac"}]))
+    sac = {"algo": "sac", "hyperparams": {"batch_size": 64, "learning_starts": 0}}  # SAC's own arguments
+    sweep = sweep_from_dict(tiny_sweep(grid=None, runs=[{"name": "a", "seed": 3}, sac]))
     assert [r.name for r in sweep.runs] == ["a", "run001"]
-    assert sweep.runs[1].config.algo == "sac" and sweep.swept == ("seed", "algo")
+    assert sweep.runs[1].config.algo == "sac" and sweep.swept == ("seed", "algo", "hyperparams")
+    with pytest.raises(SweepError, match=r"^runs\[0\]: hyperparams\.n_epochs: not an SB3 SAC argument"):
+        sweep_from_dict(tiny_sweep(grid=None, runs=[{"algo": "sac"}]))  # the base's PPO arguments
 
 
 @pytest.mark.parametrize(

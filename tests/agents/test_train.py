@@ -96,11 +96,8 @@ def test_bad_config_fields_are_named(tmp_path, changes, field):
 
 
 def test_unknown_hyperparameter_is_named(tmp_path):
-    from agents.rl.training import train
-
-    cfg = load_train_config(write_config(tmp_path / "c.yaml", hyperparams={"n_stepz": 8}))
-    with pytest.raises(TrainConfigError, match=r"^hyperparams"):
-        train(cfg, tmp_path / "run", progress=False)
+    with pytest.raises(TrainConfigError, match=r"^hyperparams\.n_stepz: not an SB3 PPO argument"):
+        load_train_config(write_config(tmp_path / "c.yaml", hyperparams={"n_stepz": 8}))
 
 
 def test_episode_stats_wrapper_on_a_stub_env():
@@ -208,11 +205,12 @@ def test_tiny_run_from_scratch_evaluates_on_the_plain_env(tmp_path):
     assert e["error"] is None and e["planner_calls"] is None and e["mean_residual_torque"] is None
 
 
-def test_residual_policy_installs_expert_and_normalizes(tmp_path):
-    """The loaded policy drives the env through the residual controller, on normalised observations."""
+def test_residual_policy_runs_in_its_training_env_and_normalizes(tmp_path):
+    """The model's env, rebuilt from rl_meta.json, has the training's residual controller; the policy acts on
+    normalised observations of it."""
     import gymnasium as gym
 
-    from agents.evaluation.policies import make_policy, policy_env_kwargs
+    from agents.evaluation.policies import make_policy, make_policy_env
     from agents.rl.model_io import SB3Policy
     from agents.rl.residual_env import ResidualController
     from agents.rl.training import train
@@ -232,7 +230,8 @@ def test_residual_policy_installs_expert_and_normalizes(tmp_path):
     meta_path = tmp_path / "run" / "rl_meta.json"
     meta = json.loads(meta_path.read_text())
     assert (meta["residual_legs"], meta["residual_basis"]) == ("stance", "expert_torque")
-    env = gym.make("QuadUneven-v0", terrain="flat", **policy_env_kwargs(path))
+    assert meta["robot"] == "paper" and meta["residual_penalty"] == 0.0
+    env = make_policy_env(path, terrain="flat")
     policy = make_policy(path, env)
     assert isinstance(policy, SB3Policy) and isinstance(env.unwrapped.controller, ResidualController)
     assert env.unwrapped.controller.residual_legs == "stance"  # the evaluation applies the training's gate
@@ -246,6 +245,8 @@ def test_residual_policy_installs_expert_and_normalizes(tmp_path):
     meta_path.write_text(meta_path.read_text().replace('"residual_legs": "stance"', '"residual_legs": "swing"'))
     with pytest.raises(PolicyError, match="residual_legs must be one of"):
         make_policy(path, gym.make("QuadUneven-v0", terrain="flat"))
+    with pytest.raises(PolicyError, match="residual_legs must be one of"):
+        make_policy_env(path)
     meta_path.write_text(meta_path.read_text().replace('"residual_legs": "swing"', '"residual_legs": "stance"'))
     meta_path.write_text(meta_path.read_text().replace('"expert_torque"', '"gain"'))
     with pytest.raises(PolicyError, match="residual_basis must be one of"):
@@ -254,7 +255,7 @@ def test_residual_policy_installs_expert_and_normalizes(tmp_path):
     (tmp_path / "run" / "model_obs_norm.npz").unlink()
 
     with pytest.raises(PolicyError, match=r"obs_norm\.npz is missing"):
-        make_policy(path, gym.make("QuadUneven-v0", terrain="flat"))
+        make_policy(path, make_policy_env(path, terrain="flat"))
 
 
 def test_wall_clock_limit_stops_training_and_still_saves(tmp_path):

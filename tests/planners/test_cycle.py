@@ -89,25 +89,24 @@ def test_unreachable_goal_raises_planning_error():
         planners.plan_gait_cycle(sc)
 
 
-def test_a_measured_start_beyond_the_reach_cap_is_planned_from(robot_cfg):
+def test_a_measured_start_beyond_the_reach_cap_is_planned_from(paper_robot):
     # The start COG stands high above the feet: every stance leg already reaches past REACH_MARGIN of
     # the stretched leg (a measured state can: the planner's nominal hips are not the robot's). The
     # cycle is planned from it instead of failing on "the given start state itself" at every replan.
     from planners.cycle import REACH_MARGIN
     from planners.wholebody import WholeBody
-    from quad_uneven_env.robot.kinematics import hip_positions_B, standing_joint_angles
 
-    feet = np.column_stack([hip_positions_B(robot_cfg)[:, :2], np.zeros(4)])
-    wb = WholeBody(robot_cfg)
-    com_to_base = -wb.com_offset(standing_joint_angles(robot_cfg, 0.33).reshape(4, 3))
-    site_z = robot_cfg.foot_radius
+    feet = np.column_stack([paper_robot.hip_positions_B[:, :2], np.zeros(4)])
+    wb = WholeBody(paper_robot)
+    com_to_base = -wb.com_offset(paper_robot.two_link.standing_joints(0.33).reshape(4, 3))
+    site_z = paper_robot.foot_radius
     # COG height at which the hip-to-site distance is 0.995 of the leg (the hips straight above the sites).
-    z = site_z + 0.995 * robot_cfg.leg_length - (wb.hips[0, 2] + com_to_base[2])
+    z = site_z + 0.995 * paper_robot.leg_length - (wb.hips[0, 2] + com_to_base[2])
     sc = planners.Scenario(
         terrain=BlockTerrain(0.0), feet_start=feet, cog_start={"pos": [0.0, 0.0, z]}, footholds=feet,
-        epsilon=0.1, cog_height=0.33, robot=robot_cfg,
+        epsilon=0.1, cog_height=0.33, robot=paper_robot,
     )  # fmt: skip
     hip = np.array([0.0, 0.0, z]) + wb.hips[0] + com_to_base
-    assert np.linalg.norm(hip - [feet[0, 0], feet[0, 1], site_z]) > REACH_MARGIN * robot_cfg.leg_length
+    assert np.linalg.norm(hip - [feet[0, 0], feet[0, 1], site_z]) > REACH_MARGIN * paper_robot.leg_length
     plan = planners.plan_gait_cycle(sc)
     assert plan.cog.position(np.array([plan.duration]))[0, 2] < z - 0.01  # and it comes down

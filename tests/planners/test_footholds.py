@@ -8,66 +8,70 @@ import pytest
 from planners.footholds import SHANK_RADIUS_SCALE, FootholdLimits, choose_footholds, foothold_costs, shank_clearance
 from planners.terrain_query import BlockTerrain, capsule_clearance
 from planners.types import FootholdError, PlanningError
-from quad_uneven_env.robot.kinematics import hip_positions_B
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec
 
 FEET = np.array([[0.25, 0.185, 0.0], [0.25, -0.185, 0.0], [-0.25, 0.185, 0.0], [-0.25, -0.185, 0.0]])
 
 
-def test_flat_ground_gives_nominal_footholds(robot_cfg):
+def test_flat_ground_gives_nominal_footholds(paper_robot):
     out = choose_footholds(
-        BlockTerrain(0.05), robot_cfg, FEET + np.array([0, 0, 0.05]), np.array([0, 0, 0.41]), np.array([0.2, 0.0]), 0.36
+        BlockTerrain(0.05),
+        paper_robot,
+        FEET + np.array([0, 0, 0.05]),
+        np.array([0, 0, 0.41]),
+        np.array([0.2, 0.0]),
+        0.36,
     )
-    nominal = hip_positions_B(robot_cfg)[:, :2] + [0.2, 0.0]
+    nominal = paper_robot.hip_positions_B[:, :2] + [0.2, 0.0]
     np.testing.assert_allclose(out[:, :2], nominal, atol=1e-9)
     np.testing.assert_allclose(out[:, 2], 0.05)
 
 
-def test_avoids_step_edge(robot_cfg):
+def test_avoids_step_edge(paper_robot):
     # A 10 cm step edge right at the LF/RF nominal x (0.45): chosen footholds keep 4.5 cm away from it.
     terrain = BlockTerrain(0.0, blocks=np.array([[0.45, 2.0, -1.0, 1.0, 0.1]]))
-    out = choose_footholds(terrain, robot_cfg, FEET, np.array([0, 0, 0.36]), np.array([0.2, 0.0]), 0.36)
+    out = choose_footholds(terrain, paper_robot, FEET, np.array([0, 0, 0.36]), np.array([0.2, 0.0]), 0.36)
     for i in (0, 1):
         assert abs(out[i, 0] - 0.45) >= FootholdLimits().edge_radius - 1e-9
         assert out[i, 2] == pytest.approx(terrain.height(out[i, 0], out[i, 1]))
 
 
-def test_stepping_stones_footholds_on_stones(robot_cfg, rng):
+def test_stepping_stones_footholds_on_stones(paper_robot, rng):
     spec = parse_terrain_spec("stepping_stones")
     hf = Terrain(spec).generate(np.random.default_rng(3))
     base = np.array([1.0, 0.0])
-    feet = np.column_stack([hip_positions_B(robot_cfg)[:, :2] + base, np.zeros(4)])
+    feet = np.column_stack([paper_robot.hip_positions_B[:, :2] + base, np.zeros(4)])
     feet[:, 2] = hf.height(feet[:, 0], feet[:, 1])
     out = choose_footholds(
-        hf, robot_cfg, feet, np.array([1.0, 0.0, feet[:, 2].mean() + 0.36]), base + np.array([0.2, 0.0]), 0.36
+        hf, paper_robot, feet, np.array([1.0, 0.0, feet[:, 2].mean() + 0.36]), base + np.array([0.2, 0.0]), 0.36
     )
     s = hf.patch_stats(out[:, 0], out[:, 1], FootholdLimits().edge_radius)
     assert np.all(s.height_max - s.height_min <= 1e-9)  # flat stone tops: no edge or hole under the foot
     np.testing.assert_allclose(out[:, 2], hf.height(out[:, 0], out[:, 1]))
 
 
-def test_no_foothold_raises_naming_leg(robot_cfg):
+def test_no_foothold_raises_naming_leg(paper_robot):
     # Washboard of 10 cm ridges every 4 cm: no flat spot anywhere.
     blocks = np.array([[x, x + 0.02, -1.0, 1.0, 0.1] for x in np.arange(-1.0, 1.0, 0.04)])
     with pytest.raises(PlanningError, match=r"LF"):
         choose_footholds(
-            BlockTerrain(0.0, blocks=blocks), robot_cfg, FEET, np.array([0, 0, 0.4]), np.array([0.2, 0.0]), 0.36
+            BlockTerrain(0.0, blocks=blocks), paper_robot, FEET, np.array([0, 0, 0.4]), np.array([0.2, 0.0]), 0.36
         )
 
 
-def test_shank_clearance_flat_stance_versus_shank_on_a_nosing(robot_cfg):
+def test_shank_clearance_flat_stance_versus_shank_on_a_nosing(paper_robot):
     flat = BlockTerrain(0.0)
-    r = robot_cfg.foot_radius
+    r = paper_robot.foot_radius
     for leg, hip_x in (("LF", 0.25), ("LH", -0.25)):
         hip = np.array([hip_x, 0.185, 0.33])  # nominal stance: the foot under the hip
-        gap = shank_clearance(flat, robot_cfg, leg, np.array([[hip_x, 0.185, r]]), hip, np.eye(3))
+        gap = shank_clearance(flat, paper_robot, leg, np.array([[hip_x, 0.185, r]]), hip, np.eye(3))
         assert gap[0] > 0.01
     # The stairs-down failure: hind foot 2.5 cm behind a 8 cm drop, hip only 0.13 m above the foot
     # and 0.1 m ahead: the forward knee dips below the foot and the shank rests on the nosing.
     stair = BlockTerrain(-0.08, blocks=np.array([[-2.0, 0.6, -1.0, 1.0, 0.0]]))
     site = np.array([[0.575, 0.198, r]])
-    low = shank_clearance(stair, robot_cfg, "LH", site, np.array([0.679, 0.198, 0.15]), np.eye(3))
-    high = shank_clearance(stair, robot_cfg, "LH", site, np.array([0.679, 0.198, 0.30]), np.eye(3))
+    low = shank_clearance(stair, paper_robot, "LH", site, np.array([0.679, 0.198, 0.15]), np.eye(3))
+    high = shank_clearance(stair, paper_robot, "LH", site, np.array([0.679, 0.198, 0.30]), np.eye(3))
     assert low[0] < -0.001 and FootholdLimits().shank_clearance < high[0]
     # On a plane the gap is exact: a shank parallel to a 15 deg slope, its axis 3 cm above it.
     slope = BlockTerrain(0.0, slope=(np.tan(np.deg2rad(15.0)), 0.0))
@@ -78,11 +82,11 @@ def test_shank_clearance_flat_stance_versus_shank_on_a_nosing(robot_cfg):
 
 
 @pytest.mark.parametrize("pitch_start", [None, 0.0])
-def test_front_foot_kept_off_the_nosing_when_stepping_down(robot_cfg, pitch_start):
+def test_front_foot_kept_off_the_nosing_when_stepping_down(paper_robot, pitch_start):
     # 8 cm drop at x = 0.5, the front nominal footholds 8 cm past it: the backward-bent front
     # shank would rest on the edge above the foot; the chosen footholds keep it clear.
     terrain = BlockTerrain(-0.08, blocks=np.array([[-2.0, 0.5, -1.0, 1.0, 0.0]]))
-    args = (terrain, robot_cfg, FEET, np.array([0.0, 0.0, 0.33]), np.array([0.33, 0.0]), 0.33)
+    args = (terrain, paper_robot, FEET, np.array([0.0, 0.0, 0.33]), np.array([0.33, 0.0]), 0.33)
     free = choose_footholds(
         *args, pitch_start=pitch_start, limits=FootholdLimits(shank_clearance=-1.0, w_edge=0.0, w_shank=0.0)
     )
@@ -92,17 +96,17 @@ def test_front_foot_kept_off_the_nosing_when_stepping_down(robot_cfg, pitch_star
     np.testing.assert_allclose(out[2:], free[2:])  # hind feet on the flat upper level: unchanged
 
 
-def test_shank_geometry_matches_the_mujoco_model(robot_cfg):
+def test_shank_geometry_matches_the_mujoco_model(paper_robot):
     import mujoco
 
     from quad_uneven_env.robot import robot_mjcf
 
-    m = mujoco.MjModel.from_xml_string(robot_mjcf(robot_cfg))
+    m = mujoco.MjModel.from_xml_string(robot_mjcf(paper_robot))
     for leg in ("LF", "RH"):
         radius, half_length = m.geom(f"{leg}_shank_geom").size[:2]
-        assert radius == pytest.approx(SHANK_RADIUS_SCALE * robot_cfg.link_radius)
+        assert radius == pytest.approx(SHANK_RADIUS_SCALE * paper_robot.link_radius)
         # The capsule runs from the knee to foot_radius short of the foot point (where shank_clearance starts it).
-        assert 2 * half_length == pytest.approx(robot_cfg.shank.length - robot_cfg.foot_radius)
+        assert 2 * half_length == pytest.approx(paper_robot.two_link.shank - paper_robot.foot_radius)
 
 
 def _slope_field(angle_deg: float):
@@ -111,9 +115,9 @@ def _slope_field(angle_deg: float):
     return Terrain(spec).generate(np.random.default_rng(0))
 
 
-def test_edge_test_accepts_a_uniform_25_deg_slope_and_rejects_a_step_edge(robot_cfg):
+def test_edge_test_accepts_a_uniform_25_deg_slope_and_rejects_a_step_edge(paper_robot):
     lim = FootholdLimits()
-    r = robot_cfg.foot_radius
+    r = paper_robot.foot_radius
     x = np.linspace(1.0, 1.8, 9)  # on the ramp, away from its kinks
     y = np.zeros_like(x)
     for terrain in (_slope_field(25.0), BlockTerrain(0.0, slope=(np.tan(np.deg2rad(25.0)), 0.0))):
@@ -137,27 +141,29 @@ def test_edge_test_accepts_a_uniform_25_deg_slope_and_rejects_a_step_edge(robot_
     np.testing.assert_array_equal(tests["edge"], [False, False, True, True])
 
 
-def test_footholds_on_a_25_deg_slope(robot_cfg):
+def test_footholds_on_a_25_deg_slope(paper_robot):
     hf = _slope_field(25.0)
     base = np.array([1.3, 0.0])
-    feet = np.column_stack([hip_positions_B(robot_cfg)[:, :2] + base, np.zeros(4)])
+    feet = np.column_stack([paper_robot.hip_positions_B[:, :2] + base, np.zeros(4)])
     feet[:, 2] = hf.height(feet[:, 0], feet[:, 1])
     cog = np.array([*base, feet[:, 2].mean() + 0.33])
-    out = choose_footholds(hf, robot_cfg, feet, cog, base + np.array([0.33, 0.0]), 0.33, pitch_start=np.deg2rad(-25.0))
-    nominal = hip_positions_B(robot_cfg)[:, :2] + base + [0.33, 0.0]
+    out = choose_footholds(
+        hf, paper_robot, feet, cog, base + np.array([0.33, 0.0]), 0.33, pitch_start=np.deg2rad(-25.0)
+    )
+    nominal = paper_robot.hip_positions_B[:, :2] + base + [0.33, 0.0]
     assert np.all(np.linalg.norm(out[:, :2] - nominal, axis=1) <= 0.05)
     assert np.all((out[:, 0] > 0.62 + 0.045) & (out[:, 0] < 2.12 - 0.045))  # on the ramp
     np.testing.assert_allclose(out[:, 2], hf.height(out[:, 0], out[:, 1]))
 
 
-def test_stone_beyond_the_inner_window_when_the_nominal_foothold_is_in_a_gap(robot_cfg):
+def test_stone_beyond_the_inner_window_when_the_nominal_foothold_is_in_a_gap(paper_robot):
     # 30 cm deep pits 14 cm wide (x) centred on the nominal footholds, ground between them: nothing
     # acceptable within the inner window (0.1 m), the ground beyond the pit is.
     goal = np.array([0.2, 0.0])
-    nominal = hip_positions_B(robot_cfg)[:, :2] + goal  # x = 0.45 (front), -0.05 (hind)
+    nominal = paper_robot.hip_positions_B[:, :2] + goal  # x = 0.45 (front), -0.05 (hind)
     ground = np.array([[-2.0, -0.12, -1.0, 1.0, 0.0], [0.02, 0.38, -1.0, 1.0, 0.0], [0.52, 2.0, -1.0, 1.0, 0.0]])
     terrain = BlockTerrain(-0.3, blocks=ground)
-    args = (terrain, robot_cfg, FEET, np.array([0.0, 0.0, 0.33]), goal, 0.33)
+    args = (terrain, paper_robot, FEET, np.array([0.0, 0.0, 0.33]), goal, 0.33)
     with pytest.raises(PlanningError, match=r"for LF within 0.1 m .*failed test: hole"):
         choose_footholds(*args, limits=FootholdLimits(reach_window=0.1))
     out = choose_footholds(*args)
@@ -168,10 +174,10 @@ def test_stone_beyond_the_inner_window_when_the_nominal_foothold_is_in_a_gap(rob
     np.testing.assert_allclose(out[:, 1], nominal[:, 1], atol=0.02)
 
 
-def test_cost_ordering_on_a_hand_made_height_map(robot_cfg):
+def test_cost_ordering_on_a_hand_made_height_map(paper_robot):
     # Flat ground at 0 and a 10 cm block from x = 0.3 on; a tilted plane.
     lim = FootholdLimits()
-    r = robot_cfg.foot_radius
+    r = paper_robot.foot_radius
     block = BlockTerrain(0.0, blocks=np.array([[0.3, 2.0, -1.0, 1.0, 0.1]]))
     nominal = np.array([0.1, 0.0])
     pts = np.array([[0.1, 0.0], [0.12, 0.0], [0.1, 0.05], [0.1, 0.15], [0.25, 0.0], [0.1, -0.15], [0.2, 0.0]])
@@ -188,21 +194,21 @@ def test_cost_ordering_on_a_hand_made_height_map(robot_cfg):
     assert c_tilt[0] == pytest.approx(lim.w_slope * np.deg2rad(10.0))
 
 
-def test_failure_names_the_leg_and_the_first_failing_test(robot_cfg):
+def test_failure_names_the_leg_and_the_first_failing_test(paper_robot):
     flat = BlockTerrain(0.0)
     # Body 0.9 m above the ground: nothing within reach.
     with pytest.raises(FootholdError, match=r"for LF within 0.25 m .*failed test: reach; of 2601 candidates") as err:
-        choose_footholds(flat, robot_cfg, FEET, np.array([0, 0, 0.9]), np.array([0.2, 0.0]), 0.9)
+        choose_footholds(flat, paper_robot, FEET, np.array([0, 0, 0.9]), np.array([0.2, 0.0]), 0.9)
     assert err.value.failed_test == "reach" and isinstance(err.value, PlanningError)
     assert err.value.slope_blocked == 0  # flat: no slope limit would help
     # A 45 deg plane: too steep everywhere.
     steep = BlockTerrain(0.0, slope=(1.0, 0.0))
     with pytest.raises(FootholdError, match=r"for LF .*failed test: slope; of 2601 candidates, .*: 0 slope") as err:
-        choose_footholds(steep, robot_cfg, FEET, np.array([0, 0, 0.33]), np.array([0.2, 0.0]), 0.33)
+        choose_footholds(steep, paper_robot, FEET, np.array([0, 0, 0.33]), np.array([0.2, 0.0]), 0.33)
     assert err.value.failed_test == "slope" and err.value.slope_blocked > 0  # reachable, only too steep
     # A 20 deg plane under a 15 deg limit: refused for the slope alone; a 25 deg limit gives the footholds.
     ramp = BlockTerrain(0.0, slope=(np.tan(np.deg2rad(20.0)), 0.0))
-    args = (ramp, robot_cfg, FEET, np.array([0, 0, 0.33]), np.array([0.2, 0.0]), 0.33)
+    args = (ramp, paper_robot, FEET, np.array([0, 0, 0.33]), np.array([0.2, 0.0]), 0.33)
     with pytest.raises(FootholdError, match=r"failed test: slope; .*; [1-9]\d* fail the slope test alone") as err:
         choose_footholds(*args, limits=FootholdLimits(max_slope=np.deg2rad(15.0)))
     assert err.value.slope_blocked > 0

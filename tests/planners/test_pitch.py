@@ -49,8 +49,8 @@ def test_body_pitch_profile_derivatives_and_rotation():
     assert BodyPitch().level and not bp.level
 
 
-def test_place_base_rotated_with_identity_is_place_base(robot_cfg, rng):
-    wb = WholeBody(robot_cfg)
+def test_place_base_rotated_with_identity_is_place_base(paper_robot, rng):
+    wb = WholeBody(paper_robot)
     c = np.array([0.1, 0.02, 0.35]) + 0.01 * rng.normal(size=(4, 3))
     x = np.column_stack([FEET_XY + 0.1, np.zeros(4)])[None] + 0.01 * rng.normal(size=(4, 4, 3))
     vel = [0.1 * rng.normal(size=a.shape) for a in (c, c, x, x)]
@@ -86,11 +86,11 @@ def turning_ref():
 
 
 @pytest.mark.parametrize("name", ["pitched_ref", "turning_ref"])
-def test_reference_com_feet_and_orientation_match_mujoco(name, request, robot_cfg):
+def test_reference_com_feet_and_orientation_match_mujoco(name, request, paper_robot):
     """Every sample's whole-body COM is the planned COG and its feet are the planned foot sites (MuJoCo's
     kinematics of the sampled pose); its orientation and base-frame rates are the plan's profile."""
     ref = request.getfixturevalue(name)
-    m = mujoco.MjModel.from_xml_string(robot_mjcf(robot_cfg))
+    m = mujoco.MjModel.from_xml_string(robot_mjcf(paper_robot))
     d = mujoco.MjData(m)
     plan = ref.plan
     t = np.linspace(0.0, plan.duration, 17)

@@ -13,8 +13,8 @@ import planners
 from planners.reference import MAX_JOINT_SPEED
 from planners.wholebody import WholeBody, leg_point
 from quad_uneven_env import constants as C
-from quad_uneven_env.config import load_robot_config
 from quad_uneven_env.robot import robot_mjcf
+from quad_uneven_env.robot.description import load_robot
 from quad_uneven_env.robot.kinematics import leg_fk_hip
 
 
@@ -24,12 +24,12 @@ def ref():
 
 
 @pytest.fixture(scope="module")
-def mj(robot_cfg):
-    m = mujoco.MjModel.from_xml_string(robot_mjcf(robot_cfg))
+def mj(paper_robot):
+    m = mujoco.MjModel.from_xml_string(robot_mjcf(paper_robot))
     return m, mujoco.MjData(m)
 
 
-def test_leg_point_jacobian_and_velocity_product(rng, robot_cfg):
+def test_leg_point_jacobian_and_velocity_product(rng, paper_robot):
     q = rng.uniform(-1, 1, (5, 3))
     qd = rng.normal(size=(5, 3))
     p, J, jd = leg_point(q, 0.2, 0.22, qd)
@@ -113,9 +113,9 @@ def test_compiled_grid_lookup_equals_row(ref):
     assert 3 * len(g.t) <= hits < len(times)
 
 
-def test_com_offset_matches_mujoco_random_pose(rng, robot_cfg, mj):
+def test_com_offset_matches_mujoco_random_pose(rng, paper_robot, mj):
     m, d = mj
-    wb = WholeBody(robot_cfg)
+    wb = WholeBody(paper_robot)
     q = rng.uniform(m.jnt_range[1:, 0], m.jnt_range[1:, 1])
     d.qpos[:] = 0.0
     d.qpos[:3], d.qpos[3], d.qpos[7:] = (0.1, -0.2, 0.5), 1.0, q
@@ -131,7 +131,7 @@ def test_aim_feet_below_footholds_places_late_feet_under_the_surface():
     from planners import paper_scenario, plan_gait_cycle
     from planners.reference import aim_feet_below_footholds
     from quad_uneven_env.constants import LEG_NAMES
-    from quad_uneven_env.robot.kinematics import hip_positions_B, leg_fk_hip
+    from quad_uneven_env.robot.kinematics import leg_fk_hip
 
     plan = plan_gait_cycle(paper_scenario())
     ref = plan.reference()
@@ -141,12 +141,12 @@ def test_aim_feet_below_footholds_places_late_feet_under_the_surface():
     legs = np.array([True, False, True, True])
     depth = 0.015
     out = aim_feet_below_footholds(sample, plan, t, legs, depth, cfg)
-    hips = hip_positions_B(cfg)
+    hips = cfg.hip_positions_B
     for i in np.flatnonzero(legs):
         landed = plan.swing[LEG_NAMES[i]].t_end <= t
         foothold = plan.footholds[i] if landed else plan.feet_start[i]
         q_leg = out.q_joints[3 * i : 3 * i + 3]
-        site = sample.p_base_W + hips[i] + leg_fk_hip(q_leg, cfg.thigh.length, cfg.shank.length)
+        site = sample.p_base_W + hips[i] + leg_fk_hip(q_leg, cfg.two_link.thigh, cfg.two_link.shank)
         np.testing.assert_allclose(site, foothold + np.array([0.0, 0.0, cfg.foot_radius - depth]), atol=1e-9)
         assert np.all(out.qd_joints[3 * i : 3 * i + 3] == 0.0)
     np.testing.assert_array_equal(out.q_joints[3:6], sample.q_joints[3:6])  # RF untouched
@@ -162,7 +162,7 @@ def test_inv3_matches_lapack_on_batches():
 
 def test_compiled_base_placement_equals_numpy():
     """The reference grid's compiled kernel against the vectorised numpy place_base, on a real cycle."""
-    cfg = load_robot_config("paper")
+    cfg = load_robot("paper")
     plan = planners.plan_gait_cycle(planners.paper_scenario())
     ref = plan.reference(cfg)
     t = np.linspace(0.0, plan.duration, 400)

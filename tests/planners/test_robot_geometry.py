@@ -8,33 +8,31 @@ import pytest
 
 from planners.robot_geometry import LegChainModel, robot_geometry
 from planners.wholebody import WholeBody, leg_point
-from quad_uneven_env.config import load_robot_config
 from quad_uneven_env.robot.description import load_robot
-from quad_uneven_env.robot.description_model import description_robot_mjcf
-from quad_uneven_env.robot.kinematics import hip_positions_B
 from quad_uneven_env.robot.leg_chain import leg_fk_B
+from quad_uneven_env.robot.model import robot_mjcf
 
 URDF_ROBOTS = ("anymal_c", "go1", "hyq", "solo12")
 
 
 def test_the_paper_robots_geometry_is_table_1():
-    cfg = load_robot_config("paper")
-    g = robot_geometry(load_robot("paper"))
-    hips = hip_positions_B(cfg)
-    assert g.chain is None and g.scale == 1.0 and g.min_reach == 0.12
+    desc = load_robot("paper")
+    g = robot_geometry(desc)
+    hips = desc.hip_positions_B
+    assert g.chain is None and g.scale == 1.0 and g.min_reach == 0.12 and not g.tests_joint_ranges
     for a in (g.hips_B, g.shoulders_B, g.feet_B):
         assert np.array_equal(a, hips)
-    assert (g.mass, g.leg_length, g.foot_radius) == (cfg.total_mass, cfg.leg_length, cfg.foot_radius)
+    assert (g.mass, g.leg_length, g.foot_radius) == (50.0, 0.2 + 0.22, 0.02)
 
 
 def test_the_chain_model_of_the_paper_legs_is_leg_point():
     """The general leg form with the paper's numbers gives :func:`leg_point`'s foot and mass moment."""
-    cfg = load_robot_config("paper")
+    legs = load_robot("paper").two_link
     chain = LegChainModel.from_description(load_robot("paper"))
     rng = np.random.default_rng(0)
     q, qd = rng.uniform(-1, 1, (5, 4, 3)), rng.uniform(-2, 2, (5, 4, 3))
-    moment = (cfg.thigh.mass * cfg.thigh.com + cfg.shank.mass * cfg.thigh.length, cfg.shank.mass * cfg.shank.com)
-    for which, ab in (("foot", (cfg.thigh.length, cfg.shank.length)), ("com", moment)):
+    moment = (legs.thigh_mass * legs.thigh_com + legs.shank_mass * legs.thigh, legs.shank_mass * legs.shank_com)
+    for which, ab in (("foot", (legs.thigh, legs.shank)), ("com", moment)):
         for got, want in zip(chain.point(q, which, qd), leg_point(q, *ab, qd), strict=True):
             assert np.allclose(got, want, atol=1e-12)
 
@@ -66,7 +64,7 @@ def test_whole_body_com_matches_the_generated_model(name):
     """WholeBody's COM offset (chain model's mass moments) = MuJoCo's whole-robot COM of the description's MJCF."""
     desc = load_robot(name)
     wb = WholeBody(desc)
-    m = mujoco.MjModel.from_xml_string(description_robot_mjcf(desc))
+    m = mujoco.MjModel.from_xml_string(robot_mjcf(desc))
     d = mujoco.MjData(m)
     rng = np.random.default_rng(2)
     for _ in range(3):

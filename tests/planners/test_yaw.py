@@ -12,7 +12,6 @@ import pytest
 from planners import Scenario, plan_gait_cycle
 from planners.footholds import choose_footholds
 from planners.pitch import BodyPitch, planar_rotation, terrain_pitch, yaw_pitch_of_quaternion
-from quad_uneven_env.robot.kinematics import hip_positions_B
 from quad_uneven_env.terrain import Terrain, parse_terrain_spec
 
 FEET_XY = np.array([[0.25, 0.185], [0.25, -0.185], [-0.25, 0.185], [-0.25, -0.185]])
@@ -67,13 +66,13 @@ def test_terrain_pitch_is_taken_along_the_heading():
     assert terrain_pitch(feet, yaw=-0.5 * np.pi) == pytest.approx(np.arctan(0.2))
 
 
-def test_nominal_footholds_are_the_hips_turned_about_the_goal(robot_cfg):
+def test_nominal_footholds_are_the_hips_turned_about_the_goal(paper_robot):
     """On flat ground every foothold is its nominal point: the hip (base frame) turned by the end yaw, plus the goal."""
     terrain = Terrain(parse_terrain_spec("flat")).generate(np.random.default_rng(0))
-    hips = hip_positions_B(robot_cfg)
+    hips = paper_robot.hip_positions_B
     goal = np.array([0.1, -0.05])
     yaw = 0.4
-    out = choose_footholds(terrain, robot_cfg, np.column_stack([FEET_XY, np.zeros(4)]), np.array([0.0, 0.0, 0.33]),
+    out = choose_footholds(terrain, paper_robot, np.column_stack([FEET_XY, np.zeros(4)]), np.array([0.0, 0.0, 0.33]),
                            goal, 0.33, yaw_start=0.0, yaw_end=yaw)  # fmt: skip
     c, s = np.cos(yaw), np.sin(yaw)
     for i in range(4):

@@ -52,7 +52,7 @@ def test_measurement_through_its_entry_point_equals_the_dispatcher_call():
         live = env._meas
         assert live._call is not None
         fresh = StepMeasurement(
-            env.model, env.data, env.idx, env.robot_cfg.foot_radius, env._scan_B, env._fields,
+            env.model, env.data, env.idx, env.robot.foot_radius, env._scan_B, env._fields,
             env.observation_space.low, env.observation_space.high,
         )  # fmt: skip
         fresh.mass = live.mass
@@ -75,8 +75,8 @@ def test_argument_type_is_the_dispatchers_type():
 
 def test_a_new_terrain_keeps_the_measurements_entry_point_and_its_outputs(monkeypatch):
     """A reset draws a new terrain (a new heights array): the measurement keeps its entry point (the array's type is
-    the same) instead of resolving it again (~0.2 ms: numba types all 36 arguments), and still measures what a fresh
-    dispatcher call measures there."""
+    the same) instead of resolving it again (~0.2 ms: numba types every array of its arguments), and still measures
+    what a fresh dispatcher call measures there."""
     import gymnasium as gym
 
     from quad_uneven_env import measurement
@@ -95,7 +95,7 @@ def test_a_new_terrain_keeps_the_measurements_entry_point_and_its_outputs(monkey
         assert live._call[1] is env.terrain.heightfield.kernel_args[0] and live._call[1] is not flat
         assert live._call[0] is entry
         fresh = StepMeasurement(
-            env.model, env.data, env.idx, env.robot_cfg.foot_radius, env._scan_B, env._fields,
+            env.model, env.data, env.idx, env.robot.foot_radius, env._scan_B, env._fields,
             env.observation_space.low, env.observation_space.high,
         )  # fmt: skip
         fresh.mass = live.mass

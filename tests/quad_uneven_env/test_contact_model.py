@@ -162,7 +162,7 @@ def _foot_depths(setup=None, seeds=(0, 1), steps=400) -> np.ndarray:
         for _ in range(steps):
             _, _, term, trunc, _ = env.step(env.action_space.sample())
             p = u.data.site_xpos[sites]
-            out.append(u.terrain.height(p[:, 0], p[:, 1]) - (p[:, 2] - u.robot_cfg.foot_radius))
+            out.append(u.terrain.height(p[:, 0], p[:, 1]) - (p[:, 2] - u.robot.foot_radius))
             if term or trunc:
                 env.reset()
     return np.concatenate(out)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from quad_uneven_env import constants as C
-from quad_uneven_env.robot.dynamics.base import BACKENDS, make_dynamics
+from quad_uneven_env.robot.dynamics import BACKENDS, make_dynamics
 from quad_uneven_env.robot.model import robot_mjcf
 
 N_STATES = 1000
@@ -15,9 +15,9 @@ TOL = 1e-8
 
 
 @pytest.fixture(scope="module")
-def mj_model(robot_cfg) -> mujoco.MjModel:
+def mj_model(paper_robot) -> mujoco.MjModel:
     """The robot alone (no terrain, so no contact): MuJoCo's M and qfrc_bias are the reference."""
-    return mujoco.MjModel.from_xml_string(robot_mjcf(robot_cfg))
+    return mujoco.MjModel.from_xml_string(robot_mjcf(paper_robot))
 
 
 @pytest.fixture(scope="module")
@@ -187,8 +187,8 @@ def test_explicit_kernel_equals_numpy_formulas(backends, states_and_reference):
         np.testing.assert_allclose(getattr(fast, f), getattr(ref, f), rtol=0, atol=1e-10)
 
 
-def test_mujoco_kernel_refuses_other_structures(robot_cfg):
-    other = mujoco.MjModel.from_xml_string(robot_mjcf(robot_cfg))
+def test_mujoco_kernel_refuses_other_structures(paper_robot):
+    other = mujoco.MjModel.from_xml_string(robot_mjcf(paper_robot))
     other.jnt_type[other.joint("RH_KFE").id] = mujoco.mjtJoint.mjJNT_SLIDE
     with pytest.raises(ValueError, match="RH_KFE"):
         make_dynamics("mujoco", other)

@@ -14,7 +14,6 @@ import pytest
 
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot.description import load_robot
-from quad_uneven_env.robot.description_model import description_robot_mjcf
 from quad_uneven_env.robot.dynamics import BACKENDS, make_dynamics
 from quad_uneven_env.robot.dynamics.chains import LegChains
 from quad_uneven_env.robot.dynamics.explicit_backend import ExplicitDynamics
@@ -27,10 +26,8 @@ FIELDS = ("M", "h", "G", "J_feet", "Jdot_qdot_feet")
 
 
 def simulated_model(name: str) -> mujoco.MjModel:
-    """The robot alone as the env simulates it (the paper's own generator, else the description's MJCF)."""
-    desc = load_robot(name)
-    xml = robot_mjcf(desc.config) if desc.config is not None else description_robot_mjcf(desc)
-    return mujoco.MjModel.from_xml_string(xml)
+    """The robot alone as the env simulates it."""
+    return mujoco.MjModel.from_xml_string(robot_mjcf(load_robot(name)))
 
 
 def random_states(model: mujoco.MjModel, rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -150,13 +147,13 @@ def test_other_structures_are_refused():
     model.jnt_pos[model.joint("RF_HFE").id] = [0.0, 0.01, 0.0]
     with pytest.raises(ValueError, match="joint RF_HFE must sit at its body's origin"):
         make_dynamics("pinocchio", model)
-    xml = description_robot_mjcf(load_robot("go1")).replace(
+    xml = robot_mjcf(load_robot("go1")).replace(
         '<site name="LH_foot"', '<body name="extra"><inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body>'
         '<site name="LH_foot"',
     )  # fmt: skip
     with pytest.raises(ValueError, match="body 'extra' carries no leg joint"):
         make_dynamics("explicit", mujoco.MjModel.from_xml_string(xml))
-    xml = description_robot_mjcf(load_robot("go1")).replace('name="RH_foot"', 'name="RH_toe"')
+    xml = robot_mjcf(load_robot("go1")).replace('name="RH_foot"', 'name="RH_toe"')
     with pytest.raises(ValueError, match="RH_foot"):
         make_dynamics("mujoco", mujoco.MjModel.from_xml_string(xml))
 
@@ -166,7 +163,7 @@ def test_paper_robot_reduces_to_appendix_a():
     ``u = -l1 sin q2 - l2 sin(q2 + q3)``, ``s = -l1 cos q2 - l2 cos(q2 + q3)``, so its leg Jacobian columns are
     ``e_x x R_x [u, 0, s]``, ``R_x [s, 0, -u]`` and ``R_x [-l2 cos(q2 + q3), 0, l2 sin(q2 + q3)]`` (trunk frame)."""
     desc = load_robot("paper")
-    l1, l2 = desc.config.thigh.length, desc.config.shank.length
+    l1, l2 = desc.two_link.thigh, desc.two_link.shank
     model = simulated_model("paper")
     qpos, qvel = random_states(model, np.random.default_rng(4), 20)
     t = make_dynamics("explicit", desc).terms(qpos, qvel)

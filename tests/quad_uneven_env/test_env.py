@@ -91,7 +91,7 @@ def test_standing_pose_is_measured_correctly():
     # Static index: distance from the COG to the nearest edge of the foot rectangle (hand computed
     # from the measured contact points), times m g.
     feet = info["feet_pos"].copy()
-    feet[:, 2] -= u.robot_cfg.foot_radius
+    feet[:, 2] -= u.robot.foot_radius
     expected, _ = normalized_stability_index(info["cog"], np.zeros(3), feet, m, g)
     assert info["stability_index_normalized"] == pytest.approx(float(expected), abs=0.01)
     half_w = 0.185
@@ -281,8 +281,8 @@ def test_contact_sensors_match_raw_contact_list():
             break
         # Re-evaluate forward so contacts and sensors describe the same (current) state.
         mujoco.mj_forward(u.model, u.data)
-        fast = measure_contacts(u.model, u.data, u.idx, u.robot_cfg.foot_radius)
-        ref = measure_contacts_reference(u.model, u.data, u.idx, u.robot_cfg.foot_radius)
+        fast = measure_contacts(u.model, u.data, u.idx, u.robot.foot_radius)
+        ref = measure_contacts_reference(u.model, u.data, u.idx, u.robot.foot_radius)
         np.testing.assert_array_equal(fast.foot_contact, ref.foot_contact)
         np.testing.assert_allclose(fast.foot_forces, ref.foot_forces, atol=1e-9)
         np.testing.assert_allclose(fast.total_force, ref.total_force, atol=1e-9)

@@ -56,7 +56,7 @@ def scan_points_W(u) -> np.ndarray:
 
 def check_against_reference(u) -> None:
     meas = u._measure()
-    ref = measure_contacts_reference(u.model, u.data, u.idx, u.robot_cfg.foot_radius)
+    ref = measure_contacts_reference(u.model, u.data, u.idx, u.robot.foot_radius)
     np.testing.assert_allclose(meas.foot_forces, ref.foot_forces, atol=1e-9)
     np.testing.assert_array_equal(meas.foot_contact, ref.foot_contact)
     np.testing.assert_allclose(meas.foot_points, ref.foot_points, atol=1e-9)

@@ -34,13 +34,13 @@ def check_step(u, stats) -> None:
     """The measurement the env just made (its buffers) against the references, on the same MuJoCo data."""
     meas, d, m = u._meas, u.data, u.model
     mass, g = u.idx.total_mass, -m.opt.gravity[2]
-    ref = measure_contacts_reference(m, d, u.idx, u.robot_cfg.foot_radius)
+    ref = measure_contacts_reference(m, d, u.idx, u.robot.foot_radius)
     np.testing.assert_array_equal(meas.foot_contact, ref.foot_contact)
     np.testing.assert_allclose(meas.foot_forces, ref.foot_forces, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(meas.foot_points, ref.foot_points, rtol=0, atol=1e-9)
     np.testing.assert_allclose(meas.total_force, ref.total_force, rtol=1e-9, atol=1e-9)
     assert meas.trunk_contact == ref.trunk_contact and meas.other_contact == ref.other_contact
-    sensors = measure_contacts(m, d, u.idx, u.robot_cfg.foot_radius)  # the numpy twin from the same sensors
+    sensors = measure_contacts(m, d, u.idx, u.robot.foot_radius)  # the numpy twin from the same sensors
     np.testing.assert_array_equal(sensors.foot_contact, ref.foot_contact)
     np.testing.assert_allclose(sensors.foot_points, ref.foot_points, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(meas.cog, d.subtree_com[u.idx.trunk_body])

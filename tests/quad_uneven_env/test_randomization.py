@@ -285,7 +285,7 @@ def test_payload_matches_a_model_with_the_payload_as_a_welded_body():
     assert u.total_mass == drawn["total_mass"] == u.model.body_subtreemass[u.idx.trunk_body]
     pos = np.array([drawn["payload_com_x"], drawn["payload_com_y"], drawn["payload_com_z"]])
     xml = scene_mjcf(
-        u.robot_cfg, u.terrain.hfield_asset_xml(), u.terrain.hfield_geom_xml(u.robot_cfg.friction), PhysicsOptions()
+        u.robot, u.terrain.hfield_asset_xml(), u.terrain.hfield_geom_xml(u.robot.friction), PhysicsOptions()
     )
     ref = mujoco.MjModel.from_xml_string(_with_payload_body(xml, drawn["payload_mass"], pos))
     ref_data = mujoco.MjData(ref)

@@ -8,15 +8,17 @@ import pinocchio as pin
 import pytest
 
 from quad_uneven_env import constants as C
-from quad_uneven_env.config import load_robot_config, read_yaml, resolve_config_path, robot_config_from_dict
+from quad_uneven_env.config import read_yaml, resolve_config_path
 from quad_uneven_env.robot import conventions as conv
+from quad_uneven_env.robot.description import MIN_INERTIA, load_robot
 from quad_uneven_env.robot.kinematics import leg_fk_hip, leg_ik_hip
-from quad_uneven_env.robot.model import MIN_INERTIA, home_qpos, robot_mjcf
+from quad_uneven_env.robot.model import robot_mjcf
+from quad_uneven_env.robot.table1 import from_table1
 
 
 @pytest.fixture(scope="module")
-def models(robot_cfg, tmp_path_factory):
-    xml = robot_mjcf(robot_cfg)
+def models(paper_robot, tmp_path_factory):
+    xml = robot_mjcf(paper_robot)
     path = tmp_path_factory.mktemp("mjcf") / "robot.xml"
     path.write_text(xml)
     mj = mujoco.MjModel.from_xml_string(xml)
@@ -24,7 +26,7 @@ def models(robot_cfg, tmp_path_factory):
     return mj, pm
 
 
-def random_qpos(robot_cfg, mj, rng):
+def random_qpos(paper_robot, mj, rng):
     q = np.zeros(C.NQ)
     q[:3] = rng.uniform(-1, 1, 3)
     quat = rng.normal(size=4)
@@ -34,7 +36,7 @@ def random_qpos(robot_cfg, mj, rng):
     return q
 
 
-def test_table1_masses_and_inertias(robot_cfg, models):
+def test_table1_masses_and_inertias(paper_robot, models):
     mj, _ = models
     body = mj.body(C.TRUNK_BODY)
     assert body.mass[0] == pytest.approx(40.0)
@@ -49,7 +51,7 @@ def test_table1_masses_and_inertias(robot_cfg, models):
     np.testing.assert_allclose(shank.ipos, [0, 0, -0.08])
     np.testing.assert_allclose(mj.body(C.shank_body("RH")).pos, [0, 0, -0.2])
     assert mujoco.mj_getTotalmass(mj) == pytest.approx(50.0)
-    assert robot_cfg.total_mass == pytest.approx(50.0)
+    assert paper_robot.total_mass == pytest.approx(50.0)
 
 
 def test_names_and_orders(models):
@@ -64,20 +66,20 @@ def test_names_and_orders(models):
     np.testing.assert_allclose(hips, [[0.25, 0.185, 0], [0.25, -0.185, 0], [-0.25, 0.185, 0], [-0.25, -0.185, 0]])
 
 
-def test_knee_range_avoids_stretched_singularity(robot_cfg, models):
+def test_knee_range_avoids_stretched_singularity(paper_robot, models):
     mj, _ = models
     for leg in C.LEG_NAMES:
         lo, hi = mj.joint(C.joint_name(leg, "KFE")).range
         assert not lo <= 0.0 <= hi, f"{leg} knee range {lo, hi} contains the stretched knee"
 
 
-def test_pinocchio_agrees_with_mujoco(robot_cfg, models, rng):
+def test_pinocchio_agrees_with_mujoco(paper_robot, models, rng):
     mj, pm = models
     pdata = pin.Data(pm)
     md = mujoco.MjData(mj)
     assert pin.computeTotalMass(pm) == pytest.approx(mujoco.mj_getTotalmass(mj), abs=1e-12)
     for _ in range(20):
-        qpos = random_qpos(robot_cfg, mj, rng)
+        qpos = random_qpos(paper_robot, mj, rng)
         md.qpos[:] = qpos
         mujoco.mj_forward(mj, md)
         q_pin = conv.qpos_mj_to_pin(qpos)
@@ -126,15 +128,15 @@ def test_qacc_conversion_matches_finite_difference(rng):
     np.testing.assert_allclose(conv.qacc_pin_to_mj(qpos[:7], v[:6], a[:6])[:3], acc_fd, atol=1e-4)
 
 
-def test_leg_fk_matches_mujoco_and_ik_inverts_it(robot_cfg, models, rng):
+def test_leg_fk_matches_mujoco_and_ik_inverts_it(paper_robot, models, rng):
     mj, _ = models
     md = mujoco.MjData(mj)
-    qpos = home_qpos(robot_cfg)
+    qpos = paper_robot.home_qpos()
     qpos[:3] = 0.0
     qpos[7:] += rng.uniform(-0.15, 0.15, 12)
     md.qpos[:] = qpos
     mujoco.mj_forward(mj, md)
-    l1, l2 = robot_cfg.thigh.length, robot_cfg.shank.length
+    l1, l2 = paper_robot.two_link.thigh, paper_robot.two_link.shank
     for i, leg in enumerate(C.LEG_NAMES):
         q_leg = qpos[7 + 3 * i : 10 + 3 * i]
         hip = mj.body(C.thigh_body(leg)).pos
@@ -145,30 +147,30 @@ def test_leg_fk_matches_mujoco_and_ik_inverts_it(robot_cfg, models, rng):
         np.testing.assert_allclose(q_back, q_leg, atol=1e-10)
 
 
-def test_home_pose_feet_touch_ground(robot_cfg, models):
+def test_home_pose_feet_touch_ground(paper_robot, models):
     mj, _ = models
     md = mujoco.MjData(mj)
-    md.qpos[:] = home_qpos(robot_cfg, ground_height=0.1)
+    md.qpos[:] = paper_robot.home_qpos(ground_height=0.1)
     mujoco.mj_forward(mj, md)
     feet = md.site_xpos[[mj.site(s).id for s in C.FOOT_SITES]]
-    np.testing.assert_allclose(feet[:, 2], 0.1 + robot_cfg.foot_radius, atol=1e-12)
+    np.testing.assert_allclose(feet[:, 2], 0.1 + paper_robot.foot_radius, atol=1e-12)
 
 
 def test_bad_robot_config_names_field():
     raw = read_yaml(resolve_config_path("paper", "robot"))
     raw["thigh"] = dict(raw["thigh"], mass=-1.0)
     with pytest.raises(ValueError, match=r"robot\.thigh\.mass"):
-        robot_config_from_dict(raw)
+        from_table1(raw)
     raw = read_yaml(resolve_config_path("paper", "robot"))
     raw["joint_range"] = dict(raw["joint_range"], KFE_front=[-2.0, 0.1])
     with pytest.raises(ValueError, match="KFE_front"):
-        robot_config_from_dict(raw)
+        from_table1(raw)
     raw = read_yaml(resolve_config_path("paper", "robot"))
     raw["colour"] = "red"
     with pytest.raises(ValueError, match="colour"):
-        robot_config_from_dict(raw)
+        from_table1(raw)
     with pytest.raises(ValueError, match="unknown robot config"):
-        load_robot_config("nonexistent")
+        load_robot("nonexistent")
 
 
 def test_yaw_of_quat_and_wrap_angle_against_scipy(rng):

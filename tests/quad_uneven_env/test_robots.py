@@ -19,10 +19,10 @@ import pytest
 
 import quad_uneven_env
 from quad_uneven_env import constants as C
-from quad_uneven_env.config import load_robot_config
+from quad_uneven_env.config import CONFIG_DIR, read_yaml
+from quad_uneven_env.env import default_pd_gains
 from quad_uneven_env.robot import conventions as cv
 from quad_uneven_env.robot.description import RobotDescription, load_robot, robot_data_dir
-from quad_uneven_env.robot.description_model import description_robot_mjcf
 from quad_uneven_env.robot.kinematics import leg_fk_hip
 from quad_uneven_env.robot.leg_chain import feet_ik_B, feet_positions_B, leg_fk_B
 from quad_uneven_env.robot.model import PhysicsOptions, robot_mjcf, scene_mjcf
@@ -62,7 +62,7 @@ def test_robots_lists_the_shipped_robots():
 @pytest.mark.parametrize("name", URDF_ROBOTS)
 def test_description_reads_the_urdf(name):
     desc = load_robot(name)
-    assert desc.config is None and desc.name == name
+    assert desc.two_link is None and desc.name == name
     assert desc.total_mass == pytest.approx(MASSES[name], abs=0.05)
     model, _, _ = _pin_model(desc)
     assert desc.total_mass == pytest.approx(sum(y.mass for y in model.inertias), rel=1e-12)
@@ -83,16 +83,26 @@ def test_solo12_torque_limits_come_from_its_yaml_not_the_urdf():
 
 
 def test_paper_description_matches_table_1():
-    cfg = load_robot_config("paper")
+    """The Table-1 robot's description says what configs/robot/paper.yaml says, and its joint chain moves the feet
+    as the closed form of its two-link legs does."""
+    raw = read_yaml(CONFIG_DIR / "robot" / "paper.yaml")
     desc = load_robot("paper")
-    assert desc.config is cfg
-    assert desc.total_mass == pytest.approx(cfg.total_mass)
+    thigh, shank = raw["thigh"], raw["shank"]
+    assert desc.total_mass == raw["body"]["mass"] + 4 * (thigh["mass"] + shank["mass"])
+    assert (desc.two_link.thigh, desc.two_link.shank) == (thigh["length"], shank["length"])
+    assert desc.two_link.hip_height == raw["standing_hip_height"]
+    half = np.array(raw["body"]["size"][:2]) / 2
+    np.testing.assert_array_equal(np.abs(desc.hip_positions_B[:, :2]), np.tile(half, (4, 1)))
     assert desc.knee_directions == KNEES["paper"]
+    assert desc.standing_height == pytest.approx(raw["standing_hip_height"] + raw["foot_radius"], abs=1e-15)
     rng = np.random.default_rng(3)
     q = rng.uniform(-1.5, 1.5, (50, 3))
     for i, leg in enumerate(desc.legs):
         hip = desc.hip_positions_B[i]
-        assert np.allclose(leg_fk_B(leg, q), hip + leg_fk_hip(q, cfg.thigh.length, cfg.shank.length), atol=1e-12)
+        assert np.allclose(leg_fk_B(leg, q), hip + leg_fk_hip(q, thigh["length"], shank["length"]), atol=1e-12)
+    feet = feet_positions_B(desc, desc.standing_joints)
+    np.testing.assert_allclose(feet, desc.standing_feet_B, atol=1e-12)
+    np.testing.assert_allclose(feet[:, 2], -raw["standing_hip_height"], atol=1e-12)
 
 
 @pytest.mark.parametrize("name", URDF_ROBOTS)
@@ -128,7 +138,7 @@ def test_inverse_kinematics_round_trip(name):
 def test_generated_mjcf_has_the_urdf_dynamics(name):
     """Total mass, mj_fullM vs pin.crba and qfrc_bias vs pin.rnea (MuJoCo's coordinates, conventions.py)."""
     desc = load_robot(name)
-    mm = mujoco.MjModel.from_xml_string(description_robot_mjcf(desc))
+    mm = mujoco.MjModel.from_xml_string(robot_mjcf(desc))
     md = mujoco.MjData(mm)
     model, iq, iv = _pin_model(desc)
     data = model.createData()
@@ -159,39 +169,17 @@ def test_generated_mjcf_has_the_urdf_dynamics(name):
         assert np.allclose(md.qfrc_bias, bias, atol=1e-8, rtol=0)
 
 
-def test_paper_description_mjcf_matches_the_paper_model():
-    """The generic generator on the paper's description gives the paper model's masses and mass matrix."""
+def test_paper_scene_mjcf_is_pinned():
+    """The default env's MJCF, byte for byte (SHA-256 of the document the one generator writes for the paper
+    robot on the rough terrain, and of the robot alone): a change that moves the paper robot's model shows here."""
     desc = load_robot("paper")
-    ref = mujoco.MjModel.from_xml_string(robot_mjcf(desc.config))
-    gen = mujoco.MjModel.from_xml_string(description_robot_mjcf(desc))
-    assert gen.nq == ref.nq and gen.nv == ref.nv
-    dr, dg = mujoco.MjData(ref), mujoco.MjData(gen)
-    rng = np.random.default_rng(4)
-    for d in (dr, dg):
-        d.qpos[3] = 1.0
-    q = rng.uniform(-1, 1, C.N_JOINTS)
-    for m, d in ((ref, dr), (gen, dg)):
-        d.qpos[7:] = q
-        mujoco.mj_forward(m, d)
-    Mr, Mg = np.zeros((C.NV, C.NV)), np.zeros((C.NV, C.NV))
-    mujoco.mj_fullM(ref, dr, Mr)
-    mujoco.mj_fullM(gen, dg, Mg)
-    assert np.allclose(Mr, Mg, atol=1e-12)
-    assert np.allclose(dr.site_xpos[ref.site(C.FOOT_SITES[0]).id] - dr.qpos[:3],
-                       dg.site_xpos[gen.site(C.FOOT_SITES[0]).id] - dg.qpos[:3], atol=1e-12)  # fmt: skip
-
-
-def test_paper_scene_mjcf_is_unchanged():
-    """The default env's MJCF, byte for byte (SHA-256 of the document the paper robot's generator wrote before
-    URDF robots existed): the paper's robot keeps its own generator."""
-    cfg = load_robot_config("paper")
     terrain = Terrain(parse_terrain_spec("rough"))
-    xml = scene_mjcf(cfg, terrain.hfield_asset_xml(), terrain.hfield_geom_xml(cfg.friction), PhysicsOptions())
+    xml = scene_mjcf(desc, terrain.hfield_asset_xml(), terrain.hfield_geom_xml(desc.friction), PhysicsOptions())
     assert hashlib.sha256(xml.encode()).hexdigest() == (
-        "0bc9fa29ab810d048bcc2b1bd67015ea73d57f00d1bc46ad829224010313d4e3"
+        "293ff00bbc2b7fd203731db698e223edc4de12a7c59825b87d52eb7bca9e94a8"
     )
-    assert hashlib.sha256(robot_mjcf(cfg).encode()).hexdigest() == (
-        "b6313e50737eea40c2435d62d87f9a991414497b2d14867dfc07944e4367fd44"
+    assert hashlib.sha256(robot_mjcf(desc).encode()).hexdigest() == (
+        "9bed51f717f295ac26d63b969c6427b7a05a69b6b3fce4277997e6571a1a9b49"
     )
 
 
@@ -227,16 +215,16 @@ def test_env_defaults_follow_the_robot(name):
     desc = load_robot(name)
     env = gym.make("QuadUneven-v0", robot=name, action_mode="joint_pd")
     u = env.unwrapped
+    kp, kd = default_pd_gains(desc)
     if name == "paper":
         assert (u.termination.min_base_height, u.termination.max_base_height) == (0.12, 1.0)
-        assert (desc.joint_pd_gains) == (100.0, 3.0)
+        assert (kp, kd) == (100.0, 3.0)
     else:
         assert u.termination.min_base_height == pytest.approx(desc.standing_height / 3.0)
         assert u.termination.max_base_height == pytest.approx(desc.standing_height / 0.36)
-        kp = 100.0 * desc.total_mass * desc.leg_length / (50.0 * 0.42)
-        assert desc.joint_pd_gains[0] == pytest.approx(kp)
-    assert u.model.actuator_gainprm[0, 0] == pytest.approx(desc.joint_pd_gains[0])
-    assert u.model.actuator_biasprm[0, 2] == pytest.approx(-desc.joint_pd_gains[1])
+        assert kp == pytest.approx(100.0 * desc.total_mass * desc.leg_length / (50.0 * 0.42))
+    assert u.model.actuator_gainprm[0, 0] == pytest.approx(kp)
+    assert u.model.actuator_biasprm[0, 2] == pytest.approx(-kd)
     env.close()
     # given values win
     given = {"termination": {"min_base_height": 0.05}, "pd_kp": 7.0}
@@ -288,7 +276,7 @@ def test_a_users_robot_by_yaml_path(tmp_path):
 @pytest.mark.parametrize(
     ("edit", "yaml_over", "message"),
     [
-        (None, {"foot_radius": "-0.02"}, r"foot_radius must be a finite number > 0"),
+        (None, {"foot_radius": "-0.02"}, r"mine\.yaml\.foot_radius must be a number in \(0, inf\) \(m\), got -0\.02"),
         (None, {"legs": "{LF: {joints: [FL_hip_joint, FL_thigh_joint, FL_calf_joint], foot: FL_toe}}"}, r"\.legs"),
         (
             None,
@@ -301,7 +289,7 @@ def test_a_users_robot_by_yaml_path(tmp_path):
             },
             r"legs\.LF\.foot: frame 'FL_toe' is not in",
         ),
-        (None, {"torque_limit": "{HAA: 0}"}, r"torque_limit\.HAA must be a finite number > 0"),
+        (None, {"torque_limit": "{HAA: 0}"}, r"torque_limit\.HAA must be a number in \(0, inf\) \(N m\), got 0"),
         (None, {"colour": "red"}, r"unknown field\(s\) \['colour'\]"),
         (None, {"gait": "{stride: -0.1}"}, r"gait\.stride must be a number in \(0, 1\] or null \(m\), got -0\.1"),
         (None, {"gait": "{cycle_time: 0.01}"}, r"gait\.cycle_time must be a number in \[0\.2, 20\]"),

@@ -218,9 +218,9 @@ def _spec(kind: str) -> dict | str:
     return {"kind": "heightmap", "heights": _heightmap_array(), "cell_size": 0.05} if kind == "heightmap" else kind
 
 
-def _scene(terrain: Terrain, robot_cfg) -> tuple[mujoco.MjModel, mujoco.MjData]:
+def _scene(terrain: Terrain, paper_robot) -> tuple[mujoco.MjModel, mujoco.MjData]:
     """Full robot scene on ``terrain`` with the current surface uploaded and the robot lifted out of the way."""
-    xml = scene_mjcf(robot_cfg, terrain.hfield_asset_xml(), terrain.hfield_geom_xml(robot_cfg.friction))
+    xml = scene_mjcf(paper_robot, terrain.hfield_asset_xml(), terrain.hfield_geom_xml(paper_robot.friction))
     model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)
     terrain.upload(model)
@@ -243,10 +243,10 @@ def _edge_points(hf: HeightField, rng: np.random.Generator, n_max: int = 2000) -
 
 
 @pytest.mark.parametrize("kind", TERRAIN_KINDS)
-def test_every_kind_matches_mj_ray(kind, robot_cfg, rng):
+def test_every_kind_matches_mj_ray(kind, paper_robot, rng):
     terrain = Terrain(_spec(kind))
     terrain.generate(rng)
-    model, data = _scene(terrain, robot_cfg)
+    model, data = _scene(terrain, paper_robot)
     hf = terrain.heightfield
     (x0, x1), (y0, y1) = hf.extent
     xr, yr = rng.uniform(x0, x1, 2000), rng.uniform(y0, y1, 2000)
@@ -260,15 +260,15 @@ def test_every_kind_matches_mj_ray(kind, robot_cfg, rng):
     np.testing.assert_allclose(hf.normal(x, y), n_ray, atol=1e-6)
 
 
-def test_hfield_xml_uses_the_shared_names(robot_cfg):
+def test_hfield_xml_uses_the_shared_names(paper_robot):
     terrain = Terrain("stairs")
-    model, _ = _scene(terrain, robot_cfg)
+    model, _ = _scene(terrain, paper_robot)
     gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, C.TERRAIN_GEOM)
     hid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_HFIELD, C.TERRAIN_HFIELD)
     assert gid >= 0 and hid >= 0 and model.geom_dataid[gid] == hid
     assert model.geom_type[gid] == mujoco.mjtGeom.mjGEOM_HFIELD
     assert (model.geom_contype[gid], model.geom_conaffinity[gid]) == (C.TERRAIN_CONTYPE, C.TERRAIN_CONAFFINITY)
-    assert model.geom_friction[gid][0] == pytest.approx(robot_cfg.friction)
+    assert model.geom_friction[gid][0] == pytest.approx(paper_robot.friction)
     assert model.geom_matid[gid] == mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_MATERIAL, "terrain_mat")
     assert (model.hfield_nrow[hid], model.hfield_ncol[hid]) == terrain.heightfield.shape
     with pytest.raises(ValueError, match="friction"):
@@ -289,9 +289,9 @@ def test_regeneration_is_seeded(kind):
     assert Terrain(kind).hfield_asset_xml() == xml[0]
 
 
-def test_upload_rewrites_the_same_model_without_recompiling(robot_cfg, rng):
+def test_upload_rewrites_the_same_model_without_recompiling(paper_robot, rng):
     terrain = Terrain({"kind": "stepping_stones", "height_jitter": 0.1})
-    model, data = _scene(terrain, robot_cfg)
+    model, data = _scene(terrain, paper_robot)
     x, y = rng.uniform(0.8, 4.0, 500), rng.uniform(-1.2, 1.2, 500)
     z0 = terrain.z_max + 1.0
     before, _ = _ray_down(model, data, x, y, z0)
@@ -311,24 +311,23 @@ def test_upload_rewrites_the_same_model_without_recompiling(robot_cfg, rng):
     np.testing.assert_allclose(halved - terrain.z_min, 0.5 * (after - terrain.z_min), atol=1e-6)
 
 
-def test_upload_refuses_a_model_of_another_layout(robot_cfg):
-    model, _ = _scene(Terrain("flat"), robot_cfg)
+def test_upload_refuses_a_model_of_another_layout(paper_robot):
+    model, _ = _scene(Terrain("flat"), paper_robot)
     with pytest.raises(ValueError, match="another terrain spec"):
         Terrain({"kind": "flat", "length": 6.0}).upload(model)
     with pytest.raises(ValueError, match="hfield"):
         Terrain("flat").upload(mujoco.MjModel.from_xml_string("<mujoco/>"))
 
 
-def test_robot_stands_on_the_spawn_area(robot_cfg):
+def test_robot_stands_on_the_spawn_area(paper_robot):
     """Home pose at spawn_height: feet touch the terrain within a millimetre (contact distance from MuJoCo).
 
     The pose is lowered by 0.5 mm: libccd (the scene's collider) reports overlaps only, not exact touches.
     """
-    from quad_uneven_env.robot.model import home_qpos
 
     terrain = Terrain({"kind": "rough", "amplitude": 0.1})
-    model, data = _scene(terrain, robot_cfg)
-    data.qpos[:] = home_qpos(robot_cfg, terrain.spawn_height)
+    model, data = _scene(terrain, paper_robot)
+    data.qpos[:] = paper_robot.home_qpos(terrain.spawn_height)
     data.qpos[2] -= 5e-4
     mujoco.mj_forward(model, data)
     gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, C.TERRAIN_GEOM)
@@ -426,7 +425,7 @@ def test_stepping_stones_have_holes_between_them(rng):
     assert np.all(hf.is_safe_foothold(stone_cx, 0.2, 0.05))
 
 
-def test_paper_blocks_and_field(rng, robot_cfg):
+def test_paper_blocks_and_field(rng, paper_robot):
     terrain = Terrain("paper")
     terrain.generate(rng)
     half = 0.08 - 0.02  # block_size / 2 minus a cell: surely on the flat top
@@ -443,9 +442,9 @@ def test_paper_blocks_and_field(rng, robot_cfg):
     # The paper's COG heights are reachable: hip-to-foot-site distance below the stretched leg (0.42 m).
     for key, cog in (("start", (0.01, 0.0, 0.544)), ("target", (0.21, 0.0, 0.5743))):
         hips = np.array(cog) + np.array([[0.25, 0.185, 0], [0.25, -0.185, 0], [-0.25, 0.185, 0], [-0.25, -0.185, 0]])
-        feet = PAPER_BLOCKS[key] + [0.0, 0.0, robot_cfg.foot_radius]
+        feet = PAPER_BLOCKS[key] + [0.0, 0.0, paper_robot.foot_radius]
         reach = np.linalg.norm(hips - feet, axis=1)
-        assert np.all(reach < 0.95 * robot_cfg.leg_length) and np.all(reach > 0.6 * robot_cfg.leg_length)
+        assert np.all(reach < 0.95 * paper_robot.leg_length) and np.all(reach > 0.6 * paper_robot.leg_length)
 
 
 def test_heightmap_from_npy_round_trips(tmp_path):

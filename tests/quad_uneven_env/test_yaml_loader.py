@@ -6,7 +6,15 @@ from pathlib import Path
 
 import pytest
 
-from quad_uneven_env.config import CONFIG_DIR, load_yaml_text, read_yaml
+from quad_uneven_env import config
+from quad_uneven_env.config import (
+    CONFIG_DIR,
+    MAX_ALIAS_VALUES,
+    MAX_YAML_DEPTH,
+    YamlLimitError,
+    load_yaml_text,
+    read_yaml,
+)
 
 SUITE_WITH_TIME_LIMIT_TWICE = """\
 name: tiny
@@ -49,3 +57,56 @@ def test_every_shipped_config_has_distinct_keys():
     assert len(files) > 10
     for path in files:
         assert isinstance(read_yaml(path), dict), path
+
+
+def nested_aliases(levels: int) -> str:
+    """A robot field whose value is 9 ** levels numbers, written in a few hundred bytes: each level's list holds
+    the previous one 9 times (an anchor, then 8 aliases)."""
+    value = "&a0 [" + ", ".join(["0.1"] * 9) + "]"
+    for i in range(1, levels):
+        value = f"&a{i} [{value}, " + ", ".join([f"*a{i - 1}"] * 8) + "]"
+    return f"name: bomb\nfoot_radius: {value}\n"
+
+
+def test_nested_aliases_are_refused_before_they_expand(tmp_path):
+    path = tmp_path / "robot.yaml"
+    path.write_text(nested_aliases(9))  # 387 million numbers in 1 kB
+    assert path.stat().st_size < 1000
+    with pytest.raises(ValueError) as err:
+        read_yaml(path)
+    msg = str(err.value)
+    assert "robot.yaml" in msg and "line 2" in msg and f"more than {MAX_ALIAS_VALUES} values" in msg
+    assert len(msg) < 300
+
+
+def test_aliases_within_the_cap_load_as_copies():
+    text = "a: &a [1, 2, 3]\nb: *a\nc: [*a, *a]\n"
+    assert load_yaml_text(text) == {"a": [1, 2, 3], "b": [1, 2, 3], "c": [[1, 2, 3], [1, 2, 3]]}
+    many = "base: &b [" + ", ".join(["0"] * 99) + "]\nrows: [" + ", ".join(["*b"] * 100) + "]\n"  # 100 x 100
+    assert len(load_yaml_text(many)["rows"]) == 100  # 100 aliases of 100 values: 10,000 repeated, the cap
+    with pytest.raises(YamlLimitError, match="repeat more than"):
+        load_yaml_text(many.replace("*b]", "*b, *b]"))
+
+
+@pytest.mark.parametrize("text", ["a: &x [1, *x]\n", "a: &x {b: *x}\n", "a: &x [[[*x]]]\n"])
+def test_a_value_containing_itself_is_refused(tmp_path, text):
+    path = tmp_path / "c.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=r"c\.yaml' is refused at line 1: the alias \*x lies inside its own anchor"):
+        read_yaml(path)
+
+
+def test_deep_nesting_is_refused_in_one_line(tmp_path):
+    path = tmp_path / "deep.yaml"
+    path.write_text("a: " + "[" * 5000 + "]" * 5000 + "\n")
+    with pytest.raises(ValueError, match=f"deeper than {MAX_YAML_DEPTH} levels"):
+        read_yaml(path)
+    assert load_yaml_text("a: " + "[" * (MAX_YAML_DEPTH - 1) + "]" * (MAX_YAML_DEPTH - 1) + "\n")
+
+
+def test_a_file_beyond_the_size_cap_is_refused_unread(tmp_path, monkeypatch):
+    monkeypatch.setattr(config, "MAX_YAML_BYTES", 1000, raising=False)
+    path = tmp_path / "big.yaml"
+    path.write_text("a: 1\n" + "# padding\n" * 200)
+    with pytest.raises(ValueError, match=r"big\.yaml' is larger than"):
+        read_yaml(path)

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from quad_uneven_env import constants as C
+from quad_uneven_env.fields import excerpt
 
 KNEE_JOINTS = np.arange(C.JOINT_KINDS.index("KFE"), C.N_JOINTS, len(C.JOINT_KINDS))
 """Indices of the knee (KFE) joints in the 12-joint order LF RF LH RH x HAA HFE KFE."""
@@ -45,7 +46,7 @@ class KneeGainAdaptation:
 
     def __init__(self, period: float) -> None:
         if not period > 0.0:
-            raise ValueError(f"period must be a positive number of seconds, got {period!r}")
+            raise ValueError(f"period must be a positive number of seconds, got {excerpt(period)}")
         self.period = float(period)
         self.gain = np.ones(12)
         """(12,) -, the gain per joint on the expert's torque."""

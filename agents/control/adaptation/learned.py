@@ -29,6 +29,7 @@ import numpy as np
 
 from agents.control.adaptation.knee import EPS, GAIN_BOUNDS, START_TIME
 from quad_uneven_env import constants as C
+from quad_uneven_env.fields import excerpt
 
 TIME_CONSTANTS = (0.5, 2.0)
 """s: time constants of the running means (a short window that follows a change, a long one that averages)."""
@@ -66,7 +67,7 @@ class JointStatistics:
 
     def __init__(self, period: float) -> None:
         if not period > 0.0:
-            raise ValueError(f"period must be a positive number of seconds, got {period!r}")
+            raise ValueError(f"period must be a positive number of seconds, got {excerpt(period)}")
         self.period = float(period)
         self._w = np.array([min(1.0, period / t) for t in TIME_CONSTANTS])[:, None]
         self._m = np.zeros((len(TIME_CONSTANTS), 5, C.N_JOINTS))  # u^2, u e, e, u, e^2

@@ -19,6 +19,7 @@ import numpy as np
 
 from agents.control.adaptation.knee import KneeGainAdaptation
 from agents.control.adaptation.learned import LearnedGainAdaptation
+from quad_uneven_env.fields import excerpt
 
 ADAPTATIONS = ("none", "knee", "learned")
 """Values of ``ExpertConfig.adaptation``: no gains, the knee law (:mod:`agents.control.adaptation.knee`), or
@@ -38,10 +39,6 @@ class AdaptiveGains:
     def __init__(self, law: Any, torque_limit: np.ndarray) -> None:
         self.law = law
         self.torque_limit = np.asarray(torque_limit, dtype=np.float64).copy()
-        self.raw = np.zeros_like(self.torque_limit)
-        """(12,) N m: where a compiled lane writes the controller's torques before the gains."""
-        self.no_limit = np.full_like(self.torque_limit, np.inf)
-        """(12,) N m: the limit a lane writing :attr:`raw` is given (the gains come before the motors' clip)."""
         self._t_reset = 0.0
         self._next_update = 0.0
 
@@ -90,7 +87,7 @@ def make_adaptation(name: str, period: float, torque_limit: np.ndarray) -> Adapt
         return AdaptiveGains(LearnedGainAdaptation(period), torque_limit)
     if name == "none":
         return None
-    raise ValueError(f"adaptation must be one of {list(ADAPTATIONS)}, got {name!r}")
+    raise ValueError(f"adaptation must be one of {list(ADAPTATIONS)}, got {excerpt(name)}")
 
 
 __all__ = ["ADAPTATIONS", "AdaptiveGains", "make_adaptation"]

@@ -1,7 +1,7 @@
-"""Whole-body dynamics terms of the 18-DOF robot behind one interface, three backends.
+"""The interface every dynamics backend implements: :class:`Dynamics` and the :class:`DynamicsTerms` it returns.
 
-``make_dynamics(backend, robot)`` (a robot description or an MjModel, any robot) returns an object whose
-``terms(qpos, qvel)`` gives, in the canonical coordinates (MuJoCo's ``qpos``/``qvel``: world-frame base
+A backend (made by :func:`quad_uneven_env.robot.dynamics.make_dynamics`) has a method ``terms(qpos, qvel)`` that
+gives, in the canonical coordinates (MuJoCo's ``qpos``/``qvel``: world-frame base
 linear velocity, base-frame angular velocity), the terms of ``M(q) qacc + h(q, qvel) = B tau + J^T F``:
 
 - ``M`` (18 x 18, kg / kg m / kg m^2), ``h = V + G`` (18, N / N m), ``G`` (18);
@@ -20,13 +20,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Protocol
 
-import mujoco
 import numpy as np
-
-from quad_uneven_env.robot.description import RobotDescription
-
-BACKENDS: tuple[str, ...] = ("explicit", "pinocchio", "mujoco")
-"""Allowed values of ``make_dynamics(backend=...)``."""
 
 
 @dataclasses.dataclass
@@ -61,30 +55,3 @@ class Dynamics(Protocol):
     def terms(self, qpos: np.ndarray, qvel: np.ndarray) -> DynamicsTerms:
         """Dynamics terms at ``qpos`` (19,) and ``qvel`` (18,), canonical coordinates."""
         ...
-
-
-def make_dynamics(backend: str, robot: RobotDescription | mujoco.MjModel) -> Dynamics:
-    """Dynamics backend of any HAA-HFE-KFE quadruped (the paper's robot, a URDF robot, a user's YAML).
-
-    :param backend: one of ``"explicit"``, ``"pinocchio"``, ``"mujoco"``.
-    :param robot: the robot's description (``env.unwrapped.robot``: its nominal masses and inertias, standard
-        gravity; the mujoco backend compiles its robot-only MJCF) or an MjModel of it (``env.unwrapped.model``,
-        a scene or robot-only model: its masses, after any randomization, and its gravity; the mujoco
-        backend's :meth:`~quad_uneven_env.robot.dynamics.mujoco_backend.MujocoDynamics.terms_from_data` reads
-        that model's MjData).
-    :raises ValueError: unknown backend, or a model that is not the project's robot structure (naming the
-        body, joint or site).
-    """
-    if backend == "explicit":
-        from quad_uneven_env.robot.dynamics.explicit_backend import ExplicitDynamics
-
-        return ExplicitDynamics(robot)
-    if backend == "pinocchio":
-        from quad_uneven_env.robot.dynamics.pinocchio_backend import PinocchioDynamics
-
-        return PinocchioDynamics(robot)
-    if backend == "mujoco":
-        from quad_uneven_env.robot.dynamics.mujoco_backend import MujocoDynamics
-
-        return MujocoDynamics(robot)
-    raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")

@@ -19,7 +19,7 @@ import mujoco
 import numpy as np
 
 from quad_uneven_env import constants as C
-from quad_uneven_env.robot.description import AXIS_TOLERANCE, RobotDescription
+from quad_uneven_env.robot.quadruped import AXIS_TOLERANCE, RobotDescription
 
 STANDARD_GRAVITY = (0.0, 0.0, -9.81)
 """m/s^2, world-frame gravity of a description (MuJoCo's default ``opt.gravity``)."""

@@ -17,9 +17,9 @@ import numpy as np
 
 from quad_uneven_env import constants as C
 from quad_uneven_env.robot.description import RobotDescription
-from quad_uneven_env.robot.description_model import description_robot_mjcf
-from quad_uneven_env.robot.dynamics import mujoco_kernels as K
+from quad_uneven_env.robot.dynamics import mujoco_kernels as DK
 from quad_uneven_env.robot.dynamics.base import DynamicsTerms
+from quad_uneven_env.robot.model import robot_mjcf
 
 
 def _named_id(model: mujoco.MjModel, kind: str, name: str) -> int:
@@ -64,7 +64,7 @@ def _kernel_indices(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
         sites.append(site)
     idx = np.array([trunk, *sites, *jnts, *dofs, *bodies], dtype=np.int64)
     par = np.array([model.body_subtreemass[trunk], *model.opt.gravity, *msub], dtype=float)
-    assert len(idx) == K.IDX_LEN and len(par) == K.PAR_LEN
+    assert len(idx) == DK.IDX_LEN and len(par) == DK.PAR_LEN
     return idx, par
 
 
@@ -73,7 +73,7 @@ class MujocoDynamics:
 
     :param robot: an MjModel of the project's robot structure (the env's scene: :meth:`terms_from_data` reads
         its MjData), or a :class:`~quad_uneven_env.robot.description.RobotDescription`, whose robot-only MJCF
-        (:func:`~quad_uneven_env.robot.description_model.description_robot_mjcf`) is compiled here.
+        (:func:`~quad_uneven_env.robot.model.robot_mjcf`) is compiled here.
     :raises ValueError: for a model of another structure, naming the body, joint or site.
     """
 
@@ -81,7 +81,7 @@ class MujocoDynamics:
 
     def __init__(self, robot: mujoco.MjModel | RobotDescription) -> None:
         if isinstance(robot, RobotDescription):
-            robot = mujoco.MjModel.from_xml_string(description_robot_mjcf(robot))
+            robot = mujoco.MjModel.from_xml_string(robot_mjcf(robot))
         if not isinstance(robot, mujoco.MjModel):
             raise ValueError(f"robot must be a RobotDescription or a mujoco.MjModel, got {type(robot).__name__}")
         model = robot
@@ -135,7 +135,7 @@ class MujocoDynamics:
         J_feet = np.empty((C.N_LEGS, 3, C.NV))
         Jdd = np.empty((C.N_LEGS, 3))
         G = np.empty(C.NV)
-        K.mujoco_terms(*self.data_views(data), M, J_feet, Jdd, G)
+        DK.mujoco_terms(*self.data_views(data), M, J_feet, Jdd, G)
         return DynamicsTerms(M, data.qfrc_bias.copy(), G, J_feet, Jdd)
 
     def terms_from_data_mjcalls(self, data: mujoco.MjData) -> DynamicsTerms:

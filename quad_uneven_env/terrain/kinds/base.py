@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from quad_uneven_env.fields import excerpt
 from quad_uneven_env.terrain.grid import Grid, check_grid, check_spawn_inside, shared_grid
 from quad_uneven_env.terrain.params import REQUIRED, SHARED_PARAMS, Param
 
@@ -54,10 +55,10 @@ class TerrainKind:
     def validate(self, raw: Params, where: str) -> dict[str, Any]:
         """Checked params with defaults filled; ValueError naming the offending field."""
         allowed = {q.name: q for q in self.all_params}
-        unknown = sorted(set(raw) - set(allowed))
+        unknown = sorted(set(raw) - set(allowed), key=str)
         if unknown:
             raise ValueError(
-                f"{where}: unknown parameter(s) {unknown}; allowed for kind {self.name!r}: {list(allowed)}"
+                f"{where}: unknown parameter(s) {excerpt(unknown)}; allowed for kind {self.name!r}: {list(allowed)}"
             )
         out: dict[str, Any] = {}
         for name, q in allowed.items():
