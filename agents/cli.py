@@ -1,4 +1,5 @@
-"""The ``quad-uneven`` command line: every argparse parser of the project, and the thin handlers behind them.
+"""The ``quad-uneven`` command line: every argparse parser of the project, and the thin handlers behind them
+(with the ``agents/cli_*.py`` modules: shared options, and subcommands of their own).
 
 Subcommands (see ``--help`` of each):
 
@@ -15,7 +16,8 @@ Subcommands (see ``--help`` of each):
 - ``select``: a training run's checkpoint chosen on validation episodes;
 - ``fit-strength``: the learned motor-strength estimator fitted on expert episodes;
 - ``sweep``: a grid of training runs on Ray Tune, each model evaluated on a suite;
-- ``plot-curves``: several training runs' learning curves in one figure.
+- ``plot-curves``: several training runs' learning curves in one figure;
+- ``baselines``: several policies on the same episodes of several suites: one markdown table.
 
 The library modules expose typed functions only; this module turns arguments into their calls and their
 errors into one line on stderr with exit code 2: every validation error of the project is a ``ValueError``
@@ -34,6 +36,8 @@ import sys
 from pathlib import Path
 from typing import NoReturn
 
+from agents.cli_backend import add_backend_arguments, backend_options
+from agents.cli_baselines import add_baselines_parser
 from agents.evaluation.episode import DEFAULT_WALL_TIME_LIMIT
 from agents.evaluation.policies import SB3_ALGOS
 from agents.evaluation.ray_backend import BACKENDS, DEFAULT_LOCAL_CPUS
@@ -173,7 +177,9 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         "Exit code 2 on an invalid suite, policy, env kwargs or output directory; 130 when interrupted (the "
         "finished episodes are kept: continue with --resume).",
     )
-    p.add_argument("--policy", required=True, help="'zero', 'expert', or the path of an SB3 model .zip")
+    p.add_argument(
+        "--policy", required=True, help="'zero', 'expert', the path of an SB3 model .zip or of an exported .onnx"
+    )
     add_suite_run_arguments(p)
     p.add_argument(
         "--workers",
@@ -350,6 +356,9 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
             f"{kind:16s} success {g['successes']}/{g['episodes']}  mean distance {g['mean_distance']:.2f} m  "
             f"mean speed {speed if speed is None else round(speed, 3)} m/s"
         )
+    for g in results["summary"]["by_factor"]:
+        if g["factor"] == "friction":
+            print(f"friction {g['bin']:9s} success {g['successes']}/{g['episodes']}")
     for t in results["targets"]:
         verdict = "PASS" if t["passed"] else f"FAIL ({t['why_not']})"
         print(f"target {t['target']:18s} entry {t['entry']}: {verdict}")
@@ -376,7 +385,7 @@ def add_collect_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
     )
     p.add_argument("--policy", required=True, help="'expert' (the scripted expert; the only policy collect records)")
     add_suite_run_arguments(p)
-    p.add_argument("--workers", type=int, default=1, help="parallel episode processes (default 1; same dataset)")
+    add_backend_arguments(p)
     p.add_argument(
         "--env-kwargs", default="{}", help="JSON object of extra QuadUneven-v0 arguments, e.g. '{\"frame_skip\": 5}'"
     )
@@ -410,8 +419,7 @@ def run_collect_command(args: argparse.Namespace) -> int:
     expert_config = _json_object(args.expert_config, "--expert-config")
     if args.episodes is not None and args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
-    if args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    backend = backend_options(args)
     if not args.episode_wall_limit > 0:  # also refuses nan
         raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
     if args.policy != "expert":
@@ -424,13 +432,13 @@ def run_collect_command(args: argparse.Namespace) -> int:
             policy=args.policy,
             episodes=args.episodes,
             seed=args.seed,
-            workers=args.workers,
             env_kwargs=env_kwargs,
             expert_config=expert_config,
             progress=not args.no_progress,
             resume=args.resume,
             overwrite=args.overwrite,
             wall_time_limit=args.episode_wall_limit,
+            **backend,
         )
     print(
         f"{summary['episodes']} episodes, {summary['steps']} steps ({summary['successes']} reached the goal) in "
@@ -591,7 +599,23 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
     p.add_argument(
         "--seed-offset", type=int, default=1000, help="added to the suite's seeds in the rollouts (default 1000)"
     )
-    p.add_argument("--workers", type=int, default=1, help="rollout processes (default 1; the same result)")
+    add_backend_arguments(p, "rollout")
+    p.add_argument(
+        "--env-kwargs",
+        default="{}",
+        help='JSON object of extra QuadUneven-v0 arguments of the student\'s env, e.g. \'{"robot": "go1"}\'',
+    )
+    p.add_argument(
+        "--robot",
+        default=None,
+        help="the robot the student learns on: a shipped name (quad_uneven_env.robots()) or a robot YAML path; the "
+        "env kwarg 'robot' (default: the paper's robot); the teacher is the expert scaled to it; docs/robots.md",
+    )
+    p.add_argument(
+        "--scale-terrain",
+        action="store_true",
+        help="roll out the suite at the robot's scale (the suite's 'scale: leg_length', as evaluate --scale-terrain)",
+    )
     p.add_argument(
         "--no-course-frame",
         dest="course_frame",
@@ -621,7 +645,7 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
 def run_distill_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven distill``: 0 on success, 2 on an invalid option, suite or DIR."""
     for name, value, low in (("--dagger-rounds", args.dagger_rounds, 0), ("--episodes", args.episodes, 1),
-                             ("--epochs", args.epochs, 1), ("--workers", args.workers, 1),
+                             ("--epochs", args.epochs, 1),
                              ("--seed", args.seed, 0), ("--seed-offset", args.seed_offset, 0)):  # fmt: skip
         if value < low:
             raise ValueError(f"{name} must be an integer >= {low}, got {value}")
@@ -631,13 +655,23 @@ def run_distill_command(args: argparse.Namespace) -> int:
         raise ValueError(f"--beta-decay must be in [0, 1], got {args.beta_decay}")
     expert = _json_object(args.expert_config, "--expert-config")
     height_scan = None if args.height_scan is None else _json_object(args.height_scan, "--height-scan")
+    env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
+    if args.robot is not None:
+        if env_kwargs.get("robot", args.robot) != args.robot:
+            raise ValueError(
+                f"--robot {excerpt(args.robot)} and --env-kwargs robot {excerpt(env_kwargs['robot'])} differ: give one"
+            )
+        env_kwargs["robot"] = args.robot
+    backend = backend_options(args)
     suite = _suite_option(args.suite)
+    if args.scale_terrain:
+        suite = dataclasses.replace(suite, scale="leg_length")
     from agents.rl.distill import DistillConfig, distill  # deferred: SB3 and torch
 
     cfg = DistillConfig(
         dagger_rounds=args.dagger_rounds, beta_decay=args.beta_decay, episodes=args.episodes, epochs=args.epochs,
-        seed=args.seed, seed_offset=args.seed_offset, workers=args.workers, budget_min=args.budget_min, expert=expert,
-        course_frame=args.course_frame, height_scan=height_scan,
+        seed=args.seed, seed_offset=args.seed_offset, budget_min=args.budget_min, expert=expert,
+        course_frame=args.course_frame, height_scan=height_scan, env_kwargs=env_kwargs, **backend,
     )  # fmt: skip
     try:
         cfg.expert_config()
@@ -1092,7 +1126,7 @@ def build_parser() -> argparse.ArgumentParser:
     for add in (
         add_demo_parser, add_evaluate_parser, add_collect_parser, add_train_parser, add_export_parser, add_paper_parser,
         add_plan_paper_parser, add_robustness_parser, add_compare_parser, add_select_parser, add_sweep_parser,
-        add_fit_strength_parser, add_distill_parser, add_plot_curves_parser,
+        add_fit_strength_parser, add_distill_parser, add_plot_curves_parser, add_baselines_parser,
     ):  # fmt: skip
         add(sub)
     return parser

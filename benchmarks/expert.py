@@ -271,8 +271,9 @@ class _HookCPU:
 
 
 class _StepTimer:
-    """Wall time of ``mj_step1`` and ``mj_step2`` as the env calls them (its module's ``mujoco`` replaced by a
-    proxy whose two functions time the real ones; every other attribute is MuJoCo's)."""
+    """Wall time of ``mj_step1`` and ``mj_step2`` as the env's physics loop calls them (the ``mujoco`` of
+    :mod:`quad_uneven_env.stepper` replaced by a proxy whose two functions time the real ones; every other attribute
+    is MuJoCo's)."""
 
     def __init__(self) -> None:
         self.step1 = self.step2 = 0.0
@@ -280,7 +281,7 @@ class _StepTimer:
 
     @classmethod
     def install(cls) -> _StepTimer:
-        import quad_uneven_env.env as env_module
+        import quad_uneven_env.stepper as stepper_module
 
         timer = cls()
         real, clock = mujoco, time.perf_counter
@@ -302,7 +303,7 @@ class _StepTimer:
                 real.mj_step2(m, d)
                 timer.step2 += clock() - t
 
-        env_module.mujoco = _Proxy()
+        stepper_module.mujoco = _Proxy()
         return timer
 
     def clear(self) -> None:
@@ -311,9 +312,9 @@ class _StepTimer:
 
     @staticmethod
     def uninstall() -> None:
-        import quad_uneven_env.env as env_module
+        import quad_uneven_env.stepper as stepper_module
 
-        env_module.mujoco = mujoco
+        stepper_module.mujoco = mujoco
 
 
 if __name__ == "__main__":

@@ -13,8 +13,9 @@ Three pieces:
 - :class:`PushSchedule`: external pushes on the trunk (``xfrc_applied`` at its centre of mass), as
   segments of constant force over the physics steps of a control step.
 
-Actuation latency and observation noise are applied by the env's physics loop and observation
-(:class:`quad_uneven_env.env.QuadUnevenEnv`); this module gives their per-episode values.
+Actuation latency and pushes are applied by the env's physics loop (:class:`quad_uneven_env.stepper.PhysicsStepper`),
+the draw and the observation noise by :class:`quad_uneven_env.world.SimulatedWorld`; this module gives their
+per-episode values.
 The drawn values are reported as a flat dict of floats (:meth:`EpisodeDraw.as_info`) with the same
 keys for every config (nominal values for the factors that are off), so vector envs can stack them.
 """

@@ -29,7 +29,8 @@ and the cone rows; then ``tau_i = (M qacc + h)_i - J_L,i^T F_i``. Solver (``qp_s
 and the torques (:func:`agents.control.qp_kernels.distribute_qp`, one call); or ``"daqp"``, DAQP (a
 dual active-set method for small dense QPs) through its Python wrapper, the reference it is tested
 against and its fallback when it fails (iteration cap, degenerate step). Both are exact and report
-infeasibility; the optimum is unique, so they agree to rounding. An infeasible problem is relaxed (see
+infeasibility; the optimum is unique, so they agree to rounding. An infeasible problem is solved again with cones
+of ``qp_kernels.wide_mu(mu)`` (twice as wide, at most 0.5) and, infeasible still, relaxed (see
 ``_relax``); an unsolved one falls back to "pinv" and sets ``result.qp_fallback``.
 """
 
@@ -377,8 +378,21 @@ class InverseDynamics:
         x = qp.solve()
         tau, F = result.tau.copy(), np.zeros((C.N_LEGS, 3))
         if x is None or not IK.qp_apply(x, C_in, lower, A, b, J_feet, lay.mask, r, tau, F):
-            self._relax(lay, J_feet, r, result, qp)
-            return
+            wide = QK.wide_mu(self.mu)
+            if wide <= self.mu:
+                self._relax(lay, J_feet, r, result, qp)
+                return
+            # infeasible in the narrow cones: the wide ones, as the compiled path
+            normals = self.up_normals if normals_W is None else np.ascontiguousarray(normals_W, dtype=float)
+            J_c, r_c = np.ascontiguousarray(J_feet, dtype=float), np.ascontiguousarray(r, dtype=float)
+            if IK.qp_fill_with_cones(normals, wide, J_c, lay.mask, r_c, result.contact_forces,
+                                    self.cone_buffer, self.cone_lower, *qp.problem):  # fmt: skip
+                result.distribution = "qp"
+                return
+            x = qp.solve()
+            if x is None or not IK.qp_apply(x, C_in, lower, A, b, J_c, lay.mask, r_c, tau, F):
+                self._relax(lay, J_feet, r, result, qp)
+                return
         result.tau, result.contact_forces, result.distribution = tau, F, "qp"
 
     def _relax(self, lay: StanceLayout, J_feet: np.ndarray, r: np.ndarray, result: IDResult, qp: _StanceQP) -> None:

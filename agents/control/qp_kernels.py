@@ -250,6 +250,18 @@ the QP's optimum was applied, the relaxed problem's solution was applied."""
 RELAX_WEIGHT = 1e-3
 """weight of the distance to the pinv forces in the relaxed problem (``InverseDynamics._relax``)."""
 
+WIDE_MU = 0.5
+"""-: a problem infeasible with cones of ``mu`` (no forces in them give the commanded base wrench) is solved again
+with cones of :func:`wide_mu` ``= min(2 mu, WIDE_MU)`` before it is relaxed: narrow cones ask little of the floor
+wherever the motion allows it, and the wider ones only where the base needs more (a payload's or a push's
+correction); with ``mu >= WIDE_MU`` nothing changes."""
+
+
+@njit(nb.float64(nb.float64), nogil=True)
+def wide_mu(mu):  # pragma: no cover - compiled
+    """-: the friction of the second try of a problem infeasible with cones of ``mu`` (:data:`WIDE_MU`)."""
+    return max(mu, min(2.0 * mu, WIDE_MU))
+
 
 @njit(nb.void(_f2, _f1, _f2, _f1, _f2, _f1), nogil=True)
 def relaxed_problem_into(H, g, A, b, H_out, g_out):  # pragma: no cover - compiled
@@ -277,7 +289,8 @@ def distribute_qp(normals, mu, J, mask, r, lower, tau, F, cones):  # pragma: no 
     :param tau: (12,) in: the pinv torques, out: the distribution's; ``F`` (4, 3) likewise for the forces.
     :param cones: (4, 5, 3) scratch: the stance legs' pyramids.
     :return: :data:`QP_INSIDE`, :data:`QP_OPTIMAL`, :data:`QP_RELAXED`, or :data:`QP_FAILED` (solver
-        failure: ``tau`` and ``F`` are untouched, solve it with DAQP).
+        failure: ``tau`` and ``F`` are untouched, solve it with DAQP). Infeasible, the problem is solved again
+        with cones of :func:`wide_mu` (the relaxed problem then uses those).
     """
     p = 0
     for leg in range(4):
@@ -292,6 +305,15 @@ def distribute_qp(normals, mu, J, mask, r, lower, tau, F, cones):  # pragma: no 
         return QP_FAILED
     if status == QP_SOLVED and IK.qp_apply(x, C, l, A, b, J, mask, r, tau, F):
         return QP_OPTIMAL
+    wide = wide_mu(mu)
+    if wide > mu:  # infeasible in the narrow cones: the wide ones
+        if IK.qp_fill_with_cones(normals, wide, J, mask, r, F, cones, lower, H, g, A, b, C, l):
+            return QP_INSIDE
+        status = solve_qp(H, g, A, b, C, l, x)
+        if status == QP_FAILED:
+            return QP_FAILED
+        if status == QP_SOLVED and IK.qp_apply(x, C, l, A, b, J, mask, r, tau, F):
+            return QP_OPTIMAL
     # infeasible at the commanded base acceleration: the relaxed problem, cone rows with zero lower bound
     H_r, g_r = np.empty((n, n)), np.empty(n)
     relaxed_problem_into(H, g, A, b, H_r, g_r)

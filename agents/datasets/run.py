@@ -58,6 +58,7 @@ from agents.evaluation.episode import (
 )
 from agents.evaluation.metrics import json_safe
 from agents.evaluation.policies import PolicyError
+from agents.evaluation.ray_backend import check_backend
 from agents.evaluation.results_io import ResultsError
 from agents.evaluation.run import EvaluationInterrupted, preflight, run_tasks, suite_episodes
 from agents.evaluation.store import (
@@ -259,6 +260,9 @@ def collect(
     resume: bool = False,
     overwrite: bool = False,
     wall_time_limit: float = DEFAULT_WALL_TIME_LIMIT,
+    backend: str = "pool",
+    address: str | None = None,
+    ship_code: bool = False,
 ) -> dict[str, Any]:
     """Record ``policy`` on every (terrain entry, seed) of ``suite`` as a Minari dataset in ``out/DATASET_ID/data``.
 
@@ -272,6 +276,10 @@ def collect(
     :param resume: continue the collection recorded in ``out`` (its finished episodes are kept, not run again).
     :param overwrite: delete an earlier collection's outputs in ``out`` first (other files are kept).
     :param wall_time_limit: s of wall-clock time per episode before it is ended (``wall_time_limit``).
+    :param backend: ``"pool"`` (``workers`` processes here) or ``"ray"`` (one Ray task per episode: the running
+        session, else the cluster at ``address``, else a local Ray of ``workers`` CPUs); the same dataset.
+    :param address: the Ray cluster to join (``backend="ray"`` only).
+    :param ship_code: a Ray session started here uploads this source tree to its workers.
     :return: the summary written to ``out/collect.json``: dataset id and path, episodes, steps, successes, the
         collection's speed (env steps/s of this call) and the dataset's size.
     :raises DatasetsUnavailable: without Minari (the ``datasets`` extra), before anything is written.
@@ -290,6 +298,7 @@ def collect(
         raise ValueError(f"workers must be an integer >= 1, got {excerpt(workers)}")
     if isinstance(wall_time_limit, bool) or not (isinstance(wall_time_limit, int | float) and wall_time_limit > 0):
         raise ValueError(f"wall_time_limit must be a number > 0 (s), got {excerpt(wall_time_limit)}")
+    check_backend(backend, address, ship_code)
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
     if env_kwargs.get("action_mode", "torque") != "torque":
         raise EnvArgumentError(
@@ -351,7 +360,8 @@ def collect(
 
         wall0 = time.perf_counter()
         try:
-            run_tasks(todo, cfg, min(workers, max(1, len(todo))), progress, keep, runner=collect_task)
+            n = workers if backend == "ray" else min(workers, max(1, len(todo)))
+            run_tasks(todo, cfg, n, progress, keep, backend, address, ship_code, runner=collect_task)
         except KeyboardInterrupt:
             raise CollectInterrupted(out, len(done), len(tasks)) from None
         wall = time.perf_counter() - wall0
@@ -410,6 +420,7 @@ def collect(
             "dataset_bytes": size,
             "bytes_per_1000_steps": 1000.0 * size / steps if steps else None,
             "workers": workers,
+            "backend": backend,
         }
         write_json_atomic(out / SUMMARY_FILE, json_safe(summary))
         for t in tasks:  # their arrays are in the dataset now

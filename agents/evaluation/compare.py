@@ -3,7 +3,7 @@
 :func:`compare_runs` pairs the episodes of two ``quad-uneven evaluate`` output folders by (entry, seed),
 refuses runs that do not hold the same episodes, and computes per policy: success and failure rates,
 falls, divergences and stalls, the stability index figures and the mean residual torque, overall, per
-terrain entry and per randomization factor (thirds of the drawn values, as in the report), plus the
+terrain entry and per randomization factor (the report's bins of the drawn values), plus the
 episodes whose outcome differs and the paired test of the success counts (McNemar's exact test: of the
 episodes where the two differ, how lopsided the split is). Several folder pairs (the same suite evaluated
 with different ``--seed`` offsets) pool into one comparison. :func:`write_comparison` writes
@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from agents.evaluation.machine import machines_differ
-from agents.evaluation.metrics import json_safe
+from agents.evaluation.metrics import factor_bins, json_safe
 from agents.evaluation.results_io import load_results
 from agents.outputs import OutputError, output_dir, write_json_atomic
 from quad_uneven_env.fields import excerpt
@@ -156,25 +156,22 @@ def _pair_factors(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, float
 
 
 def _factor_groups(pairs: Sequence[tuple[dict, dict]]) -> list[dict[str, Any]]:
-    """Per factor, the paired episodes split into thirds of the drawn value (one group per value if <= 3);
-    pushes by :func:`shared_push_factors`."""
+    """Per factor, the paired episodes in the report's bins of the drawn value (:func:`factor_bins`); pushes by
+    :func:`shared_push_factors`."""
     factors = [_pair_factors(a, b) for a, b in pairs]
     names = sorted({k for f in factors for k in f})
     rows = []
     for name in names:
         items = [(f[name], a, b) for f, (a, b) in zip(factors, pairs, strict=True) if f.get(name) is not None]
-        items.sort(key=lambda x: x[0])
-        values = sorted({v for v, _, _ in items})
-        if len(values) <= 3:
-            groups = [[x for x in items if x[0] == v] for v in values]
-        else:
-            groups = [list(g) for g in np.array_split(np.array(items, dtype=object), 3) if len(g)]
-        for g in groups:
+        values = np.array([v for v, _, _ in items])
+        for label, group in factor_bins(name, values):
+            g = [items[i] for i in group]
             rows.append(
                 {
                     "factor": name,
-                    "low": float(g[0][0]),
-                    "high": float(g[-1][0]),
+                    "bin": label,
+                    "low": float(values[group].min()),
+                    "high": float(values[group].max()),
                     "baseline": group_figures([a for _, a, _ in g]),
                     "candidate": group_figures([b for _, _, b in g]),
                 }
@@ -370,7 +367,7 @@ def comparison_markdown(comp: Mapping[str, Any]) -> str:
     if comp["by_factor"]:
         lines += [
             "",
-            "## By randomization factor (thirds of the drawn values)",
+            "## By randomization factor (the report's bins of the drawn values)",
             "",
             "Pushes: the pushes both episodes of a pair received (the same draws until the first of them ends).",
             "",
@@ -378,7 +375,7 @@ def comparison_markdown(comp: Mapping[str, Any]) -> str:
             sep,
         ]
         for row in comp["by_factor"]:
-            lines += _rows(f"{row['factor']} {row['low']:.3g}–{row['high']:.3g}", row)
+            lines += _rows(f"{row['factor']} {row['bin']} ({row['low']:.3g}–{row['high']:.3g})", row)
     lines += ["", "## Episodes whose outcome differs", ""]
     if comp["changed"]:
         lines += ["| entry | seed | baseline | candidate |", "|---|---|---|---|"]

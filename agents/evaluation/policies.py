@@ -33,7 +33,7 @@ class PolicyError(ValueError):
 
 
 def policy_kind(name: str) -> str:
-    """``"zero"``, ``"expert"`` or ``"sb3"`` (a path to a ``.zip`` model).
+    """``"zero"``, ``"expert"``, ``"sb3"`` (a path to a ``.zip`` model) or ``"onnx"`` (a ``quad-uneven export`` file).
 
     :raises PolicyError: for anything else.
     """
@@ -41,8 +41,11 @@ def policy_kind(name: str) -> str:
         return name
     if str(name).endswith(".zip"):
         return "sb3"
+    if str(name).endswith(".onnx"):
+        return "onnx"
     raise PolicyError(
-        f"policy must be one of {list(NAMED_POLICIES)} or the path of an SB3 model .zip, got {excerpt(name)}"
+        f"policy must be one of {list(NAMED_POLICIES)}, the path of an SB3 model .zip or of an exported .onnx, got "
+        f"{excerpt(name)}"
     )
 
 
@@ -57,6 +60,13 @@ def make_policy_env(name: str, **kwargs: Any) -> gym.Env:
         ``TypeError`` on a bad argument.
     """
     kind = policy_kind(name)
+    if kind == "onnx":
+        from agents.evaluation.onnx_policy import OnnxPolicyError, make_onnx_env
+
+        try:
+            return make_onnx_env(name, **kwargs)
+        except OnnxPolicyError as err:
+            raise PolicyError(str(err)) from None
     if kind != "sb3":
         return gym.make(ENV_ID, **{**POLICY_ENV_KWARGS[kind], **kwargs})
     from agents.rl.model_io import ModelError, make_model_env
@@ -129,7 +139,8 @@ def make_policy(
     :param name: ``"zero"`` (the zero action), ``"expert"`` (``agents.expert.attach_expert(env)``: the expert,
         installed as the physics-rate controller of ``env.unwrapped``), or the path of an SB3 model ``.zip``, loaded
         for the env it was trained in, which ``env`` must be (:func:`agents.rl.model_io.load_sb3_policy`: its robot,
-        and for a residual model ``QuadUnevenResidual-v0`` with the expert and residual of its training).
+        and for a residual model ``QuadUnevenResidual-v0`` with the expert and residual of its training), or of an
+        ONNX file of ``quad-uneven export`` (:class:`agents.evaluation.onnx_policy.OnnxPolicy`, not a residual one).
     :param algo: ``"ppo"`` or ``"sac"``: the class an SB3 model file is loaded with (None: :func:`model_algo`).
     :param allow_pickle: unpickle files of the model folder (trusted files only; default: refused).
     :param expert_config: fields of :class:`agents.expert.ExpertConfig` for ``"expert"`` (e.g.
@@ -142,4 +153,11 @@ def make_policy(
         return ZeroActionPolicy(env.action_space)
     if kind == "expert":
         return _expert(env, expert_config)
+    if kind == "onnx":
+        from agents.evaluation.onnx_policy import OnnxPolicy, OnnxPolicyError
+
+        try:
+            return OnnxPolicy(name, env)
+        except OnnxPolicyError as err:
+            raise PolicyError(str(err)) from None
     return _sb3(name, env, algo, allow_pickle)

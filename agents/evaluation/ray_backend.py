@@ -1,8 +1,9 @@
-"""Episodes as Ray tasks (``quad-uneven evaluate --backend ray``): one task per episode, on a local Ray or a cluster.
+"""Episodes as Ray tasks (``evaluate``, ``collect``, ``distill`` with ``--backend ray``): one task per episode, on a
+local Ray or a cluster.
 
-Each task runs :func:`agents.evaluation.episode.run_task` (the function the process pool runs) on an
-``EpisodeTask`` and returns its ``EpisodeResult`` through Ray's object store; the caller writes every
-result as it arrives, so the records, ``--resume`` and interrupts behave as with the process pool.
+Each task runs the function the process pool runs (:func:`agents.evaluation.episode.run_task` for ``evaluate``,
+``collect``'s recorder, ``distill``'s rollout) and returns its result through Ray's object store; the caller writes
+every result as it arrives, so the records, ``--resume`` and interrupts behave as with the process pool.
 
 Ray is the optional ``distributed`` extra: :func:`import_ray` imports it (``import agents`` never
 does) and turns its absence into :class:`RayUnavailable`. What travels to the workers: docs/distributed.md.
@@ -20,7 +21,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from agents.evaluation.episode import EpisodeResult, EvalConfig, run_task
+from agents.evaluation.episode import EvalConfig, run_task
 from agents.evaluation.suites import EpisodeTask
 from quad_uneven_env.fields import excerpt
 
@@ -31,9 +32,11 @@ __all__ = [
     "SHIPPED",
     "RayUnavailable",
     "absolute_paths",
+    "check_backend",
     "code_runtime_env",
     "import_ray",
     "import_tune",
+    "map_on_ray",
     "ray_session",
     "run_on_ray",
 ]
@@ -138,6 +141,20 @@ def ray_session(
         ray.shutdown()
 
 
+def check_backend(backend: str, address: str | None, ship_code: bool) -> None:
+    """Check a command's backend options; with ``backend="ray"``, import Ray (fail before anything is written).
+
+    :raises ValueError: on an unknown backend, or ``address``/``ship_code`` without ``backend="ray"``.
+    :raises RayUnavailable: with ``backend="ray"`` and no Ray.
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {list(BACKENDS)}, got {excerpt(backend)}")
+    if (address is not None or ship_code) and backend != "ray":
+        raise ValueError(f"address and ship_code are for backend 'ray' only, got backend {excerpt(backend)}")
+    if backend == "ray":
+        import_ray()
+
+
 def absolute_paths(cfg: EvalConfig) -> EvalConfig:
     """``cfg`` with its file paths (a model file, the video folder) made absolute: a Ray worker's working
     directory need not be this process's."""
@@ -148,32 +165,54 @@ def absolute_paths(cfg: EvalConfig) -> EvalConfig:
     return dataclasses.replace(cfg, policy=policy, video_dir=video_dir)
 
 
-def run_on_ray(
-    tasks: Sequence[EpisodeTask],
-    cfg: EvalConfig,
-    on_result: Callable[[EpisodeResult], None],
+def map_on_ray(
+    fn: Callable[..., Any],
+    items: Sequence[Any],
+    on_result: Callable[[int, Any], None],
+    shared: tuple[Any, ...] = (),
     address: str | None = None,
     num_cpus: int | None = None,
     ship_code: bool = False,
 ) -> None:
-    """Run every task as a Ray task (1 CPU each), handing each result to ``on_result`` as it finishes.
+    """``fn(item, *shared)`` of every item as a Ray task (1 CPU each), handing ``on_result(position, value)`` each
+    value as it finishes (``position``: the item's index in ``items``).
 
+    ``fn`` must be a module-level function (the workers import it); ``shared`` goes to Ray's object store once.
     Joins the running Ray session, else starts one (see :func:`ray_session`, also for ``ship_code``). An error
-    in ``on_result`` or an interrupt cancels the tasks not yet finished; the results already handed on are the caller's.
+    in ``on_result`` or an interrupt cancels the tasks not yet finished; the values already handed on are the caller's.
 
     :raises RayUnavailable: without Ray.
     """
-    if not tasks:
+    if not items:
         return
     with ray_session(address, num_cpus, ship_code=ship_code) as ray:
-        remote = ray.remote(num_cpus=1, max_retries=0)(run_task)
-        cfg_ref = ray.put(absolute_paths(cfg))
-        pending = [remote.remote(t, cfg_ref) for t in tasks]
+        remote = ray.remote(num_cpus=1, max_retries=0)(fn)
+        refs = [ray.put(value) for value in shared]
+        pending = [remote.remote(item, *refs) for item in items]
+        position = {ref: i for i, ref in enumerate(pending)}
         try:
             while pending:
                 ready, pending = ray.wait(pending, num_returns=1)
-                on_result(ray.get(ready[0]))
-        except BaseException:  # an error or an interrupt: do not wait for the running episodes
+                on_result(position[ready[0]], ray.get(ready[0]))
+        except BaseException:  # an error or an interrupt: do not wait for the running tasks
             for ref in pending:
                 ray.cancel(ref, force=True)
             raise
+
+
+def run_on_ray(
+    tasks: Sequence[EpisodeTask],
+    cfg: EvalConfig,
+    on_result: Callable[[Any], None],
+    address: str | None = None,
+    num_cpus: int | None = None,
+    ship_code: bool = False,
+    runner: Callable[[EpisodeTask, EvalConfig], Any] = run_task,
+) -> None:
+    """Run every episode task as a Ray task (:func:`map_on_ray`), handing each result to ``on_result`` as it finishes.
+
+    :param runner: the episode function, ``runner(task, cfg)`` (default :func:`run_task`, whose result is an
+        :class:`EpisodeResult`; a module-level function).
+    :raises RayUnavailable: without Ray.
+    """
+    map_on_ray(runner, tasks, lambda _, result: on_result(result), (absolute_paths(cfg),), address, num_cpus, ship_code)

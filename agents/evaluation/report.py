@@ -74,36 +74,33 @@ def _tables(summary: Mapping[str, Any]) -> list[str]:
 
 
 def _factor_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
-    """By randomization factor: one line per factor, its episodes in thirds by drawn value (success, mean index)."""
+    """By randomization factor: one line per bin of each factor's drawn values (success, mean index)."""
     if not rows:
         return []
-    by_factor: dict[str, list[Mapping[str, Any]]] = {}
-    for r in rows:
-        by_factor.setdefault(r["factor"], []).append(r)
-    n_cols = max(len(v) for v in by_factor.values())
-    names = [f"group {k + 1}" for k in range(n_cols)]
-    names[0], names[-1] = f"{names[0]} (lowest values)", f"{names[-1]} (highest values)"
-    head = "| factor | " + " | ".join(names) + " |"
+    head = "| factor | bin | drawn values | episodes | success rate | mean index (N m) | end reasons |"
     lines = [
         "## By randomization factor",
         "",
-        "Randomized episodes sorted by each factor's drawn value (motor strength: the weakest joint; damping "
-        "and frictionloss: the mean over the joints; pushes: the count and the largest impulse, N s, of those "
-        "received, so an episode that falls early counts few) and split into thirds (one group per value for "
-        "factors with at most three values); each cell: value range, success rate (successes / episodes), "
-        "mean index (N m).",
+        "Randomized episodes binned by each factor's drawn value (`agents.evaluation.metrics.factor_bins`: fixed "
+        "edges for friction, payload (kg), motor strength, latency (s) and the largest push (N s); thirds of the "
+        "values for the others). Motor strength: the weakest joint; damping and frictionloss: the mean over the "
+        "joints; pushes: the count and the largest impulse of those received, so an episode that falls early "
+        "counts few.",
         "",
         head,
         "|" + "---|" * (head.count("|") - 1),
     ]
-    for factor, groups in by_factor.items():
+    for g in rows:
         cells = [
-            f"{g['low']:.3g}–{g['high']:.3g}: {g['success_rate']:.0%} ({g['successes']}/{g['episodes']}), "
-            f"{_f(g['mean_stability_index'])}"
-            for g in groups
+            g["factor"],
+            g.get("bin", "–"),
+            f"{g['low']:.3g}–{g['high']:.3g}",
+            str(g["episodes"]),
+            f"{g['success_rate']:.0%} ({g['successes']})",
+            _f(g["mean_stability_index"]),
+            _reasons(g["end_reasons"]),
         ]
-        cells += ["–"] * (n_cols - len(cells))
-        lines.append(f"| {factor} | " + " | ".join(cells) + " |")
+        lines.append("| " + " | ".join(cells) + " |")
     return [*lines, ""]
 
 

@@ -32,7 +32,7 @@ from agents.evaluation.episode import (
 from agents.evaluation.machine import distinct_machines
 from agents.evaluation.metrics import factor_summary, json_safe, summarize
 from agents.evaluation.policies import SB3_ALGOS, PolicyError, make_policy, model_algo, policy_kind
-from agents.evaluation.ray_backend import BACKENDS, import_ray, run_on_ray
+from agents.evaluation.ray_backend import check_backend, run_on_ray
 from agents.evaluation.report import write_report
 from agents.evaluation.store import (
     RUN_FILE,
@@ -81,7 +81,7 @@ def run_tasks(
     :func:`agents.evaluation.ray_backend.run_on_ray`), handing each result to ``on_result`` as it ends.
 
     :param runner: the episode function, ``runner(task, cfg)`` (default :func:`run_task`; a module-level function:
-        the processes import it; the Ray backend runs :func:`run_task` only).
+        the processes or Ray workers import it).
 
     An interrupt (Ctrl-C, or SIGTERM under :func:`agents.interrupts.sigterm_as_keyboard_interrupt`)
     stops the workers at once; the results already handed on are kept by the caller.
@@ -95,7 +95,7 @@ def run_tasks(
                 on_result(result)
                 bar.update(1)
 
-            run_on_ray(tasks, cfg, keep, address=address, num_cpus=workers, ship_code=ship_code)
+            run_on_ray(tasks, cfg, keep, address=address, num_cpus=workers, ship_code=ship_code, runner=runner)
             return
         if workers <= 1:
             for t in tasks:
@@ -227,12 +227,7 @@ def evaluate(
         raise ValueError(f"workers must be an integer >= 1, got {excerpt(workers)}")
     if isinstance(wall_time_limit, bool) or not (isinstance(wall_time_limit, int | float) and wall_time_limit > 0):
         raise ValueError(f"wall_time_limit must be a number > 0 (s), got {excerpt(wall_time_limit)}")
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {list(BACKENDS)}, got {excerpt(backend)}")
-    if (address is not None or ship_code) and backend != "ray":
-        raise ValueError(f"address and ship_code are for backend 'ray' only, got backend {excerpt(backend)}")
-    if backend == "ray":
-        import_ray()  # without the extra, fail before anything is written
+    check_backend(backend, address, ship_code)  # without Ray, fail before anything is written
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
     suite, tasks = suite_episodes(suite, env_kwargs, episodes, seed)
     out = Path(out)

@@ -30,9 +30,10 @@ class ExpertConfig:
     Nominal assumptions (``model="nominal"``): the robot's masses, inertias and centres of mass are those of
     the robot description the env was built from (``env.unwrapped.robot``; the paper's robot: 50 kg
     in all, link COMs as in Table 1), never the simulator's; a payload, scaled links or a
-    shifted COM are disturbances to it. Its friction cones assume ``friction`` (0.5, half the nominal
-    floor's 1.0; the inscribed pyramid's ``friction / sqrt(2)`` = 0.35 per tangent axis is the margin that
-    covers floors down to about 0.35-0.5 depending on the force's direction). Motor strength, joint
+    shifted COM are disturbances to it. Its friction cones assume ``friction`` (0.25, a quarter of the
+    nominal floor's 1.0: the slow crawl needs little tangential force, and its force QP, which otherwise
+    spends whatever cone it is given on internal forces, then asks no floor of 0.25 or more for more than it
+    holds; docs/robustness.md#friction). Motor strength, joint
     damping and friction, latency and pushes are not modelled: the feedback and the replanning
     (``recovery``) absorb them.
     """
@@ -66,15 +67,19 @@ class ExpertConfig:
     """what the expert plans and controls with: "nominal" (its own model of the nominal robot: the robot
     configuration's masses, inertias and centres of mass, fed with the measured state only, see the
     module docstring) or "oracle" (the simulator's live model and state, and its friction in the cones)."""
-    friction: float = param(0.5, "-", lo=0.0, hi=2.0, lo_open=True)
+    friction: float = param(0.25, "-", lo=0.0, hi=2.0, lo_open=True)
     """-, in (0, 2]: friction coefficient the nominal model assumes in its "qp" friction cones at the start
     of an episode (the 4-sided pyramid inside the cone, mu / sqrt(2) per axis), and the slope limit of
-    its footholds (``foothold_limits_for_friction``). The nominal floor's is 1.0; 0.5 keeps the planned
-    forces inside the cones of floors down to about 0.4. With ``friction_adapt`` it is lowered when a
-    stance foot slips. Unused by "oracle", which takes the simulator's."""
+    its footholds (``foothold_limits_for_friction``: 10 deg at 0.25). The QP keeps the torques closest to the
+    pinv ones, whose internal forces lean on the feet: it uses the cone up to its edge (stance forces at
+    tangential / normal 0.5 with cones of 0.5 on any floor), so this is the friction the walk demands of the
+    floor, not a margin below it. Where no forces inside it give the planned base acceleration (a payload's or a
+    push's correction) the QP takes cones of 0.5 instead (:data:`agents.control.qp_kernels.WIDE_MU`). The nominal
+    floor's is 1.0; 0.25 walks floors down to 0.2 (flat) and 0.3 (rough 5 cm, 8 cm stairs). With
+    ``friction_adapt`` it is lowered when a stance foot slips. Unused by "oracle", which takes the simulator's."""
     steep_friction: float = param(0.8, "-", lo=0.0, hi=2.0)
     """-, in [0, 2]: the friction the nominal model may assume for one gait cycle whose footholds ``friction``
-    refuses as too steep (a ramp steeper than atan(friction / sqrt(2)), 19.5 deg at 0.5): such a stride is
+    refuses as too steep (a ramp steeper than atan(friction / sqrt(2)), 10 deg at 0.25): such a stride is
     planned again with the slope limit of this friction, and if that plan is feasible its cycle runs with
     cones of this friction. The nominal floor's is 1.0, so 0.8 spends part of the margin only where the
     ground leaves no choice (ramps to 28.6 deg, the foothold search's cap); 0 never does (the expert then
@@ -148,6 +153,13 @@ class ExpertConfig:
             )
 
 
+SCALED_ROBOT_FRICTION = 0.5
+"""-: the friction of the force QP's cones on a URDF robot (``ExpertConfig.friction``; the paper robot's: 0.25).
+Cones of 0.25 make the QP trade friction for joint torque: on rough ground at their scale the stance peaks rise
+from 0.72 to 0.82 of the motor limit (ANYmal C's hip flexion), 0.58 to 0.69 (Go1's), 0.75 to 0.77 (HyQ's),
+where the paper robot's stay at 0.33; those robots keep the wider cones (docs/robustness.md#every-robot)."""
+
+
 def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
     """The fields of :class:`ExpertConfig` that depend on the robot (docs/robots.md#scaling-rules); the paper
     robot's are the defaults.
@@ -159,7 +171,7 @@ def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
     lengths); the computed-torque gains (per unit mass) with ``1 / s`` (stiffness) and ``1 / sqrt(s)``
     (damping), the same damping ratio at a natural frequency scaled like the gait's. The COG height is the
     robot's standing COG height times the paper robot's ratio of its walking to its standing COG height. The
-    robot YAML's ``gait`` overrides them.
+    force QP's cones assume :data:`SCALED_ROBOT_FRICTION`. The robot YAML's ``gait`` overrides them.
     """
     from planners.robot_geometry import robot_geometry
     from planners.wholebody import WholeBody
@@ -195,6 +207,7 @@ def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
         "recovery_position": base.recovery_position * s,
         "slip_speed": base.slip_speed * t,
         "foothold_scale": s,
+        "friction": SCALED_ROBOT_FRICTION,
         "gains": gains,
     }
 

@@ -126,6 +126,9 @@ class CyclePlanner:
         """rad: the planned base yaw at the end of the current plan (0 until a command turns it)."""
         self.durations: tuple[float, ...] = config.durations
         """s: the phases of the current cycle."""
+        self.cycle_config: ExpertConfig | None = None
+        """the settings the next cycles are planned with (durations, stride, epsilon, clearance, cog_height), set by
+        a controller that adjusts the plan per cycle; None: :attr:`config`."""
         self._data: mujoco.MjData | None = None
         self._sim: mujoco.MjData | None = None
         self._terrain: Any = None
@@ -217,7 +220,8 @@ class CyclePlanner:
     def start_cycle(self, t0: float, cog_start: dict | None, measured: bool = False) -> None:
         """Plan the cycle starting at ``t0`` (s) from ``cog_start`` (the previous plan's end; None: the
         measured COG at rest); ``measured``: ``cog_start`` is the measured COG state (pitch measured too)."""
-        d, cfgx, env = self._data, self.config, self.env
+        d, env = self._data, self.env
+        cfgx = self.config if self.cycle_config is None else self.cycle_config
         feet = self.measured_footholds(mid_swing=measured)
         previous = getattr(self.current, "pitch", None)
         self.durations = cycle_durations(cfgx.durations, env.command)

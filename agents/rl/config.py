@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.rl.hyperparams import HYPERPARAMS, check_hyperparams, check_policy_kwargs
+from agents.rl.plan_config import PlanConfig
 from agents.rl.residual_config import RESIDUAL_BASES, RESIDUAL_LEGS, ResidualConfig, expert_config
 from quad_uneven_env.config import CONFIG_DIR, read_yaml
 from quad_uneven_env.fields import check_fields, clip, excerpt, param
@@ -26,6 +27,10 @@ RL_CONFIG_DIR = CONFIG_DIR / "rl"
 
 ALGOS = ("ppo", "sac")
 """Stable-Baselines3 algorithms ``quad-uneven train`` supports."""
+
+RESIDUAL_LEVELS = ("torque", "plan")
+"""What a residual agent adjusts: the expert's joint torques (``QuadUnevenResidual-v0``, every control step) or its
+plan (``QuadUnevenPlan-v0``, the settings of every gait cycle)."""
 
 VEC_ENVS = ("auto", "dummy", "subproc")
 """VecEnv classes: ``auto`` is SubprocVecEnv for n_envs > 1, else DummyVecEnv."""
@@ -48,6 +53,14 @@ class TrainConfig:
     """true: a residual on the expert (``QuadUnevenResidual-v0``); false: a policy from scratch on
     ``QuadUneven-v0`` in ``joint_pd`` mode (the reference RL users compare with; no expert in the loop,
     so ``expert_features`` and ``residual_penalty`` must be off)."""
+    residual_level: str = param("torque", kind="choice", choices=RESIDUAL_LEVELS)
+    """with ``residual: true``: ``torque`` (a residual on the expert's joint torques, ``QuadUnevenResidual-v0``:
+    ``residual_*``) or ``plan`` (offsets of the expert's plan settings per gait cycle, ``QuadUnevenPlan-v0``:
+    ``plan``; one env step is one cycle, ``timesteps`` count cycles)."""
+    plan: dict[str, Any] = dataclasses.field(default_factory=dict)
+    """with ``residual_level: plan``: fields of :class:`agents.rl.plan_config.PlanConfig` (the ranges of the plan
+    action, e.g. ``{stride_range: 0.2}``; not ``expert`` nor ``max_control_steps``, which ``expert`` and
+    ``max_episode_steps`` give); ``{}``: its defaults."""
     terrain: Any = "rough"
     """terrain kind, preset (``configs/terrain/``), YAML path or ``{kind: ..., params}`` mapping, or a list of
     them (a terrain mix: each episode on one drawn uniformly, :class:`agents.rl.terrain_mix.TerrainMixEnv`);
@@ -83,7 +96,7 @@ class TrainConfig:
     (adaptive gains on its knee torques, :mod:`agents.control.adaptation`: the residual then acts on the adapted
     torques); ``{}``: its defaults."""
     max_episode_steps: int = param(1000, "steps", kind="int", lo=1)
-    """control steps per training episode (1000 = 20 s)."""
+    """control steps per training episode (1000 = 20 s), with either residual level."""
     env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
     """extra QuadUneven-v0 arguments (e.g. ``reward_weights``), also used by ``quad-uneven evaluate``."""
     normalize_obs: bool = param(True, kind="bool")
@@ -131,6 +144,23 @@ class TrainConfig:
         """
         fields = ("residual_scale", "residual_legs", "residual_basis", "expert_features", "residual_penalty", "expert")
         return ResidualConfig.from_dict({name: getattr(self, name) for name in fields}, where="")
+
+    def plan_config(self) -> PlanConfig:
+        """The plan env's :class:`~agents.rl.plan_config.PlanConfig` of this run (``residual_level: plan``): ``plan``,
+        with ``expert`` and ``max_episode_steps`` (as ``max_control_steps``).
+
+        :raises ValueError: naming ``plan.field`` or ``expert.field`` (:func:`validate` checks them first).
+        """
+        raw = {**self.plan, "max_control_steps": self.max_episode_steps}
+        config = PlanConfig.from_dict(raw, where="plan")
+        return dataclasses.replace(config, expert=expert_config(self.expert, "expert"))
+
+    def env_config(self) -> ResidualConfig | PlanConfig | None:
+        """The settings of this run's env: a :class:`ResidualConfig` (torque level), a :class:`PlanConfig` (plan
+        level), or None (``residual: false``, no expert)."""
+        if not self.residual:
+            return None
+        return self.plan_config() if self.residual_level == "plan" else self.residual_config()
 
 
 def _mapping(name: str, value: Any) -> dict[str, Any]:
@@ -204,6 +234,7 @@ def validate(cfg: TrainConfig) -> TrainConfig:
             expert_config(expert, "expert")
         except ValueError as err:
             raise TrainConfigError(str(err)) from None
+    _check_plan_level(cfg)
     _check_sb3_arguments(cfg)
     if cfg.algo == "sac" and "log_std_init" in cfg.policy_kwargs and not cfg.hyperparams.get("use_sde"):
         warnings.warn(
@@ -212,6 +243,40 @@ def validate(cfg: TrainConfig) -> TrainConfig:
             stacklevel=2,
         )
     return cfg
+
+
+def _check_plan_level(cfg: TrainConfig) -> None:
+    """``plan`` and the torque residual's fields checked against ``residual_level``.
+
+    :raises TrainConfigError: naming the field that does not fit the level.
+    """
+    plan = _mapping("plan", cfg.plan)
+    if cfg.residual_level != "plan" or not cfg.residual:
+        if cfg.residual_level == "plan" or plan:
+            raise TrainConfigError(
+                "plan and residual_level: plan need residual: true and residual_level: plan, got "
+                f"residual={cfg.residual}, residual_level={excerpt(cfg.residual_level)}, plan={excerpt(cfg.plan)}"
+            )
+        return
+    torque = {"residual_scale": 0.1, "residual_legs": "all", "residual_basis": "torque_limit", "residual_penalty": 0.0}
+    for name, default in torque.items():
+        if getattr(cfg, name) != default:
+            raise TrainConfigError(
+                f"{name} applies to residual_level torque only: with residual_level plan it must be left at "
+                f"{excerpt(default)}, got {excerpt(getattr(cfg, name))}"
+            )
+    if not cfg.expert_features:
+        raise TrainConfigError("expert_features must be true with residual_level plan (its observation has them)")
+    for name in ("expert", "max_control_steps"):
+        if name in plan:
+            raise TrainConfigError(
+                f"plan.{name} is not accepted: the config's {'expert' if name == 'expert' else 'max_episode_steps'} "
+                "gives it"
+            )
+    try:
+        PlanConfig.from_dict(plan, where="plan")
+    except ValueError as err:
+        raise TrainConfigError(str(err)) from None
 
 
 OWN_FIELDS = ("policy_kwargs", "env", "seed", "verbose", "device", "policy", "tensorboard_log")

@@ -49,13 +49,18 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
-from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks
+from agents.evaluation.ray_backend import check_backend, map_on_ray
+from agents.evaluation.run import suite_episodes
+from agents.evaluation.suites import EpisodeTask, Suite
 from agents.expert import ExpertConfig, ExpertPolicy
 from agents.outputs import output_dir
 from agents.rl.model_io import write_metadata
 from agents.rl.normalization import ObsNormalization, norm_path
 from quad_uneven_env import constants as C
 from quad_uneven_env.fields import excerpt
+
+STUDENT_ENV_FIELDS = ("action_mode", "pd_kp", "pd_kd", "pd_action_scale", "gait_period", "course_frame", "height_scan")
+"""``QuadUneven-v0`` arguments of the student's env that :class:`DistillConfig`'s own fields set."""
 
 DISTILL_OUTPUTS = ("model.zip", "model_obs_norm.npz", "rl_meta.json", "distill_summary.json", "distill_curve.png")
 """Top-level names ``distill`` writes in its ``--out`` (``--overwrite`` deletes what the manifest lists)."""
@@ -106,13 +111,22 @@ class DistillConfig:
     """the student env's ``height_scan`` grid (``size_x``, ``size_y``, ``resolution``, m; None: the env's default,
     1.0 x 0.6 m at 0.1 m)."""
     expert: dict[str, Any] = dataclasses.field(default_factory=lambda: {"recovery": False})
-    """the teacher's :class:`agents.expert.ExpertConfig` fields."""
+    """the teacher's :class:`agents.expert.ExpertConfig` fields (over :meth:`ExpertConfig.for_robot` of the robot)."""
+    env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
+    """extra ``QuadUneven-v0`` arguments of the student's and the rollouts' env, e.g. ``{"robot": "go1"}`` (the
+    robot the student learns on; not the fields this config sets: :data:`STUDENT_ENV_FIELDS`)."""
     seed: int = 0
     """seed of the network's initialisation, the minibatches and the expert/student draws."""
     budget_min: float = 60.0
     """minutes of wall-clock time: no round starts after it (the model of the last finished round is kept)."""
     workers: int = 1
-    """rollout processes (the result does not depend on it)."""
+    """rollout processes, or the CPUs of a local Ray with ``backend="ray"`` (the result does not depend on it)."""
+    backend: str = "pool"
+    """where the rollouts run: ``"pool"`` (processes here) or ``"ray"`` (one Ray task per episode; the same result)."""
+    address: str | None = None
+    """the Ray cluster to join (``backend="ray"``; None: the running session, else a local Ray)."""
+    ship_code: bool = False
+    """a Ray session started here uploads this source tree to its workers."""
 
     def __post_init__(self) -> None:
         checks = (
@@ -131,6 +145,7 @@ class DistillConfig:
             ("course_frame", isinstance(self.course_frame, bool), "True or False"),
             ("budget_min", self.budget_min > 0, "a number > 0 (min)"),
             ("workers", self.workers >= 1, "an integer >= 1"),
+            ("env_kwargs", isinstance(self.env_kwargs, dict), "a mapping of QuadUneven-v0 arguments"),
         )
         for name, ok, allowed in checks:
             if not ok:
@@ -140,10 +155,28 @@ class DistillConfig:
             from quad_uneven_env.fields import from_mapping
 
             from_mapping(HeightScanConfig, self.height_scan, "distill.height_scan")  # its errors name the field
+        taken = sorted(set(self.env_kwargs) & {*STUDENT_ENV_FIELDS, "terrain", "randomization"})
+        if taken:
+            raise ValueError(
+                f"distill.env_kwargs must not set {taken}: the distill options set the student's "
+                f"{list(STUDENT_ENV_FIELDS)}, the suite its terrain and randomization"
+            )
+        check_backend(self.backend, self.address, self.ship_code)
+
+    def robot(self) -> Any:
+        """The :class:`~quad_uneven_env.robot.description.RobotDescription` of ``env_kwargs["robot"]`` (default: the
+        paper's); :raises ValueError: naming ``distill.env_kwargs.robot`` if it cannot be loaded."""
+        from quad_uneven_env.robot.description import load_robot
+
+        try:
+            return load_robot(self.env_kwargs.get("robot", "paper"))
+        except (ValueError, TypeError) as err:
+            raise ValueError(f"distill.env_kwargs.robot: {err}") from None
 
     def expert_config(self) -> ExpertConfig:
-        """The teacher's :class:`ExpertConfig` (its fields checked, the error naming the field)."""
-        return ExpertConfig(**self.expert)
+        """The teacher's :class:`ExpertConfig`: :meth:`ExpertConfig.for_robot` of :meth:`robot` with :attr:`expert`
+        over it (its fields checked, the error naming the field)."""
+        return ExpertConfig.for_robot(self.robot(), self.expert)
 
     def clock_period(self) -> float:
         """s: the observation's gait clock period."""
@@ -152,6 +185,7 @@ class DistillConfig:
     def student_env_kwargs(self) -> dict[str, Any]:
         """The ``QuadUneven-v0`` arguments the student acts with (recorded in ``rl_meta.json``)."""
         return {
+            **self.env_kwargs,
             "action_mode": "joint_pd",
             "pd_kp": self.pd_kp,
             "pd_kd": self.pd_kd,
@@ -219,7 +253,8 @@ class DaggerTeacher:
             self._first = False
         if not self.student_acts:
             return self._tau.copy()
-        target = np.clip(u._home_joints + self.scale * np.asarray(action), u._joint_lo, u._joint_hi)
+        target = np.empty(C.N_JOINTS)
+        u.action_map.joint_targets_into(np.asarray(action), self.scale, target)
         return self.kp * (target - data.qpos[7:]) - self.kd * data.qvel[6:]
 
 
@@ -304,7 +339,7 @@ def rollout(job: RolloutJob) -> dict[str, Any]:
         student_acts = job.student is not None and rng.random() >= job.beta
         teacher.begin_step(student_acts)
         obs_next, _, terminated, truncated, info = env.step(student_action)
-        label = expert_label(ref.q_joints, teacher.first_tau, u._home_joints, cfg.pd_kp, cfg.pd_action_scale)
+        label = expert_label(ref.q_joints, teacher.first_tau, u.action_map.home_joints, cfg.pd_kp, cfg.pd_action_scale)
         rows_obs.append(obs)
         rows_label.append(label)
         rows_student.append(student_action)
@@ -333,8 +368,19 @@ def rollout(job: RolloutJob) -> dict[str, Any]:
     }
 
 
-def run_rollouts(jobs: list[RolloutJob], workers: int) -> list[dict[str, Any]]:
-    """:func:`rollout` of every job, in order (``workers`` processes; the results do not depend on it)."""
+def run_rollouts(
+    jobs: list[RolloutJob], workers: int, backend: str = "pool", address: str | None = None, ship_code: bool = False
+) -> list[dict[str, Any]]:
+    """:func:`rollout` of every job, in order (``workers`` processes, or Ray tasks with ``backend="ray"``:
+    :func:`agents.evaluation.ray_backend.map_on_ray`; the results do not depend on either)."""
+    if backend == "ray":
+        results: list[dict[str, Any] | None] = [None] * len(jobs)
+
+        def keep(i: int, result: dict[str, Any]) -> None:
+            results[i] = result
+
+        map_on_ray(rollout, jobs, keep, address=address, num_cpus=workers, ship_code=ship_code)
+        return [r for r in results if r is not None]
     if workers <= 1 or len(jobs) <= 1:
         return [rollout(j) for j in jobs]
     ctx = multiprocessing.get_context("spawn")
@@ -444,6 +490,10 @@ def distill(
 ) -> dict[str, Any]:
     """Behaviour cloning from the expert on ``suite``'s episodes, then ``cfg.dagger_rounds`` DAgger rounds.
 
+    The episodes are those ``evaluate`` runs on the robot of ``cfg.env_kwargs`` with the seeds moved by
+    ``cfg.seed_offset`` (:func:`agents.evaluation.run.suite_episodes`: a suite with ``scale: leg_length`` is scaled
+    to the robot); the teacher is :meth:`DistillConfig.expert_config`, and ``rl_meta.json`` records the robot.
+
     Writes into ``out``: the student (``model.zip``, ``model_obs_norm.npz``, ``rl_meta.json``, after every round),
     ``distill_summary.json`` (per round: data, rollouts, losses) and ``distill_curve.png``.
 
@@ -454,7 +504,7 @@ def distill(
 
     _check_suite(suite)
     cfg.expert_config()  # its errors before any work
-    tasks = episode_tasks(suite, cfg.episodes, cfg.seed_offset)
+    suite, tasks = suite_episodes(suite, cfg.env_kwargs, cfg.episodes, cfg.seed_offset)
     start = time.perf_counter()
     with output_dir(out, "distill", DISTILL_OUTPUTS, overwrite=overwrite) as manifest:
         out = manifest.out
@@ -479,7 +529,7 @@ def distill(
                 for t in tasks
             ]
             t0 = time.perf_counter()
-            results = run_rollouts(jobs, cfg.workers)
+            results = run_rollouts(jobs, cfg.workers, cfg.backend, cfg.address, cfg.ship_code)
             rollout_s = time.perf_counter() - t0
             obs = np.concatenate([r["obs"] for r in results])
             labels = np.concatenate([r["labels"] for r in results])

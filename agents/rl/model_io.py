@@ -39,6 +39,8 @@ import gymnasium as gym
 import numpy as np
 
 from agents.rl.normalization import ObsNormalization, norm_path, pickle_path
+from agents.rl.plan_config import PlanConfig
+from agents.rl.plan_env import PLAN_ENV_ID, PlanExpertEnv
 from agents.rl.residual_config import ResidualConfig
 from agents.rl.residual_env import RESIDUAL_ENV_ID, ResidualExpertEnv
 from quad_uneven_env import ENV_ID as PLAIN_ENV_ID
@@ -87,6 +89,8 @@ META_FIELD_TYPES: dict[str, tuple[str, ...]] = {
     "format": ("string",),
     "algo": ("string",),
     "residual": ("bool",),
+    "residual_level": ("string",),
+    "plan": ("object",),
     "residual_scale": ("number",),
     "residual_legs": ("string",),
     "residual_basis": ("string",),
@@ -173,13 +177,21 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
         raise ModelError(f"{path}: algo must be one of {list(ALGOS)}, got {excerpt(meta.get('algo'))}")
     if not isinstance(meta.get("residual", False), bool):
         raise ModelError(f"{path}: residual must be true or false, got {excerpt(meta.get('residual'))}")
-    env_id = RESIDUAL_ENV_ID if meta.get("residual") else PLAIN_ENV_ID
+    level = meta.get("residual_level", "torque")
+    if level not in ("torque", "plan") or (level == "plan" and not meta.get("residual")):
+        raise ModelError(
+            f"{path}: residual_level must be 'torque' or 'plan' (with residual: true), got {excerpt(level)}"
+        )
+    env_id = (PLAN_ENV_ID if level == "plan" else RESIDUAL_ENV_ID) if meta.get("residual") else PLAIN_ENV_ID
     if meta.get("env_id", env_id) != env_id:
         raise ModelError(
             f"{path}: env_id must be {env_id!r} for a model with residual: {str(meta.get('residual', False)).lower()}, "
-            f"got {excerpt(meta['env_id'])}"
+            f"residual_level: {level}, got {excerpt(meta['env_id'])}"
         )
-    if meta.get("residual"):
+    if level == "plan":
+        config = plan_config_of(meta, path)
+        _check_estimator(meta, config.expert, path)
+    elif meta.get("residual"):
         if "residual_scale" not in meta:
             raise ModelError(f"{path}: residual_scale is missing (a residual model needs a number in (0, 1])")
         for name, value in NOT_READ.items():
@@ -189,18 +201,38 @@ def _check_metadata(meta: dict[str, Any], path: Path) -> dict[str, Any]:
                     "(the expert's adaptation is "
                     "expert: {adaptation: ...})"
                 )
-        config = residual_config_of(meta, path)
-        if config.expert.adaptation == "learned":
-            from agents.control.adaptation.learned import DEFAULT_ESTIMATOR, estimator_digest
-
-            digest = meta.get("strength_estimator_sha256")
-            if digest != estimator_digest():
-                raise ModelError(
-                    f"{path}: strength_estimator_sha256 must be the sha256 of {DEFAULT_ESTIMATOR.name} the model was "
-                    f"made with ({estimator_digest()[:12]}... is installed), got {str(digest)[:12]!r}: the model's "
-                    "gains would come from another estimator"
-                )
+        _check_estimator(meta, residual_config_of(meta, path).expert, path)
     return meta
+
+
+def _check_estimator(meta: dict[str, Any], expert: Any, path: Path) -> None:
+    """Refuse a model whose expert's learned adaptation used another strength estimator than the installed one."""
+    if expert.adaptation != "learned":
+        return
+    from agents.control.adaptation.learned import DEFAULT_ESTIMATOR, estimator_digest
+
+    digest = meta.get("strength_estimator_sha256")
+    if digest != estimator_digest():
+        raise ModelError(
+            f"{path}: strength_estimator_sha256 must be the sha256 of {DEFAULT_ESTIMATOR.name} the model was "
+            f"made with ({estimator_digest()[:12]}... is installed), got {str(digest)[:12]!r}: the model's "
+            "gains would come from another estimator"
+        )
+
+
+def plan_config_of(meta: dict[str, Any], path: str | Path = META_FILE) -> PlanConfig:
+    """The :class:`~agents.rl.plan_config.PlanConfig` a plan-level model's metadata records (``plan`` and
+    ``expert``; ``max_control_steps`` is the evaluation's, given by :func:`make_model_env`).
+
+    :raises ModelError: naming ``path`` and the bad field (e.g. ``plan.stride_range``) with its allowed values.
+    """
+    raw = dict(meta.get("plan") or {})
+    raw.pop("max_control_steps", None)
+    raw["expert"] = meta.get("expert") or {}
+    try:
+        return PlanConfig.from_dict(raw, where="plan")
+    except ValueError as err:
+        raise ModelError(f"{path}: {err}") from None
 
 
 def residual_config_of(meta: dict[str, Any], path: str | Path = META_FILE) -> ResidualConfig:
@@ -245,6 +277,8 @@ def model_env_spec(meta: dict[str, Any] | None, path: str | Path = META_FILE) ->
     if meta is None:
         return PLAIN_ENV_ID, {}
     kwargs = dict(meta.get("env_kwargs") or {})
+    if meta.get("residual_level") == "plan":
+        return PLAN_ENV_ID, {**kwargs, "config": plan_config_of(meta, path)}
     if meta.get("residual"):
         return RESIDUAL_ENV_ID, {**kwargs, "config": residual_config_of(meta, path)}
     return PLAIN_ENV_ID, kwargs
@@ -262,6 +296,9 @@ def make_model_env(model_path: str | Path, **kwargs: Any) -> gym.Env:
     import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 
     env_id, recorded = model_env_spec(read_metadata(model_path), Path(model_path).parent / META_FILE)
+    if env_id == PLAN_ENV_ID and "max_episode_steps" in kwargs:  # control steps: the plan env's steps are cycles
+        steps = kwargs.pop("max_episode_steps")
+        recorded["config"] = dataclasses.replace(recorded["config"], max_control_steps=steps)
     return gym.make(env_id, **{**recorded, **kwargs})
 
 
@@ -695,21 +732,25 @@ def check_spaces(model: Any, env: gym.Env, path: Path) -> None:
             )
 
 
-def _residual_wrapper(env: gym.Env) -> ResidualExpertEnv | None:
-    """The :class:`~agents.rl.residual_env.ResidualExpertEnv` among ``env``'s wrappers, or None."""
+def _residual_wrapper(env: gym.Env) -> ResidualExpertEnv | PlanExpertEnv | None:
+    """The :class:`~agents.rl.residual_env.ResidualExpertEnv` or :class:`~agents.rl.plan_env.PlanExpertEnv` among
+    ``env``'s wrappers, or None."""
     while isinstance(env, gym.Wrapper):
-        if isinstance(env, ResidualExpertEnv):
+        if isinstance(env, ResidualExpertEnv | PlanExpertEnv):
             return env
         env = env.env
     return None
 
 
-def check_model_env(meta: dict[str, Any], env: gym.Env, path: Path) -> ResidualExpertEnv | None:
+def check_model_env(meta: dict[str, Any], env: gym.Env, path: Path) -> ResidualExpertEnv | PlanExpertEnv | None:
     """Refuse an env the model (with metadata ``meta``) was not trained in; :return: a residual model's
-    :class:`~agents.rl.residual_env.ResidualExpertEnv` (None for any other model).
+    :class:`~agents.rl.residual_env.ResidualExpertEnv` or :class:`~agents.rl.plan_env.PlanExpertEnv` (None for any
+    other model).
 
     The env's robot must be the model's (:func:`model_robot`); a residual model needs ``QuadUnevenResidual-v0`` with
-    its recorded residual and expert (:func:`make_model_env` builds it), any other model an env without an expert.
+    its recorded residual and expert, a plan-level one (``residual_level: plan``) ``QuadUnevenPlan-v0`` with its
+    recorded plan ranges and expert (:func:`make_model_env` builds either), any other model an env without an
+    expert.
 
     :raises ModelError: naming ``robot`` or the env, with what the model needs.
     """
@@ -727,11 +768,23 @@ def check_model_env(meta: dict[str, Any], env: gym.Env, path: Path) -> ResidualE
                 f"policy: {path} was trained without the expert ({PLAIN_ENV_ID}), the env is {RESIDUAL_ENV_ID}"
             )
         return None
-    if wrapper is None:
+    plan = meta.get("residual_level") == "plan"
+    env_id, kind = (PLAN_ENV_ID, PlanExpertEnv) if plan else (RESIDUAL_ENV_ID, ResidualExpertEnv)
+    if not isinstance(wrapper, kind):
         raise ModelError(
-            f"policy: {path} is a residual model: it runs in {RESIDUAL_ENV_ID} with the expert of its training "
+            f"policy: {path} is a residual model: it runs in {env_id} with the expert of its training "
             "(agents.rl.model_io.make_model_env builds it)"
         )
+    if plan:
+        want, got = plan_config_of(meta, path).to_dict(), wrapper.config.to_dict()
+        differ = [k for k in want if k != "max_control_steps" and want[k] != got[k]]
+        if differ:
+            name = differ[0]
+            raise ModelError(
+                f"policy: {path} was trained with {name}={excerpt(want[name])}, the env has "
+                f"{name}={excerpt(got[name])} (agents.rl.model_io.make_model_env builds the model's env)"
+            )
+        return wrapper
     want = residual_config_of(meta, path).to_dict()
     got = wrapper.config.to_dict()
     differ = [k for k in want if k != "residual_penalty" and want[k] != got[k]]
@@ -790,6 +843,7 @@ __all__ = [
     "make_model_env",
     "model_env_spec",
     "model_robot",
+    "plan_config_of",
     "read_metadata",
     "read_model_zip",
     "recorded_shape",

@@ -31,6 +31,7 @@ from agents.rl.config import TrainConfig, TrainConfigError, terrain_label, terra
 from agents.rl.learning_curve import plot_learning_curve
 from agents.rl.model_io import write_metadata
 from agents.rl.normalization import ObsNormalization, norm_path
+from agents.rl.plan_env import PLAN_ENV_ID
 from agents.rl.residual_env import RESIDUAL_ENV_ID
 from agents.rl.terrain_mix import TerrainMixEnv
 from agents.rl.vec_env import EVAL_SEED_OFFSET, SCRATCH_ENV_KWARGS, build_vec_env, make_train_env, normalize
@@ -203,6 +204,23 @@ def _metadata(cfg: TrainConfig, robot: str) -> dict[str, Any]:
             "env_kwargs": {**SCRATCH_ENV_KWARGS, **cfg.env_kwargs},
             "expert_features": False,
         }
+    if cfg.residual_level == "plan":
+        plan = cfg.plan_config()
+        if plan.expert.adaptation == "learned":
+            from agents.control.adaptation.learned import estimator_digest
+
+            common = {**common, "strength_estimator_sha256": estimator_digest()}
+        recorded = {k: v for k, v in plan.to_dict().items() if k not in ("expert", "max_control_steps")}
+        return {
+            **common,
+            "residual": True,
+            "residual_level": "plan",
+            "plan": recorded,
+            "expert": plan.to_dict()["expert"],
+            "env_id": PLAN_ENV_ID,
+            "env_kwargs": dict(cfg.env_kwargs),
+            "expert_features": True,
+        }
     residual = cfg.residual_config()
     if residual.expert.adaptation == "learned":
         from agents.control.adaptation.learned import estimator_digest
@@ -356,7 +374,7 @@ def _preflight_env(cfg: TrainConfig) -> str:
     try:
         env = make_train_env(
             cfg.terrain, cfg.max_episode_steps, dict(cfg.env_kwargs), cfg.randomization,
-            cfg.residual_config() if cfg.residual else None,
+            cfg.env_config(),
         )  # fmt: skip
     except (ValueError, TypeError) as err:
         raise TrainConfigError(f"env_kwargs {excerpt(cfg.env_kwargs)}: {err}") from None
@@ -444,7 +462,13 @@ def train(
             title=(f"residual {cfg.algo.upper()}" if cfg.residual else f"{cfg.algo.upper()} from scratch (joint_pd)")
             + f" on {_terrain_label(cfg.terrain)}"
             + ("" if cfg.randomization is None else f", randomization {cfg.randomization}")
-            + (f" (scale {cfg.residual_scale})" if cfg.residual else ""),
+            + (
+                ""
+                if not cfg.residual
+                else " (plan level)"
+                if cfg.residual_level == "plan"
+                else f" (scale {cfg.residual_scale})"
+            ),
         )
         summary = {
             "timesteps": int(model.num_timesteps),

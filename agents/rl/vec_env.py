@@ -15,6 +15,8 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
 from agents.rl.config import TrainConfig, terrain_label
+from agents.rl.plan_config import PlanConfig
+from agents.rl.plan_env import PLAN_ENV_ID
 from agents.rl.residual_config import ResidualConfig
 from agents.rl.residual_env import RESIDUAL_ENV_ID
 from agents.rl.terrain_mix import TerrainMixEnv
@@ -76,7 +78,7 @@ def make_train_env(
     max_episode_steps: int,
     env_kwargs: dict[str, Any] | None = None,
     randomization: Any = None,
-    residual: ResidualConfig | None = None,
+    residual: ResidualConfig | PlanConfig | None = None,
 ) -> gym.Env:
     """One training env with a time limit and :class:`EpisodeStats`: the residual env (expert in the loop), or
     plain ``QuadUneven-v0`` in ``joint_pd`` mode (training from scratch).
@@ -86,10 +88,16 @@ def make_train_env(
     :param max_episode_steps: control steps before truncation.
     :param env_kwargs: extra QuadUneven-v0 arguments.
     :param randomization: the training world's randomization (None: nominal).
-    :param residual: the residual env's settings and its expert's; None: no expert (from scratch).
+    :param residual: the residual env's settings and its expert's (a :class:`PlanConfig`: the plan-level env, whose
+        episodes end after ``PlanConfig.max_control_steps`` control steps instead of ``max_episode_steps`` env
+        steps); None: no expert (from scratch).
     """
 
     def one(spec: Any) -> gym.Env:
+        if isinstance(residual, PlanConfig):
+            return gym.make(
+                PLAN_ENV_ID, config=residual, terrain=spec, randomization=randomization, **(env_kwargs or {})
+            )
         if residual is None:
             return gym.make(
                 "QuadUneven-v0",
@@ -145,7 +153,7 @@ def build_vec_env(
         cfg.max_episode_steps,
         dict(cfg.env_kwargs),
         cfg.randomization,
-        cfg.residual_config() if cfg.residual else None,
+        cfg.env_config(),
     )
     if kind == "subproc":
         env_fn = functools.partial(_ignoring_interrupts, env_fn)

@@ -38,6 +38,8 @@ ENV_FIELDS = (
     "robot",
     "algo",
     "residual",
+    "residual_level",
+    "plan",
     "residual_scale",
     "residual_legs",
     "residual_basis",

@@ -64,9 +64,14 @@ def test_counts_rates_and_changed_episodes(tmp_path):
     ]
     assert [r["candidate"]["successes"] for r in comp["by_entry"]] == [2, 1]
     friction = [r for r in comp["by_factor"] if r["factor"] == "friction"]
-    assert [(r["low"], r["high"]) for r in friction] == [(0.3, 0.4), (0.9, 0.9), (1.1, 1.1)]
-    assert [r["baseline"]["successes"] for r in friction] == [1, 0, 1]
-    assert [r["candidate"]["successes"] for r in friction] == [2, 0, 1]
+    assert [(r["bin"], r["low"]) for r in friction] == [
+        ("< 0.35", 0.3),
+        ("0.35-0.45", 0.4),
+        ("0.8-1", 0.9),
+        (">= 1", 1.1),
+    ]
+    assert [r["baseline"]["successes"] for r in friction] == [1, 0, 0, 1]
+    assert [r["candidate"]["successes"] for r in friction] == [1, 1, 0, 1]
 
 
 def _pushed(episode, impulses, received):

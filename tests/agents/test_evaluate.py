@@ -457,10 +457,15 @@ def test_randomized_entries_record_their_draws_and_the_report_groups_by_factor(t
     rows = res["summary"]["by_factor"]
     assert {r["factor"] for r in rows} == {"friction", "payload_mass", "total_mass", "latency"}
     friction = [r for r in rows if r["factor"] == "friction"]
-    assert [r["episodes"] for r in friction] == [2, 2, 2] and friction[0]["high"] <= friction[1]["low"]
+    bins = {0.35: "< 0.35", 0.45: "0.35-0.45", 0.6: "0.45-0.6", 0.8: "0.6-0.8", 1.0: "0.8-1", 2.0: ">= 1"}
+    expected = {}
+    for f in frictions:
+        label = bins[min(edge for edge in bins if f < edge)]
+        expected[label] = expected.get(label, 0) + 1
+    assert {r["bin"]: r["episodes"] for r in friction} == expected
     assert res["meta"]["randomization"] == [None, spec]
     report = (tmp_path / "o" / "report.md").read_text()
-    assert "## By randomization factor" in report and "| friction |" in report
+    assert "## By randomization factor" in report and "| friction | " in report
     assert "+ randomization" in report  # the entry label
 
 
@@ -480,19 +485,41 @@ def test_bad_randomization_of_a_later_entry_fails_before_any_episode(tmp_path, c
 def test_factor_summary_groups_by_value_hand_case():
     from agents.evaluation.metrics import factor_summary
 
-    def record(friction, latency, success):
+    def record(friction, latency, damping, pushes, success):
         base = {"success": success, "fall_reason": None if success else "fall: tilt 70 deg > 60 deg"}
         base |= {k: 1.0 for k in ("distance", "mean_speed", "sim_time", "min_stability_index")}
         base |= {k: 1.0 for k in ("mean_stability_index", "time_index_negative", "cost_of_transport")}
         base |= {"fraction_index_nonnegative": 1.0, "planner_ms_median": None, "planner_ms_p95": None}
-        return base | {"factors": {"friction": friction, "latency": latency, "payload_mass": 0.0}}
+        base |= {"end_reason": "goal" if success else "fall"}
+        factors = {"friction": friction, "latency": latency, "payload_mass": 0.0, "joint_damping_mean": damping}
+        return base | {"factors": factors | {"push_count": pushes}}
 
-    frictions = [0.9, 0.3, 0.5, 0.4, 0.8, 0.6]
-    records = [record(f, 0.002 * (k % 2), f >= 0.5) for k, f in enumerate(frictions)]
-    records.append({**record(1.0, 0.0, True), "factors": None})  # a nominal episode: left out
+    # friction bins (edges 0.35, 0.45, 0.6, 0.8, 1.0): < 0.35 {0.3}, 0.35-0.45 {0.4, 0.35, 0.449},
+    # 0.45-0.6 {0.45, 0.5}, 0.8-1 {0.9, 0.8}, >= 1 {1.2}; 0.6-0.8 is empty
+    frictions = [0.9, 0.3, 0.5, 0.4, 0.8, 0.35, 0.449, 0.45, 1.2]
+    success = [True, False, True, False, True, True, False, True, True]
+    latencies = [0.0, 0.002, 0.004, 0.006, 0.008, 0.01, 0.0, 0.002, 0.004]  # edges 0.003, 0.007: 4, 3, 2
+    dampings = [0.1, 0.9, 0.5, 0.3, 0.7, 0.2, 0.8, 0.4, 0.6]  # no edges: thirds by value
+    records = [
+        record(f, lat, dmp, float(k % 2), ok)
+        for k, (f, lat, dmp, ok) in enumerate(zip(frictions, latencies, dampings, success, strict=True))
+    ]
+    records.append({**record(1.0, 0.0, 0.0, 0.0, True), "factors": None})  # a nominal episode: left out
     rows = factor_summary(records)
-    assert {r["factor"] for r in rows} == {"friction", "latency"}  # payload_mass does not vary
-    friction = [(r["low"], r["high"], r["success_rate"]) for r in rows if r["factor"] == "friction"]
-    assert friction == [(0.3, 0.4, 0.0), (0.5, 0.6, 1.0), (0.8, 0.9, 1.0)]
-    latency = [(r["low"], r["episodes"]) for r in rows if r["factor"] == "latency"]
-    assert latency == [(0.0, 3), (0.002, 3)]  # two distinct values: one group each
+    assert {r["factor"] for r in rows} == {"friction", "latency", "joint_damping_mean", "push_count"}  # payload const
+    friction = [
+        (r["bin"], r["low"], r["high"], r["episodes"], r["successes"]) for r in rows if r["factor"] == "friction"
+    ]
+    assert friction == [
+        ("< 0.35", 0.3, 0.3, 1, 0),
+        ("0.35-0.45", 0.35, 0.449, 3, 1),
+        ("0.45-0.6", 0.45, 0.5, 2, 2),
+        ("0.8-1", 0.8, 0.9, 2, 2),
+        (">= 1", 1.2, 1.2, 1, 1),
+    ]
+    latency = [(r["bin"], r["episodes"], r["successes"]) for r in rows if r["factor"] == "latency"]
+    assert latency == [("< 0.003", 4, 2), ("0.003-0.007", 3, 2), (">= 0.007", 2, 2)]
+    damping = [(r["bin"], r["low"], r["high"]) for r in rows if r["factor"] == "joint_damping_mean"]
+    assert damping == [("thirds 1/3", 0.1, 0.3), ("thirds 2/3", 0.4, 0.6), ("thirds 3/3", 0.7, 0.9)]
+    pushes = [(r["bin"], r["episodes"]) for r in rows if r["factor"] == "push_count"]
+    assert pushes == [("0", 5), ("1", 4)]  # two distinct values: one group each

@@ -245,9 +245,9 @@ def test_a_foot_in_the_air_at_a_measured_replan_lands_at_the_nearest_terrain_poi
 
 @pytest.mark.parametrize("steep_friction", [0.8, 0.0])
 def test_a_ramp_too_steep_for_the_assumed_friction_is_walked_with_the_steep_ground_friction(steep_friction):
-    """A 25 deg ramp is steeper than the default cones hold (atan(0.5 / sqrt 2) = 19.5 deg). The default expert
+    """A 25 deg ramp is steeper than the default cones hold (atan(0.25 / sqrt 2) = 10 deg). The default expert
     plans the strides onto it again assuming friction 0.8 (logged), walks those cycles with cones of 0.8
-    and the level ones with 0.5, and climbs; with ``steep_friction=0`` it stands before the ramp."""
+    and the level ones with 0.25, and climbs; with ``steep_friction=0`` it stands before the ramp."""
     env = gym.make(
         "QuadUneven-v0",
         terrain={"kind": "slope", "params": {"angle_deg": 25, "ramp_length": 1.2, "plateau_length": 0.5}},
@@ -262,8 +262,8 @@ def test_a_ramp_too_steep_for_the_assumed_friction_is_walked_with_the_steep_grou
         assumed.add(expert.assumed_friction)
     steep_tries = [line for line in expert.failure_log if "planned assuming friction 0.80" in line]
     if steep_friction:
-        assert assumed == {0.5, 0.8} and steep_tries
+        assert assumed == {0.25, 0.8} and steep_tries
         assert info["distance"] > 1.0  # the ramp starts at ~0.3 m
     else:
-        assert assumed == {0.5} and not steep_tries
+        assert assumed == {0.25} and not steep_tries
         assert info["distance"] < 0.6 and any("failed test: slope" in line for line in expert.failure_log)

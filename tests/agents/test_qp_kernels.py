@@ -217,3 +217,29 @@ def test_a_failed_compiled_solve_falls_back_to_daqp(monkeypatch):
             np.testing.assert_allclose(got.tau, ref.tau, rtol=0, atol=1e-8)
             np.testing.assert_allclose(got.contact_forces, ref.contact_forces, rtol=0, atol=1e-7)
             assert (got.distribution, got.relaxed, got.qp_fallback) == ("qp", relaxed, False)
+
+
+def test_a_problem_infeasible_in_narrow_cones_is_solved_in_the_wide_ones():
+    """Cones of 0.25 cannot give a forward base acceleration of 3 m/s^2 on four feet; both solvers then solve it
+    with cones of ``wide_mu(0.25)`` = 0.5: the optimum of a QP built with cones of 0.5. At 4 m/s^2 those cannot
+    either: the relaxed problem in the wide cones, as a QP built with cones of 0.5 relaxes it."""
+    from quad_uneven_env.robot.dynamics.base import make_dynamics
+
+    assert [QK.wide_mu(mu) for mu in (0.07, 0.25, 0.4, 0.5, 0.8)] == [0.14, 0.5, 0.5, 0.5, 0.8]
+    env = gym.make("QuadUneven-v0", terrain="flat")
+    env.reset(seed=0)
+    m, d = env.unwrapped.model, env.unwrapped.data
+
+    def solve(mu, solver, ax):
+        return ID.InverseDynamics(make_dynamics("mujoco", m), "qp", qp_solver=solver, mu=mu).solve(
+            d.qpos, d.qvel, np.array([ax, 0.0, 0.0, 0.0, 0.0, 0.0]), (True,) * 4
+        )
+
+    for ax, relaxed in ((3.0, False), (4.0, True)):
+        wide = solve(0.5, "daqp", ax)
+        assert wide.relaxed == relaxed
+        for solver in ("compiled", "daqp"):
+            got = solve(0.25, solver, ax)
+            assert (got.distribution, got.relaxed) == ("qp", relaxed)
+            np.testing.assert_allclose(got.tau, wide.tau, rtol=0, atol=1e-7)
+            np.testing.assert_allclose(got.contact_forces, wide.contact_forces, rtol=0, atol=1e-6)

@@ -265,7 +265,7 @@ def test_stance_gated_env_equals_the_plain_residual_on_touching_legs():
     seen = _spy_on_expert(env)
     env.reset(seed=1)
     action = np.linspace(-1.0, 1.0, 12).astype(np.float32)
-    for _ in range(10):
+    for _ in range(35):  # 0.7 s: RH swings (phase 1, 0.5-1.0 s)
         env.step(action)
     tau, touch = seen[-1]
     lim = env.unwrapped.idx.torque_limit

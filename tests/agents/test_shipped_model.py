@@ -102,7 +102,7 @@ def test_the_shipped_model_was_trained_with_the_shipped_config(name):
     assert meta["residual"] and meta["expert_features"] and meta["randomization"] == world
     assert meta.get("residual_legs", "all") == legs
     assert meta.get("residual_basis", "torque_limit") == basis
-    assert meta.get("expert", {}) == ({"adaptation": "knee"} if "_adaptive" in name else {})
+    assert meta.get("expert", {}) == ({"adaptation": "knee", "friction": 0.5} if "_adaptive" in name else {})
     assert meta["algo"] == name.split("_")[0]
     assert not list(model.parent.glob("*.pkl"))
 

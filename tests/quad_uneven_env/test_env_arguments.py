@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import inspect
+
 import gymnasium as gym
 import numpy as np
 import pytest
 
 import quad_uneven_env  # noqa: F401
 from quad_uneven_env.config import MAX_SCAN_POINTS
-from quad_uneven_env.env import ENV_ARGS, QuadUnevenEnv
+from quad_uneven_env.env import QuadUnevenEnv
+from quad_uneven_env.env_config import EnvConfig
+from quad_uneven_env.fields import params_of
 
 
 def make(**kwargs):
@@ -95,9 +99,8 @@ def test_a_bad_argument_raises_at_make_naming_it(name, value, message):
 
 
 def test_the_bad_argument_list_covers_every_scalar_argument():
-    assert {q.name for q in ENV_ARGS} <= {name for name, _, _ in BAD}
-    params = set(QuadUnevenEnv.__init__.__code__.co_varnames[1 : QuadUnevenEnv.__init__.__code__.co_argcount])
-    assert params == {name for name, _, _ in BAD}
+    assert {q.name for q in params_of(EnvConfig)} <= {name for name, _, _ in BAD}
+    assert set(inspect.signature(QuadUnevenEnv).parameters) == {name for name, _, _ in BAD}
 
 
 @pytest.mark.parametrize(
@@ -155,5 +158,5 @@ def test_a_numpy_integer_seed_is_the_same_seed():
 
 def test_the_docstring_lists_every_scalar_argument():
     doc = QuadUnevenEnv.__doc__
-    for q in ENV_ARGS:
+    for q in params_of(EnvConfig):
         assert f"| ``{q.name}`` |" in doc and q.allowed() in doc

@@ -20,7 +20,7 @@ import pytest
 import quad_uneven_env
 from quad_uneven_env import constants as C
 from quad_uneven_env.config import CONFIG_DIR, read_yaml
-from quad_uneven_env.env import default_pd_gains
+from quad_uneven_env.env_config import default_pd_gains
 from quad_uneven_env.robot import conventions as cv
 from quad_uneven_env.robot.description import RobotDescription, load_robot, robot_data_dir
 from quad_uneven_env.robot.kinematics import leg_fk_hip
