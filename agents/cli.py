@@ -44,7 +44,7 @@ from agents.evaluation.ray_backend import BACKENDS, DEFAULT_LOCAL_CPUS
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import Suite, SuiteError, load_suite, suite_from_dict, suite_names
 from agents.interrupts import sigterm_as_keyboard_interrupt
-from agents.outputs import OutputManifest, prepare_output_dir
+from agents.outputs import output_dir, output_file
 from agents.paper.simulation import DISTRIBUTIONS as PAPER_DISTRIBUTIONS
 from agents.plotting import video_to_gif
 from agents.rl.config import ALGOS, load_train_config, validate
@@ -128,6 +128,8 @@ def run_demo_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven demo``."""
     if args.gif is not None and args.no_video:
         raise ValueError(f"--gif is made from the video: drop --no-video, got --gif {args.gif} --no-video")
+    if args.gif is not None:
+        output_file(args.gif, "--gif")
     try:
         ep = demo(args.out, args.terrain, args.seed, args.distance, not args.no_video)
     except SuiteError as err:  # name the demo's options, not the suite fields it builds from them
@@ -706,15 +708,7 @@ def run_export_command(args: argparse.Namespace) -> int:
     from agents.rl.export import export_onnx
     from agents.rl.model_io import ModelError
 
-    try:
-        is_dir, exists = args.out.is_dir(), args.out.exists()
-    except OSError as err:  # e.g. a name longer than the file system allows
-        raise ModelError(f"--out {str(args.out)!r} cannot be written ({err.strerror or err})") from None
-    if is_dir:
-        raise ModelError(f"--out {str(args.out)!r} is a directory; give the .onnx file to write")
-    if exists and not args.overwrite:
-        raise ModelError(f"--out {str(args.out)!r} exists; pass --overwrite to replace it")
-    prepare_output_dir(args.out.parent, keep=True, field="--out's folder")
+    output_file(args.out, overwrite=args.overwrite)
     try:
         path = export_onnx(args.policy, args.out, args.algo, args.allow_pickle, out_field="--out")
     except ImportError as err:
@@ -736,10 +730,8 @@ def run_paper_command(args: argparse.Namespace) -> int:
         settle=args.settle,
         seed=args.seed,
     )
-    prepare_output_dir(args.out, keep=True, field="--out")  # a file or an uncreatable path fails before the run
-
-    run = run_paper_sim(config, progress=not args.no_progress)
-    with OutputManifest(args.out, "paper"):
+    with output_dir(args.out, "paper", keep=True):  # a file or an uncreatable path fails before the run
+        run = run_paper_sim(config, progress=not args.no_progress)
         info = write_paper_outputs(run, args.out, fps=args.fps)
     keys = (
         "fell", "min_stability_index_planned_Nm", "min_stability_index_measured_Nm", "time_without_support_s",
@@ -785,8 +777,7 @@ def run_plan_paper_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven plan-paper``."""
     from agents.paper.planned import write_planned_outputs
 
-    prepare_output_dir(args.out, keep=True, field="--out")
-    with OutputManifest(args.out, "plan-paper"):
+    with output_dir(args.out, "plan-paper", keep=True):
         info = write_planned_outputs(args.out)
     print(json.dumps({k: info[k] for k in ("min_stability_index_Nm", "junction_jump_max", "swing_min_clearance_m")}))
     return 0
@@ -1018,6 +1009,9 @@ def run_fit_strength_command(args: argparse.Namespace) -> int:
 
     out = DEFAULT_ESTIMATOR if args.out is None else args.out
     seeds = parse_seeds(args.seeds)
+    for field, path in (("--out", out), ("--data", args.data), ("--plot", args.plot)):
+        if path is not None:
+            output_file(path, field)
     with sigterm_as_keyboard_interrupt():
         report = fit_strength_estimator(
             seeds, args.seconds, args.workers, args.test_every, out, args.data, args.from_data, args.plot
@@ -1118,8 +1112,7 @@ def run_plot_curves_command(args: argparse.Namespace) -> int:
     labels = args.labels or [run.name for run in args.runs]
     if len(labels) != len(args.runs):
         raise ValueError(f"--labels: {len(labels)} labels for {len(args.runs)} runs; give one per RUN")
-    if args.out.suffix.lower() != ".png":
-        raise ValueError(f"--out must be a .png file, got {str(args.out)!r}")
+    output_file(args.out, suffix=".png")
     out = plot_learning_curves(list(zip(labels, args.runs, strict=True)), args.out, title=args.title)
     print(f"wrote {out}")
     return 0
@@ -1139,6 +1132,47 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+POLICY_NAMES = ("zero", "expert")
+"""The named policies of ``--policy``; any other value is a model's path."""
+
+CONFIG_SUFFIXES = (".yaml", ".yml")
+"""A ``--suite``, ``--robot``, ``--terrain`` or ``--randomization`` value with one of these suffixes is a file's path,
+any other a shipped name (:func:`quad_uneven_env.config.resolve_config_path`)."""
+
+NAME_OR_PATH = {
+    "policy": lambda v: v not in POLICY_NAMES,
+    "suite": lambda v: Path(v).suffix in CONFIG_SUFFIXES,
+    "robot": lambda v: Path(v).suffix in CONFIG_SUFFIXES,
+    "terrain": lambda v: Path(v).suffix in CONFIG_SUFFIXES,
+    "randomization": lambda v: Path(v).suffix in CONFIG_SUFFIXES,
+    "config": lambda v: True,
+    "init_from": lambda v: True,
+}
+"""Options given as text that name a file: when the value names one."""
+
+
+def absolute_paths(args: argparse.Namespace) -> argparse.Namespace:
+    """``args`` with every path made absolute against the working directory, once, right after parsing.
+
+    Paths (``type=Path`` options, and the text options of :data:`NAME_OR_PATH` when they name a file) then mean the
+    same wherever they are used: in worker processes, on Ray nodes, and in libraries that join or change folders.
+    Nothing is read or created; ``..`` and symbolic links are kept as written.
+    """
+
+    def absolute(value: object, names_file: object = None) -> object:
+        if isinstance(value, list):
+            return [absolute(v, names_file) for v in value]
+        if isinstance(value, Path):
+            return value if value.is_absolute() else Path.cwd() / value
+        if isinstance(value, str) and names_file is not None and value and names_file(value):
+            return value if Path(value).is_absolute() else str(Path.cwd() / value)
+        return value
+
+    for dest, value in vars(args).items():
+        setattr(args, dest, absolute(value, NAME_OR_PATH.get(dest)))
+    return args
+
+
 def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
@@ -1146,7 +1180,7 @@ def _one_line(text: str) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``quad-uneven``: the subcommand's exit code; 2 (one line on stderr) on invalid input."""
     try:
-        args = build_parser().parse_args(argv)
+        args = absolute_paths(build_parser().parse_args(argv))
         return args.func(args)
     except ValueError as err:  # every validation error of the library (SuiteError, PolicyError, OutputError, ...)
         print(f"error: {_one_line(err)}", file=sys.stderr)

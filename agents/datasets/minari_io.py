@@ -90,8 +90,8 @@ def write_dataset(
     from minari.data_collector import EpisodeBuffer
     from minari.dataset.minari_storage import MinariStorage
 
-    storage = MinariStorage.new(
-        Path(path), observation_space=observation_space, action_space=action_space, env_spec=env_spec
+    storage = MinariStorage.new(  # absolute: Minari's size count joins a relative path with itself
+        Path(path).absolute(), observation_space=observation_space, action_space=action_space, env_spec=env_spec
     )
     storage.update_metadata({"dataset_id": dataset_id, "minari_version": minari.__version__, **dict(metadata)})
     buffers = [_buffer(EpisodeBuffer, i, arrays, seed) for i, (arrays, seed, _) in enumerate(episodes)]

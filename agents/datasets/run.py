@@ -71,7 +71,7 @@ from agents.evaluation.store import (
     run_identity,
 )
 from agents.evaluation.suites import EpisodeTask, Suite, load_suite
-from agents.outputs import OutputError, OutputManifest, write_json_atomic
+from agents.outputs import OutputError, write_json_atomic
 from quad_uneven_env.fields import excerpt
 
 __all__ = ["COLLECT_FORMAT", "COLLECT_OUTPUTS", "CollectInterrupted", "CollectedEpisode", "collect", "collect_task"]
@@ -306,8 +306,8 @@ def collect(
             f"got {excerpt(env_kwargs['action_mode'])}"
         )
     suite, tasks = suite_episodes(suite, env_kwargs, episodes, seed)
-    out = open_output_dir(Path(out), resume=resume, overwrite=overwrite, outputs=COLLECT_OUTPUTS, what="collect")
-    with OutputManifest(out, "collect"):  # --overwrite deletes only what a collect wrote
+    out = Path(out)
+    with open_output_dir(out, resume, overwrite, COLLECT_OUTPUTS, "collect", "collect"):  # --overwrite: only ours
         entries = [
             {"kind": e.kind, "params": e.params, "seeds": list(e.seeds), "randomization": e.randomization,
              "command": e.command, "waypoints": e.waypoints}

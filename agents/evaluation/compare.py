@@ -22,7 +22,7 @@ import numpy as np
 from agents.evaluation.machine import machines_differ
 from agents.evaluation.metrics import factor_bins, json_safe
 from agents.evaluation.results_io import load_results
-from agents.outputs import OutputError, OutputManifest, prepare_output_dir, write_json_atomic
+from agents.outputs import OutputError, output_dir, write_json_atomic
 from quad_uneven_env.fields import excerpt
 
 FAILURE_KINDS = ("fall", "diverged", "stall", "error")
@@ -414,10 +414,10 @@ def write_comparison(comp: Mapping[str, Any], out: str | Path) -> dict[str, Path
 
     :raises OutputError: if ``out`` is a file, cannot be created or the files cannot be written (named).
     """
-    out = prepare_output_dir(out, keep=True, field="--out")
+    out = Path(out)
     paths = {"md": out / "comparison.md", "json": out / "comparison.json", "png": out / "comparison.png"}
     try:
-        with OutputManifest(out, "compare") as manifest:
+        with output_dir(out, "compare", keep=True) as manifest:
             paths["md"].write_text(comparison_markdown(comp))
             write_json_atomic(paths["json"], json_safe(comp))
             plot_comparison(comp, paths["png"])

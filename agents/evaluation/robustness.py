@@ -26,7 +26,7 @@ import numpy as np
 from agents.evaluation.metrics import json_safe
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import Suite, suite_from_dict
-from agents.outputs import OutputManifest, prepare_output_dir, write_json_atomic
+from agents.outputs import output_dir, write_json_atomic
 from agents.plotting import pyplot, save
 from quad_uneven_env.fields import excerpt
 
@@ -127,8 +127,8 @@ def robustness_sweep(
         },
         source=f"robustness {factor}",
     )
-    out = prepare_output_dir(out, keep=True, field="--out")
-    with OutputManifest(out, "robustness"):
+    with output_dir(out, "robustness", keep=True) as manifest:
+        out = manifest.out
         return _sweep(factor, out, suite, values, randomizations, seeds, workers, policy, terrain, goal_distance,
                       expert_config, progress)  # fmt: skip
 

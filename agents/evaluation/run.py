@@ -47,7 +47,7 @@ from agents.evaluation.store import (
 )
 from agents.evaluation.suites import EpisodeTask, Suite, episode_tasks, load_suite, scale_suite
 from agents.evaluation.targets import check_command_targets, check_targets
-from agents.outputs import OutputError, OutputManifest, write_json_atomic
+from agents.outputs import OutputError, write_json_atomic
 from quad_uneven_env.fields import excerpt
 
 __all__ = [
@@ -230,24 +230,24 @@ def evaluate(
     check_backend(backend, address, ship_code)  # without Ray, fail before anything is written
     env_kwargs = check_env_kwargs(dict(env_kwargs or {}) if isinstance(env_kwargs, Mapping) else env_kwargs or {})
     suite, tasks = suite_episodes(suite, env_kwargs, episodes, seed)
-    out = open_output_dir(Path(out), resume=resume, overwrite=overwrite)
-    identity = run_identity(
-        suite, str(policy), algo if kind == "sb3" else None, env_kwargs, episodes, seed, len(tasks), expert_config
-    )
-    resuming = resume and check_resume(out, identity)
-    cfg = EvalConfig(
-        policy=str(policy),
-        goal_distance=suite.goal_distance,
-        time_limit=suite.time_limit,
-        algo=algo,
-        env_kwargs=env_kwargs,
-        video_dir=str(out / "videos") if video else None,
-        wall_time_limit=float(wall_time_limit),
-        allow_pickle=allow_pickle,
-        expert_config=dict(expert_config or {}),
-    )
-    preflight(tasks, cfg)
-    with OutputManifest(out, "evaluate") as manifest:
+    out = Path(out)
+    with open_output_dir(out, resume=resume, overwrite=overwrite) as manifest:
+        identity = run_identity(
+            suite, str(policy), algo if kind == "sb3" else None, env_kwargs, episodes, seed, len(tasks), expert_config
+        )
+        resuming = resume and check_resume(out, identity)
+        cfg = EvalConfig(
+            policy=str(policy),
+            goal_distance=suite.goal_distance,
+            time_limit=suite.time_limit,
+            algo=algo,
+            env_kwargs=env_kwargs,
+            video_dir=str(out / "videos") if video else None,
+            wall_time_limit=float(wall_time_limit),
+            allow_pickle=allow_pickle,
+            expert_config=dict(expert_config or {}),
+        )
+        preflight(tasks, cfg)
         if not resuming:
             start_run(out, identity)
         done = load_records(out, tasks) if resuming else {}

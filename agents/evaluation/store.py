@@ -13,12 +13,13 @@ Layout of ``DIR`` (docs/evaluation.md, "The output directory"):
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import zipfile
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +28,7 @@ import numpy as np
 from agents.evaluation.episode import EpisodeResult
 from agents.evaluation.results_io import ResultsError, load_record, read_json
 from agents.evaluation.suites import EpisodeTask, Suite
-from agents.outputs import OutputError, prepare_output_dir, write_json_atomic
+from agents.outputs import LOCK_FILE, MANIFEST_FILE, OutputError, OutputManifest, output_dir, write_json_atomic
 from quad_uneven_env.fields import clip, excerpt
 
 __all__ = [
@@ -112,29 +113,40 @@ def run_identity(
     }
 
 
+@contextlib.contextmanager
 def open_output_dir(
-    out: Path, resume: bool, overwrite: bool, outputs: Sequence[str] = EVAL_OUTPUTS, what: str = "evaluation"
-) -> Path:
-    """Check and create ``out`` before any work: a file fails, an earlier run's outputs are refused.
+    out: Path,
+    resume: bool,
+    overwrite: bool,
+    outputs: Sequence[str] = EVAL_OUTPUTS,
+    what: str = "evaluation",
+    command: str = "evaluate",
+) -> Iterator[OutputManifest]:
+    """Own ``out`` while the ``with`` block runs (:func:`agents.outputs.output_dir`: checked, created and locked
+    before any work): an earlier run's outputs are refused.
 
     With ``resume``, a directory holding an earlier run is kept (:func:`check_resume` compares it);
     with ``overwrite``, the files its manifest lists are deleted and other files kept (:mod:`agents.outputs`).
 
     :param what: the command's kind of directory, for the messages (``"evaluation"``, ``"collect"``).
-    :raises OutputError: naming the directory and what is wrong with it.
+    :param command: the command's name, recorded in the manifest and the lock.
+    :return: the directory's manifest.
+    :raises OutputError: naming the directory and what is wrong with it (``OutputInUse`` if another run holds it).
     """
     if resume and overwrite:
         raise OutputError("--resume and --overwrite exclude each other (continue a run, or start it again)")
-    if resume and out.is_dir() and any(out.iterdir()) and not (out / RUN_FILE).is_file():
-        raise OutputError(
-            f"--resume: {str(out)!r} holds no {RUN_FILE} (not {'an' if what[0] in 'aeiou' else 'a'} {what} "
-            "directory, or one that never started); pass --overwrite to start a new run there"
-        )
     hint = (
         "pass --resume to continue the run recorded there, --overwrite to delete its outputs (other files are "
         "kept), or choose another directory"
     )
-    return prepare_output_dir(out, outputs, overwrite=overwrite, keep=resume, field="--out", hint=hint)
+    with output_dir(out, command, outputs, overwrite=overwrite, keep=resume, field="--out", hint=hint) as manifest:
+        present = [p for p in out.iterdir() if p.name not in (MANIFEST_FILE, LOCK_FILE)]
+        if resume and present and not (out / RUN_FILE).is_file():
+            raise OutputError(
+                f"--resume: {str(out)!r} holds no {RUN_FILE} (not {'an' if what[0] in 'aeiou' else 'a'} {what} "
+                "directory, or one that never started); pass --overwrite to start a new run there"
+            )
+        yield manifest
 
 
 def check_resume(

@@ -53,7 +53,7 @@ from agents.evaluation.ray_backend import check_backend, map_on_ray
 from agents.evaluation.run import suite_episodes
 from agents.evaluation.suites import EpisodeTask, Suite
 from agents.expert import ExpertConfig, ExpertPolicy
-from agents.outputs import OutputManifest, prepare_output_dir
+from agents.outputs import output_dir
 from agents.rl.model_io import write_metadata
 from agents.rl.normalization import ObsNormalization, norm_path
 from quad_uneven_env import constants as C
@@ -505,9 +505,9 @@ def distill(
     _check_suite(suite)
     cfg.expert_config()  # its errors before any work
     suite, tasks = suite_episodes(suite, cfg.env_kwargs, cfg.episodes, cfg.seed_offset)
-    out = prepare_output_dir(out, DISTILL_OUTPUTS, overwrite=overwrite, field="--out")
     start = time.perf_counter()
-    with OutputManifest(out, "distill") as manifest:
+    with output_dir(out, "distill", DISTILL_OUTPUTS, overwrite=overwrite) as manifest:
+        out = manifest.out
         torch.set_num_threads(1)
         model = make_student(cfg, {"kind": tasks[0].kind, **tasks[0].params})
         meta = _metadata(cfg, suite, model.get_env().envs[0].unwrapped.robot.name)

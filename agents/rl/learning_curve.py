@@ -1,10 +1,16 @@
-"""Learning curves of a training run from its Monitor CSVs and EvalCallback log (no pandas needed)."""
+"""Learning curves of a training run from its Monitor CSVs and EvalCallback log (no pandas needed).
+
+Both are read through checked readers: a file that SB3 did not write (another format, a binary file, a column or
+array missing, a value that is not a finite number, an episode length that is not a whole number of steps >= 1)
+is refused with :class:`LearningCurveError` naming the file, the line and the field.
+"""
 
 from __future__ import annotations
 
 import csv
 import math
 import textwrap
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -13,29 +19,82 @@ import numpy as np
 ROLLING = 20
 """Episodes in the rolling mean of the learning curve."""
 
+MONITOR_COLUMNS = ("r", "l", "t")
+"""The columns every Monitor CSV has: the episode's return, length (env steps) and end time (s since the start)."""
+
+EVALUATION_ARRAYS = ("timesteps", "results", "ep_lengths")
+"""The arrays of EvalCallback's ``evaluations.npz``: (n,) env steps, (n, episodes) returns and lengths (steps)."""
+
+
+class LearningCurveError(ValueError):
+    """A monitor or evaluation file of a training run that cannot be read; the message names the file and field."""
+
+
+def _monitor_value(path: Path, line: int, row: dict[str, Any], key: str) -> float:
+    """The Monitor CSV value ``row[key]`` checked: a finite number; ``l`` a whole number >= 1, ``t`` >= 0."""
+    text = row.get(key)
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        value = math.nan
+    if key == "l":
+        ok = math.isfinite(value) and value >= 1 and value == int(value)
+        allowed = "a whole number of steps >= 1"
+    else:
+        ok = math.isfinite(value) and (key != "t" or value >= 0)
+        allowed = "a number >= 0 (s)" if key == "t" else "a finite number"
+    if not ok:
+        raise LearningCurveError(f"{path} line {line}: {key} must be {allowed}, got {text!r}")
+    return value
+
+
+def _monitor_rows(path: Path) -> list[dict[str, Any]]:
+    """The episodes of one Monitor CSV (its ``#`` header line skipped), each with checked ``r``, ``l``, ``t``."""
+    try:
+        lines = path.read_text().splitlines()
+    except (OSError, UnicodeDecodeError) as err:
+        raise LearningCurveError(f"{path}: not a Monitor CSV of a training run ({err})") from None
+    offset = 1 if lines and lines[0].startswith("#") else 0
+    try:
+        reader = csv.DictReader(lines[offset:])
+        missing = [c for c in MONITOR_COLUMNS if c not in (reader.fieldnames or [])]
+        if missing:
+            raise LearningCurveError(
+                f"{path}: column(s) {missing} missing; a Monitor CSV has {list(MONITOR_COLUMNS)} (return, length in "
+                f"steps, time in s), got {reader.fieldnames}"
+            )
+        rows = []
+        for row in reader:
+            line = offset + reader.line_num
+            if None in row or None in row.values():
+                raise LearningCurveError(f"{path} line {line}: {len(reader.fieldnames)} values expected per row")
+            for key in MONITOR_COLUMNS:
+                row[key] = _monitor_value(path, line, row, key)
+            rows.append(row)
+    except csv.Error as err:
+        raise LearningCurveError(f"{path}: not a Monitor CSV of a training run ({err})") from None
+    return rows
+
 
 def read_monitor(monitor_dir: Path) -> dict[str, np.ndarray]:
     """Episodes of every ``*.monitor.csv`` in ``monitor_dir``, ordered by wall time.
 
     :return: ``timesteps`` (env steps of all envs at the end of the episode), ``r`` (return), ``l`` (steps),
         ``t`` (s since the start) and every extra column (e.g. ``ep_stability_mean``, N m), as float arrays
-        (empty arrays if there is no finished episode).
+        (empty arrays if there is no finished episode; an extra value that is no number is NaN).
+    :raises LearningCurveError: on a file that is not a Monitor CSV (named, with the line and column).
     """
-    rows: list[dict[str, str]] = []
+    rows: list[dict[str, Any]] = []
     for path in sorted(Path(monitor_dir).glob("*.monitor.csv")):
-        with path.open() as f:
-            first = f.readline()
-            if not first.startswith("#"):
-                f.seek(0)
-            rows.extend(csv.DictReader(f))
-    rows.sort(key=lambda row: float(row["t"]))
-    keys = list(rows[0]) if rows else ["r", "l", "t"]
+        rows.extend(_monitor_rows(path))
+    rows.sort(key=lambda row: row["t"])
+    keys = list(rows[0]) if rows else list(MONITOR_COLUMNS)
     out = {k: np.array([_float(row.get(k)) for row in rows], dtype=float) for k in keys}
     out["timesteps"] = np.cumsum(out["l"]) if rows else np.zeros(0)
     return out
 
 
-def _float(text: str | None) -> float:
+def _float(text: Any) -> float:
     try:
         return float(text) if text not in (None, "") else math.nan
     except ValueError:
@@ -54,14 +113,45 @@ def rolling_mean(x: np.ndarray, window: int = ROLLING) -> np.ndarray:
 
 
 def read_evaluations(path: Path) -> dict[str, np.ndarray] | None:
-    """EvalCallback's ``evaluations.npz``: ``timesteps`` and mean ``returns`` and ``lengths``; None if absent."""
-    if not Path(path).is_file():
+    """EvalCallback's ``evaluations.npz``: ``timesteps`` and mean ``returns`` and ``lengths``; None if absent.
+
+    :raises LearningCurveError: on a file that is not one EvalCallback wrote: unreadable, an array of
+        :data:`EVALUATION_ARRAYS` missing or of another shape, a value that is not finite, a length < 1 step.
+    """
+    path = Path(path)
+    if not path.is_file():
         return None
-    data = np.load(path)
+
+    def bad(why: str) -> LearningCurveError:
+        return LearningCurveError(f"{path}: not an evaluations.npz of SB3's EvalCallback ({why})")
+
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            missing = [k for k in EVALUATION_ARRAYS if k not in data.files]
+            if missing:
+                raise bad(f"array(s) {missing} missing; it has {sorted(data.files)}")
+            steps, returns, lengths = (np.asarray(data[k]) for k in EVALUATION_ARRAYS)
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        if isinstance(err, LearningCurveError):
+            raise
+        raise bad(str(err)) from None
+    for name, a in zip(EVALUATION_ARRAYS, (steps, returns, lengths), strict=True):
+        if a.dtype.kind not in "iuf":
+            raise bad(f"{name} holds {a.dtype} values, not numbers")
+    n = len(steps) if steps.ndim == 1 else -1
+    if n < 0 or returns.shape != lengths.shape or returns.ndim != 2 or len(returns) != n or returns.shape[1] < 1:
+        raise bad(f"shapes timesteps {steps.shape}, results {returns.shape}, ep_lengths {lengths.shape}; expected "
+                  "(n,), (n, episodes), (n, episodes)")  # fmt: skip
+    if not (np.all(np.isfinite(steps)) and np.all(steps >= 0)):
+        raise bad("timesteps must be finite numbers >= 0")
+    if not np.all(np.isfinite(returns)):
+        raise bad("results must be finite numbers")
+    if not (np.all(np.isfinite(lengths)) and np.all(lengths >= 1) and np.all(lengths == np.round(lengths))):
+        raise bad("ep_lengths must be whole numbers of steps >= 1")
     return {
-        "timesteps": data["timesteps"].astype(float),
-        "returns": data["results"].mean(axis=1),
-        "lengths": data["ep_lengths"].mean(axis=1),
+        "timesteps": steps.astype(float),
+        "returns": returns.mean(axis=1),
+        "lengths": lengths.mean(axis=1),
     }
 
 
@@ -119,7 +209,8 @@ def plot_learning_curves(runs: list[tuple[str, Path]], out_png: Path, title: str
 
     :param runs: (label, ``quad-uneven train`` folder) pairs; each folder needs ``monitor/*.monitor.csv``.
     :param out_png: the figure (PNG) written.
-    :raises ValueError: ``RUN: ...`` naming a folder without a finished training episode.
+    :raises ValueError: ``RUN: ...`` naming a folder without a finished training episode;
+        :class:`LearningCurveError` on a monitor or evaluation file it cannot read.
     """
     from agents.plotting import pyplot
 
@@ -167,4 +258,11 @@ def _finish(fig: Any, axes: Any, ylabels: list[str], title: str | None, out_png:
     return save(fig, out_png, dpi=110, tight=False)
 
 
-__all__ = ["plot_learning_curve", "plot_learning_curves", "read_evaluations", "read_monitor", "rolling_mean"]
+__all__ = [
+    "LearningCurveError",
+    "plot_learning_curve",
+    "plot_learning_curves",
+    "read_evaluations",
+    "read_monitor",
+    "rolling_mean",
+]

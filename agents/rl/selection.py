@@ -33,7 +33,7 @@ from agents.evaluation.results_io import ResultsError, load_results
 from agents.evaluation.run import evaluate
 from agents.evaluation.store import RUN_FILE
 from agents.evaluation.suites import Suite, load_suite
-from agents.outputs import OutputManifest, prepare_output_dir, write_json_atomic
+from agents.outputs import output_dir, write_json_atomic
 from agents.plotting import pyplot, save
 from agents.rl.model_io import META_FILE
 from agents.rl.normalization import norm_path
@@ -178,8 +178,8 @@ def select_checkpoint(
         suite = load_suite(suite)
     refs = [load_reference(f, suite, seed, episodes) for f in references]
     out = run / "selection" if out is None else out
-    out = prepare_output_dir(out, SELECTION_OUTPUTS, overwrite, keep=not overwrite, field="out")
-    with OutputManifest(out, "select"):
+    with output_dir(out, "select", SELECTION_OUTPUTS, overwrite, keep=not overwrite, field="out") as manifest:
+        out = manifest.out
         for c in candidates:
             folder = out / "evals" / c["name"]
             started = (folder / RUN_FILE).is_file()

@@ -40,7 +40,7 @@ from agents.evaluation.metrics import json_safe
 from agents.evaluation.ray_backend import import_tune, ray_session
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import SuiteError, load_suite
-from agents.outputs import OutputManifest, prepare_output_dir, write_json_atomic
+from agents.outputs import output_dir, write_json_atomic
 from agents.plotting import pyplot, save
 from agents.rl.config import TrainConfig, TrainConfigError, load_train_config, terrain_list, validate
 from quad_uneven_env.config import read_yaml
@@ -333,8 +333,8 @@ def run_sweep(
     :raises RayUnavailable: without the ``distributed`` extra; ``OutputError`` on an unusable ``out``.
     """
     import_tune("sweep")  # without the extra, fail before anything is written
-    out = prepare_output_dir(Path(out), SWEEP_OUTPUTS, overwrite=overwrite, field="--out").resolve()
-    with OutputManifest(out, "sweep"):
+    with output_dir(Path(out).absolute(), "sweep", SWEEP_OUTPUTS, overwrite=overwrite) as manifest:
+        out = manifest.out
         write_json_atomic(
             out / "sweep.json",
             json_safe({"name": sweep.name, "source": sweep.source, "swept": list(sweep.swept),

@@ -26,7 +26,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList, Check
 from tqdm.auto import tqdm
 
 from agents.interrupts import sigterm_as_keyboard_interrupt
-from agents.outputs import OutputManifest, prepare_output_dir
+from agents.outputs import output_dir
 from agents.rl.config import TrainConfig, TrainConfigError, terrain_label, terrain_list
 from agents.rl.learning_curve import plot_learning_curve
 from agents.rl.model_io import write_metadata
@@ -421,8 +421,8 @@ def train(
         init = check_init_model(cfg.init_from, meta)
         if init[0].resolve().is_relative_to(Path(out).resolve()):
             raise TrainConfigError(f"init_from: {init[0]} lies in --out {str(out)!r}, whose outputs this run replaces")
-    out = prepare_output_dir(out, TRAIN_OUTPUTS, overwrite=overwrite, field="--out")
-    with OutputManifest(out, "train"):
+    with output_dir(out, "train", TRAIN_OUTPUTS, overwrite=overwrite) as manifest:
+        out = manifest.out
         torch.set_num_threads(1)  # small networks: threads only contend with the env processes on 2 cores
         (out / "train_config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
         for folder in (out, out / "checkpoints", out / "best"):

@@ -644,3 +644,55 @@ def test_rough_cached_filter_gives_the_uncached_surface_bit_for_bit():
 
     for seed in (3, 3, 11):
         np.testing.assert_array_equal(KIND.generate(p, grid, np.random.default_rng(seed)), direct(seed))
+
+
+# ---------------------------------------------------------------------------------- features beyond the grid
+@pytest.mark.parametrize(
+    ("spec", "end", "fields"),
+    [
+        # the grid ends at x_start + length = -1.5 + 8 = 6.5 m; features start at x0 = 0.6 + 0.02 = 0.62 m
+        ({"kind": "slope", "ramp_length": 3.0}, 0.62 + 2 * 3.0 + 1.0, ("ramp_length", "plateau_length", "length")),
+        ({"kind": "slope", "plateau_length": 6.0}, 0.62 + 2 * 1.5 + 6.0, ("ramp_length", "plateau_length")),
+        ({"kind": "slope", "length": 4.0}, 0.62 + 2 * 1.5 + 1.0, ("length to at least 6.12 m",)),
+        ({"kind": "stairs", "direction": "pyramid", "n_steps": 11}, 0.62 + 21 * 0.3, ("n_steps", "tread", "length")),
+        ({"kind": "stairs", "direction": "up", "n_steps": 30}, 0.62 + 29 * 0.3, ("n_steps",)),
+        ({"kind": "stairs", "direction": "down", "tread": 1.0, "n_steps": 7}, 0.62 + 6 * 1.0, ("tread",)),
+    ],
+    ids=["long ramps", "long plateau", "short grid", "pyramid", "up", "down"],
+)
+def test_a_feature_that_ends_beyond_the_grid_is_refused(spec, end, fields):
+    """Cut off without a word, a ramp down or a flight of steps would never come back down (or reach its top)."""
+    with pytest.raises(ValueError, match="beyond the grid") as err:
+        Terrain(spec)
+    message = str(err.value)
+    assert f"x = {end:g} m" in message and "grid's end x = " in message
+    assert [f for f in fields if f not in message] == [], message
+
+
+@pytest.mark.parametrize(
+    "spec",
+    [
+        {"kind": "slope", "ramp_length": 2.9, "plateau_length": 0.02},  # ends at 6.44 m, on the grid (6.5 m)
+        {"kind": "stairs", "direction": "pyramid", "n_steps": 11, "length": 8.0 + 0.6},  # last edge 6.92 m
+        {"kind": "stairs", "direction": "up", "n_steps": 20, "tread": 0.3},  # last edge 6.32 m
+    ],
+    ids=["slope", "pyramid", "up"],
+)
+def test_a_feature_that_ends_on_the_grid_is_whole(spec):
+    """The last node of the grid sees the feature's end: the slope back at 0, the flight at its last level."""
+    hf = Terrain(spec).heightfield
+    last = hf.heights[:, -1]
+    if spec["kind"] == "slope":
+        assert np.all(last == 0.0)
+    else:
+        top = 0.0 if spec["direction"] == "pyramid" else spec["n_steps"] * 0.08
+        np.testing.assert_allclose(last, top, atol=1e-12)
+
+
+def test_a_huge_broadcast_heightmap_is_refused_before_it_is_copied():
+    """A 10^6 x 10^6 view costs no memory; its float64 copy would be 8 TB: the cap is checked on the shape first."""
+    huge = np.broadcast_to(np.float64(0.0), (10**6, 10**6))
+    with pytest.raises(ValueError, match=r"heights has 1000000 x 1000000 nodes; the cap is 4000000"):
+        parse_terrain_spec({"kind": "heightmap", "heights": huge})
+    with pytest.raises(ValueError, match="cap is 4000000"):
+        Terrain({"kind": "heightmap", "heights": np.broadcast_to(np.float32(0.0), (3001, 3001)), "cell_size": 0.01})

@@ -57,14 +57,14 @@ def _load(value: Any, where: str) -> np.ndarray:
         raise ValueError(f"{where}.heights must be a 2-D array of numbers (m) or a .npy path ({exc})") from exc
     if raw.dtype.kind not in "iuf":  # bools, strings, complex or objects are not heights
         raise ValueError(f"{where}.heights must hold real numbers (m; float or int), got dtype {raw.dtype}")
-    h = np.array(raw, dtype=np.float64)
-    if h.ndim != 2 or h.shape[0] < 2 or h.shape[1] < 2:
+    if raw.ndim != 2 or raw.shape[0] < 2 or raw.shape[1] < 2:
         raise ValueError(
             f"{where}.heights must be a 2-D array (rows along y, columns along x) of at least 2 x 2, "
-            f"got shape {h.shape}"
+            f"got shape {raw.shape}"
         )
-    if h.size > MAX_CELLS:
-        raise ValueError(f"{where}.heights has {h.size} nodes; the cap is {MAX_CELLS}")
+    if raw.shape[0] * raw.shape[1] > MAX_CELLS:  # before the copy: a broadcast view costs no memory, its copy does
+        raise ValueError(f"{where}.heights has {raw.shape[0]} x {raw.shape[1]} nodes; the cap is {MAX_CELLS}")
+    h = np.array(raw, dtype=np.float64)
     if not np.all(np.isfinite(h)):
         raise ValueError(f"{where}.heights must be finite (found NaN or Inf)")
     h.setflags(write=False)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from quad_uneven_env.terrain.grid import Grid, feature_start
+from quad_uneven_env.terrain.grid import Grid, feature_start, shared_grid
 from quad_uneven_env.terrain.kinds.base import Params, TerrainKind
 from quad_uneven_env.terrain.params import Param
 
@@ -23,9 +23,23 @@ def step_levels(p: Params, x: np.ndarray) -> np.ndarray:
     return np.where(k < n, up, np.clip(2 * n - 1 - k, 0, n))
 
 
+def last_edge(p: Params) -> float:
+    """World x (m) of the flight's last step edge: x0 + (n_steps - 1) tread (pyramid: x0 + (2 n_steps - 1) tread)."""
+    edges = 2 * p["n_steps"] if p["direction"] == "pyramid" else p["n_steps"]
+    return feature_start(p) + (edges - 1) * p["tread"]
+
+
 def _check(p: Params, where: str) -> None:
     if p["tread"] < 2.0 * p["cell_size"]:
         raise ValueError(f"{where}.tread must be in [max(0.15, 2 * cell_size), 1] m, got {p['tread']:g}")
+    end = shared_grid(p).xs[-1]
+    if last_edge(p) > end + 1e-9:
+        raise ValueError(
+            f"{where}: the {p['direction']} flight of n_steps={p['n_steps']} treads of {p['tread']:g} m from "
+            f"x = {feature_start(p):g} m has its last step edge at x = {last_edge(p):g} m, beyond the grid's end "
+            f"x = {end:g} m: lower n_steps or tread, or raise length to at least "
+            f"{last_edge(p) + p['cell_size'] - p['x_start']:g} m"
+        )
 
 
 def _generate(p: Params, grid: Grid, rng: np.random.Generator) -> np.ndarray:
@@ -45,7 +59,8 @@ KIND = TerrainKind(
         "(z) each: `up` climbs to n_steps * riser and stays there; `down` descends to -n_steps * riser; "
         "`pyramid` climbs n_steps (the top step is one tread long) and descends back to 0. Constant along y. "
         "A step edge lies on the first node at or beyond x0 + k tread; the riser is the one-cell-wide "
-        "triangle strip before it. Deterministic (the rng is not used)."
+        "triangle strip before it. The last step edge must lie on the grid (else ValueError naming the fields). "
+        "Deterministic (the rng is not used)."
     ),
     params=(
         Param("riser", 0.08, "m", "height of each step", lo=0.0, hi=0.25, lo_open=True),
