@@ -40,7 +40,7 @@ from agents.cli_backend import add_backend_arguments, backend_options
 from agents.cli_baselines import add_baselines_parser
 from agents.evaluation.episode import DEFAULT_WALL_TIME_LIMIT
 from agents.evaluation.policies import SB3_ALGOS
-from agents.evaluation.ray_backend import BACKENDS, DEFAULT_LOCAL_CPUS
+from agents.evaluation.ray_backend import DEFAULT_LOCAL_CPUS
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import Suite, SuiteError, load_suite, suite_from_dict, suite_names
 from agents.interrupts import sigterm_as_keyboard_interrupt
@@ -181,32 +181,7 @@ def add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPar
         "--policy", required=True, help="'zero', 'expert', the path of an SB3 model .zip or of an exported .onnx"
     )
     add_suite_run_arguments(p)
-    p.add_argument(
-        "--workers",
-        type=int,
-        default=None,
-        help=f"parallel episode processes (default 1); with --backend ray and no --address: the CPUs of the local "
-        f"Ray (default {DEFAULT_LOCAL_CPUS})",
-    )
-    p.add_argument(
-        "--backend",
-        choices=BACKENDS,
-        default="pool",
-        help="where the episodes run: 'pool' (processes on this machine, default) or 'ray' (one Ray task per "
-        "episode; needs the 'distributed' extra; docs/distributed.md)",
-    )
-    p.add_argument(
-        "--address",
-        default=None,
-        help="with --backend ray: the Ray cluster to join ('auto', HOST:6379 or ray://HOST:10001); default: a "
-        "local Ray",
-    )
-    p.add_argument(
-        "--ship-code",
-        action="store_true",
-        help="with --backend ray: upload this source tree (packages and configs) to the Ray workers instead of "
-        "using the package installed on each node",
-    )
+    add_backend_arguments(p)
     p.add_argument(
         "--video",
         action="store_true",
@@ -313,17 +288,8 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
         raise ValueError(f"--expert-config is for --policy expert only, got --policy {args.policy!r}")
     if args.episodes is not None and args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
-    if (args.address is not None or args.ship_code) and args.backend != "ray":
-        raise ValueError("--address and --ship-code need --backend ray")
-    if args.workers is not None and args.address is not None:
-        raise ValueError(
-            f"--workers sets the processes here or the CPUs of a local Ray; the cluster given by --address "
-            f"{args.address!r} has its own CPUs: drop --workers {args.workers}"
-        )
+    workers = backend_options(args)["workers"]
     _model_file_options(args)
-    workers = args.workers if args.workers is not None else DEFAULT_LOCAL_CPUS if args.backend == "ray" else 1
     if not args.episode_wall_limit > 0:  # also refuses nan
         raise ValueError(f"--episode-wall-limit must be a number > 0 (s), got {args.episode_wall_limit}")
     suite = _suite_option(args.suite)
