@@ -298,16 +298,10 @@ def distribute_qp(normals, mu, J, mask, r, lower, tau, F, cones):  # pragma: no 
     n, n_in = 3 * p, 5 * p
     H, g, A, b = np.empty((n, n)), np.empty(n), np.zeros((6, n)), np.empty(6)
     C, l, x = np.empty((n_in, n)), np.empty(n_in), np.empty(n)
-    if IK.qp_fill_with_cones(normals, mu, J, mask, r, F, cones, lower, H, g, A, b, C, l):
-        return QP_INSIDE
-    status = solve_qp(H, g, A, b, C, l, x)
-    if status == QP_FAILED:
-        return QP_FAILED
-    if status == QP_SOLVED and IK.qp_apply(x, C, l, A, b, J, mask, r, tau, F):
-        return QP_OPTIMAL
     wide = wide_mu(mu)
-    if wide > mu:  # infeasible in the narrow cones: the wide ones
-        if IK.qp_fill_with_cones(normals, wide, J, mask, r, F, cones, lower, H, g, A, b, C, l):
+    for attempt in range(2 if wide > mu else 1):  # the narrow cones, then (infeasible there) the wide ones
+        cone_mu = mu if attempt == 0 else wide
+        if IK.qp_fill_with_cones(normals, cone_mu, J, mask, r, F, cones, lower, H, g, A, b, C, l):
             return QP_INSIDE
         status = solve_qp(H, g, A, b, C, l, x)
         if status == QP_FAILED:
