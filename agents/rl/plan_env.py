@@ -32,7 +32,6 @@ Usage::
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
@@ -45,7 +44,7 @@ from agents.expert import ExpertConfig, ExpertPolicy
 from agents.rl.expert_features import EXPERT_FEATURE_FIELDS, augmented_space, expert_features
 from agents.rl.plan_config import PLAN_ACTION_SIZE, PlanConfig, check_plan_action, cycle_config
 from agents.rl.plan_features import PLAN_FEATURE_FIELDS, augmented_plan_space, plan_features
-from agents.rl.residual_config import expert_overrides
+from agents.rl.residual_config import expert_overrides, split_config
 from quad_uneven_env.env import QuadUnevenEnv
 from quad_uneven_env.fields import excerpt
 
@@ -162,14 +161,7 @@ def make_plan_env(config: PlanConfig | Mapping[str, Any] | None = None, **kwargs
     """
     if "controller" in kwargs:
         raise ValueError("controller is not accepted by the plan env: the expert is its controller")
-    names = {f.name for f in dataclasses.fields(PlanConfig)}
-    fields = {k: kwargs.pop(k) for k in list(kwargs) if k in names}
-    if fields and config is not None:
-        raise ValueError(
-            f"give the plan env's settings in config or as keywords, not both: got config and {sorted(fields)}"
-        )
-    if not isinstance(config, PlanConfig):
-        config = PlanConfig.from_dict(fields if config is None else config)
+    config = split_config(PlanConfig, config, kwargs, "plan env's settings")
     return PlanExpertEnv(QuadUnevenEnv(**kwargs), config)
 
 

@@ -144,6 +144,19 @@ class ResidualConfig:
         return from_mapping(cls, values, where)
 
 
+def split_config(cls: type, config: Any, kwargs: dict[str, Any], what: str) -> Any:
+    """The ``cls`` settings of an env factory: ``config`` (an instance, a mapping of its fields, or None), or the
+    fields of ``cls`` popped from ``kwargs`` (the rest are the base env's arguments).
+
+    :raises ValueError: when both ``config`` and such fields are given, or on a bad field (named).
+    """
+    names = {f.name for f in dataclasses.fields(cls)}
+    fields = {k: kwargs.pop(k) for k in list(kwargs) if k in names}
+    if fields and config is not None:
+        raise ValueError(f"give the {what} in config or as keywords, not both: got config and {sorted(fields)}")
+    return config if isinstance(config, cls) else cls.from_dict(fields if config is None else config)
+
+
 __all__ = [
     "DEFAULT_RESIDUAL_SCALE",
     "RESIDUAL_BASES",
@@ -154,4 +167,5 @@ __all__ = [
     "check_residual_scale",
     "expert_config",
     "expert_overrides",
+    "split_config",
 ]

@@ -38,7 +38,6 @@ Usage::
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
@@ -57,6 +56,7 @@ from agents.rl.residual_config import (
     check_residual_legs,
     check_residual_scale,
     expert_overrides,
+    split_config,
 )
 from quad_uneven_env.env import QuadUnevenEnv
 from quad_uneven_env.fields import excerpt
@@ -310,14 +310,7 @@ def make_residual_env(config: ResidualConfig | Mapping[str, Any] | None = None, 
     """
     if "controller" in kwargs:
         raise ValueError("controller is not accepted by the residual env: expert plus residual is its controller")
-    names = {f.name for f in dataclasses.fields(ResidualConfig)}
-    fields = {k: kwargs.pop(k) for k in list(kwargs) if k in names}
-    if fields and config is not None:
-        raise ValueError(
-            f"give the residual's settings in config or as keywords, not both: got config and {sorted(fields)}"
-        )
-    if not isinstance(config, ResidualConfig):
-        config = ResidualConfig.from_dict(fields if config is None else config)
+    config = split_config(ResidualConfig, config, kwargs, "residual's settings")
     return ResidualExpertEnv(QuadUnevenEnv(**kwargs), config)
 
 
