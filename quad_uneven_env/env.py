@@ -28,6 +28,7 @@ from quad_uneven_env.command import CommandConfig, CommandSchedule, command_argu
 from quad_uneven_env.config import HeightScanConfig, RewardWeights, TerminationLimits
 from quad_uneven_env.env_config import EnvConfig, arguments_table
 from quad_uneven_env.fields import excerpt
+from quad_uneven_env.history import ProprioHistory, history_fields
 from quad_uneven_env.measurement import StepMeasurement
 from quad_uneven_env.measurement_kernels import clip_finite_into
 from quad_uneven_env.observations import (
@@ -216,19 +217,22 @@ class QuadUnevenEnv(gym.Env):
         self._fall = FallCheck(config.termination)
 
         self.action_space = spaces.Box(-1.0, 1.0, (C.N_JOINTS,), dtype=np.float32)
-        self._fields = observation_fields(
+        # the measured fields, then the proprioceptive history the env keeps of them
+        measured = observation_fields(
             config.height_scan, C.N_JOINTS, command=self._command is not None, course_frame=config.course_frame
         )
+        self._fields = measured + history_fields(measured, config.proprio_history)
         self.observation_structure: dict[str, slice] = observation_structure(self._fields)
         self.observation_space = observation_space(self._fields)
         # Row 0 of the terrain queries is the point under the base, the rest the height scan grid.
         self._scan_B = np.vstack([np.zeros((1, 2)), height_scan_points_B(config.height_scan)])
-        space = self.observation_space
+        space = observation_space(measured)
         self._meas = StepMeasurement(
-            self.model, self.data, self.idx, config.robot.foot_radius, self._scan_B, self._fields, space.low, space.high
+            self.model, self.data, self.idx, config.robot.foot_radius, self._scan_B, measured, space.low, space.high
         )
         servo = config.action_mode == "joint_pd"
-        self._world = SimulatedWorld(self.model, self.idx, config.randomization, servo, self._dt, self._fields, space)
+        self._world = SimulatedWorld(self.model, self.idx, config.randomization, servo, self._dt, measured, space)
+        self._history = ProprioHistory(observation_structure(measured), config.proprio_history)
 
         self.render_mode = config.render_mode
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.dt))
@@ -240,7 +244,7 @@ class QuadUnevenEnv(gym.Env):
         self._tau_frac = np.zeros(C.N_JOINTS)  # the reward's scratch buffers
         self._joint_power = np.zeros(C.N_JOINTS)
         self._prev_action = np.zeros(C.N_JOINTS)
-        self._last_obs = np.zeros(space.shape, dtype=np.float32)
+        self._last_obs = np.zeros(self.observation_space.shape, dtype=np.float32)
         self._last_index_norm = self._start_x = self._mg = 0.0
         self._episode_steps = 0
         self._needs_reset = True
@@ -256,6 +260,7 @@ class QuadUnevenEnv(gym.Env):
     pd_action_scale: float = _argument("pd_action_scale", "rad per unit of action (``joint_pd``).")
     episode_step_cap: int = _argument("episode_step_cap", "control steps after which the env truncates an episode.")
     course_frame: bool = _argument("course_frame", "the observation ends with the course frame (**Observation**).")
+    proprio_history: int = _argument("proprio_history", "control steps of proprioception kept (**Observation**).")
     reward_weights: RewardWeights = _argument("reward_weights", "the reward's weights (**Reward**).")
     termination: TerminationLimits = _argument("termination", "when an episode ends in a fall (**Episode end**).")
     height_scan: HeightScanConfig = _argument("height_scan", "the observation's terrain scan grid.")
@@ -378,7 +383,7 @@ class QuadUnevenEnv(gym.Env):
         meas = self._measure()
         self._start_x = float(meas.cog[0])
         self._last_index_norm = meas.index / self._mg
-        self._last_obs = self._world.observe(meas.obs)
+        self._last_obs = self._history.reset(self._world.observe(meas.obs))
         names = REWARD_TERMS if self._command is None else REWARD_TERMS + COMMAND_REWARD_TERMS
         info = self._info(meas, terms=dict.fromkeys(names, 0.0), diverged=False, reason=None)
         return self._last_obs.copy(), info
@@ -433,7 +438,7 @@ class QuadUnevenEnv(gym.Env):
         terms = self._reward_terms(x_before, index_norm, fell, diverged, command)
         reward = float(sum(terms.values()))
         if not diverged:  # after a failed step the observation is the last good one (that of the restored state)
-            self._last_obs = self._world.observe(meas.obs)
+            self._last_obs = self._history.push(self._world.observe(meas.obs), self._last_obs)
             self._last_index_norm = index_norm
         info = self._info(meas, terms, diverged, reason)
         if self.render_mode == "human":

@@ -18,6 +18,7 @@ from quad_uneven_env.actuation import ACTION_MODES
 from quad_uneven_env.command import CommandConfig, load_command
 from quad_uneven_env.config import HeightScanConfig, RewardWeights, TerminationLimits
 from quad_uneven_env.fields import check_fields, excerpt, from_mapping, param, params_of
+from quad_uneven_env.history import MAX_HISTORY
 from quad_uneven_env.randomization import RandomizationConfig, load_randomization, randomization_for_robot
 from quad_uneven_env.rendering import RENDER_MODES
 from quad_uneven_env.rewards import COMMAND_REWARD_TERMS
@@ -119,6 +120,15 @@ class EnvConfig:
         "-",
         "append the trunk's heading and sideways offset on the course to the observation (not with ``command``)",
         kind="bool",
+    )
+
+    proprio_history: int = param(
+        0,
+        "control steps",
+        "append the joint angles, velocities and actions of this many previous control steps to the observation",
+        kind="int",
+        lo=0,
+        hi=MAX_HISTORY,
     )
 
     def __post_init__(self) -> None:

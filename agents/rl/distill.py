@@ -35,6 +35,7 @@ the aggregated labels), written as a ``quad-uneven train`` folder: ``model.zip``
 
 from __future__ import annotations
 
+import collections
 import concurrent.futures
 import dataclasses
 import json
@@ -307,7 +308,8 @@ class RolloutJob:
 def rollout(job: RolloutJob) -> dict[str, Any]:
     """Run one episode: the expert or the student acts (see the module docstring); every step is labelled.
 
-    :return: ``obs`` (N, n_obs) float32 (``prev_action`` holds the previous executed action), ``labels`` (N, 12),
+    :return: ``obs`` (N, n_obs) float32 (``prev_action`` holds the previous executed action and
+        ``prev_action_history`` those before it), ``labels`` (N, 12),
         ``student_action`` (N, 12) (zeros without a student), ``student_acted`` (N,) bool, and the episode's
         ``distance`` (m), ``success``, ``fell``, ``reason``, ``steps``, ``seed``, ``entry``.
     """
@@ -325,12 +327,17 @@ def rollout(job: RolloutJob) -> dict[str, Any]:
     rng = np.random.default_rng(list(job.rng_seed))
     obs, info = env.reset(seed=task.seed)
     prev = u.observation_structure["prev_action"]
+    prev_history = u.observation_structure.get("prev_action_history")
     rows_obs, rows_label, rows_student, rows_acted = [], [], [], []
     executed = np.zeros(C.N_JOINTS, dtype=np.float32)
+    # the actions executed before the previous one, oldest first (the env's history holds the student's actions)
+    earlier = collections.deque([executed] * u.proprio_history, maxlen=max(1, u.proprio_history))
     reason, fell, success = None, False, False
     while True:
         obs = obs.copy()
         obs[prev] = executed  # what the student's env shows: the previous executed joint_pd action
+        if prev_history is not None:
+            obs[prev_history] = np.concatenate(earlier)
         t = float(u.data.time)
         ref, _ = teacher.expert.planned_now(t)
         student_action = np.zeros(C.N_JOINTS, dtype=np.float32)
@@ -344,6 +351,7 @@ def rollout(job: RolloutJob) -> dict[str, Any]:
         rows_label.append(label)
         rows_student.append(student_action)
         rows_acted.append(student_acts)
+        earlier.append(executed)
         executed = student_action if student_acts else label
         obs = obs_next
         if info["distance"] >= job.goal_distance:

@@ -314,3 +314,21 @@ def _tiny_suite_file(tmp_path):
     path = tmp_path / "tiny.yaml"
     path.write_text(yaml.safe_dump(TINY))
     return str(path)
+
+
+def test_the_rollouts_history_of_actions_is_the_executed_one():
+    """With ``proprio_history``, the student sees the actions executed before (the expert's labels while it acts,
+    its own where it acts): the env's own record holds the action passed to ``step``, which the teacher ignores."""
+    from agents.rl.distill import RolloutJob, rollout
+
+    cfg = tiny_config(env_kwargs={"proprio_history": 3})
+    suite = suite_from_dict(TINY, source="test")
+    task = episode_tasks(suite, 1, 1000)[0]
+    res = rollout(RolloutJob(task, suite.goal_distance, 0.3, cfg, 1.0, None, (0,)))
+    env = gym.make("QuadUneven-v0", terrain="flat", **cfg.student_env_kwargs())
+    st = env.unwrapped.observation_structure
+    executed = np.vstack([np.zeros((4, 12), np.float32), res["labels"]])  # zeros before the first step
+    for n in range(res["steps"]):
+        np.testing.assert_array_equal(res["obs"][n][st["prev_action_history"]].reshape(3, 12), executed[n : n + 3])
+        np.testing.assert_array_equal(res["obs"][n][st["prev_action"]], executed[n + 3])
+    assert np.abs(res["obs"][-1][st["prev_action_history"]]).max() > 0.05
