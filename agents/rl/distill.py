@@ -63,7 +63,9 @@ from quad_uneven_env.fields import excerpt
 STUDENT_ENV_FIELDS = ("action_mode", "pd_kp", "pd_kd", "pd_action_scale", "gait_period", "course_frame", "height_scan")
 """``QuadUneven-v0`` arguments of the student's env that :class:`DistillConfig`'s own fields set."""
 
-DISTILL_OUTPUTS = ("model.zip", "model_obs_norm.npz", "rl_meta.json", "distill_summary.json", "distill_curve.png")
+DISTILL_OUTPUTS = (
+    "model.zip", "model_obs_norm.npz", "rl_meta.json", "distill_summary.json", "distill_curve.png", "rounds",
+)  # fmt: skip
 """Top-level names ``distill`` writes in its ``--out`` (``--overwrite`` deletes what the manifest lists)."""
 
 NORM_EPSILON = 1e-8
@@ -476,7 +478,9 @@ def _metadata(cfg: DistillConfig, suite: Suite, robot: str) -> dict[str, Any]:
 
 
 def save_student(model: Any, norm: ObsNormalization, out: Path, meta: dict[str, Any]) -> Path:
-    """Write ``model.zip``, ``model_obs_norm.npz`` and ``rl_meta.json`` into ``out``; :return: the model's path."""
+    """Write ``model.zip``, ``model_obs_norm.npz`` and ``rl_meta.json`` into ``out`` (created); :return: the model's
+    path."""
+    out.mkdir(parents=True, exist_ok=True)
     path = out / "model.zip"
     model.save(path)
     norm.save(norm_path(path))
@@ -502,7 +506,8 @@ def distill(
     ``cfg.seed_offset`` (:func:`agents.evaluation.run.suite_episodes`: a suite with ``scale: leg_length`` is scaled
     to the robot); the teacher is :meth:`DistillConfig.expert_config`, and ``rl_meta.json`` records the robot.
 
-    Writes into ``out``: the student (``model.zip``, ``model_obs_norm.npz``, ``rl_meta.json``, after every round),
+    Writes into ``out``: the student (``model.zip``, ``model_obs_norm.npz``, ``rl_meta.json``, after every round;
+    each round's also in ``rounds/round_K/``, a folder ``evaluate`` reads, for selection on validation episodes),
     ``distill_summary.json`` (per round: data, rollouts, losses) and ``distill_curve.png``.
 
     :return: the summary.
@@ -573,6 +578,7 @@ def distill(
                 + f"; loss {losses[-1]:.4f} on {len(all_obs)} samples"
             )
             save_student(model, norm, out, meta)
+            save_student(model, norm, out / "rounds" / f"round_{k}", meta)  # each round's student, to select from
             summary["wall_time_s"] = time.perf_counter() - start
             (out / "distill_summary.json").write_text(json.dumps(summary, indent=2))
             manifest.add_new()

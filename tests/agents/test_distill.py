@@ -168,6 +168,13 @@ def test_a_tiny_run_writes_a_train_folder_that_evaluate_and_export_read(tiny_run
         "course_frame": True,
     }  # fmt: skip
     assert policy_obs_size(out / "model.zip") == 137  # the default layout (134) + course_heading + course_lateral
+    # each round's student in rounds/round_K, the last one the folder's own
+    for k in (0, 1):
+        assert read_metadata(out / "rounds" / f"round_{k}" / "model.zip") == meta
+    last, final = policy_weights(out / "rounds" / "round_1" / "model.zip"), policy_weights(out / "model.zip")
+    first = policy_weights(out / "rounds" / "round_0" / "model.zip")
+    assert all(np.array_equal(last[k], final[k]) for k in final)
+    assert not all(np.array_equal(first[k], final[k]) for k in final)
 
     # the loaded policy acts as the student did in the rollouts (numpy forward == SB3 predict)
     from agents.rl.distill import mlp_forward, policy_params
