@@ -561,6 +561,9 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
     )
     p.add_argument("--episodes", type=int, default=2, help="episodes per suite entry per round (default 2)")
     p.add_argument("--epochs", type=int, default=20, help="passes over the aggregated data after each round (20)")
+    p.add_argument(
+        "--net-arch", default="256,256", help="comma-separated hidden layer sizes of the policy (default 256,256)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the network, minibatches and draws (default 0)")
     p.add_argument(
         "--seed-offset", type=int, default=1000, help="added to the suite's seeds in the rollouts (default 1000)"
@@ -608,6 +611,21 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
     return p
 
 
+MAX_LAYER_SIZE = 4096
+"""The widest hidden layer ``--net-arch`` takes."""
+
+
+def _layer_sizes(text: str, option: str) -> tuple[int, ...]:
+    """``"256,256"`` -> (256, 256); :raises ValueError: naming ``option`` unless 1-8 integers in [1, 4096]."""
+    parts = text.split(",")
+    if not 1 <= len(parts) <= 8 or not all(p.strip().isdigit() and 1 <= int(p) <= MAX_LAYER_SIZE for p in parts):
+        raise ValueError(
+            f"{option} must be 1 to 8 comma-separated layer sizes in [1, {MAX_LAYER_SIZE}], e.g. 256,256; got "
+            f"{excerpt(text)}"
+        )
+    return tuple(int(p) for p in parts)
+
+
 def run_distill_command(args: argparse.Namespace) -> int:
     """Handler of ``quad-uneven distill``: 0 on success, 2 on an invalid option, suite or DIR."""
     for name, value, low in (("--dagger-rounds", args.dagger_rounds, 0), ("--episodes", args.episodes, 1),
@@ -620,6 +638,7 @@ def run_distill_command(args: argparse.Namespace) -> int:
     if not 0.0 <= args.beta_decay <= 1.0:
         raise ValueError(f"--beta-decay must be in [0, 1], got {args.beta_decay}")
     expert = _json_object(args.expert_config, "--expert-config")
+    net_arch = _layer_sizes(args.net_arch, "--net-arch")
     height_scan = None if args.height_scan is None else _json_object(args.height_scan, "--height-scan")
     env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
     if args.robot is not None:
@@ -636,7 +655,7 @@ def run_distill_command(args: argparse.Namespace) -> int:
 
     cfg = DistillConfig(
         dagger_rounds=args.dagger_rounds, beta_decay=args.beta_decay, episodes=args.episodes, epochs=args.epochs,
-        seed=args.seed, seed_offset=args.seed_offset, budget_min=args.budget_min, expert=expert,
+        seed=args.seed, seed_offset=args.seed_offset, budget_min=args.budget_min, expert=expert, net_arch=net_arch,
         course_frame=args.course_frame, height_scan=height_scan, env_kwargs=env_kwargs, **backend,
     )  # fmt: skip
     try:

@@ -279,6 +279,10 @@ def policy_weights(path):
         (["--expert-config", '{"stride": -1}'], "stride"),
         (["--suite", "no_such_suite"], "no_such_suite"),
         (["--suite", "command"], "command or waypoints"),
+        (["--net-arch", "256,,256"], "--net-arch"),
+        (["--net-arch", "0"], "--net-arch"),
+        (["--net-arch", "99999"], "--net-arch"),
+        (["--net-arch", "-5,3"], "--net-arch"),
     ],
 )
 def test_bad_distill_options_exit_2_with_one_line(tmp_path, capsys, extra, field):
@@ -300,19 +304,20 @@ def test_a_non_empty_out_is_refused(tmp_path, capsys):
 # ------------------------------------------------------------------------------------------ height scan
 def test_the_height_scan_option_in_a_tiny_run(tmp_path):
     """Through the CLI: a 0.4 x 0.2 m height scan at 0.05 m (9 x 5 = 45 points instead of 77)
-    is the student's observation (137 - 77 + 45 = 105 inputs) and is recorded for evaluate."""
+    is the student's observation (137 - 77 + 45 = 105 inputs) and is recorded for evaluate; one hidden layer of 16."""
     from agents.rl.model_io import read_metadata
 
     scan = {"size_x": 0.4, "size_y": 0.2, "resolution": 0.05}
     assert main([
         "distill", "--suite", _tiny_suite_file(tmp_path), "--out", str(tmp_path / "o"), "--dagger-rounds", "1",
-        "--episodes", "1", "--epochs", "1",
+        "--episodes", "1", "--epochs", "1", "--net-arch", "16",
         "--height-scan", json.dumps(scan),
     ]) == 0  # fmt: skip
     assert policy_obs_size(tmp_path / "o" / "model.zip") == 105
     assert read_metadata(tmp_path / "o" / "model.zip")["env_kwargs"]["height_scan"] == scan
     summary = json.loads((tmp_path / "o" / "distill_summary.json").read_text())
     assert summary["config"]["height_scan"] == scan and len(summary["rounds"]) == 2
+    assert summary["config"]["net_arch"] == [16]
 
 
 def _tiny_suite_file(tmp_path):
