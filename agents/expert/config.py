@@ -159,12 +159,15 @@ SCALED_ROBOT_FRICTION = 0.5
 """-: the friction of the force QP's cones on a robot whose motors have little margin over its weight
 (:func:`motor_load` at least :data:`NARROW_CONES_MAX_LOAD`; ``ExpertConfig.friction``, the narrow cones, otherwise).
 Cones of 0.25 make the QP trade friction for joint torque: on rough ground at their scale the stance peaks rise
-from 0.72 to 0.82 of the motor limit (ANYmal C's hip flexion), 0.58 to 0.69 (Go1's), 0.75 to 0.77 (HyQ's),
-where the paper robot's stay at 0.33; those robots keep the wider cones (docs/robustness.md#every-robot)."""
+from 0.72 to 0.82 of the motor limit (ANYmal C's hip flexion) and 0.75 to 0.77 (HyQ's), whose weakest motors in
+the ``hard`` world (0.7 of their torque) have no such margin; those robots keep the wider cones
+(docs/robustness.md#every-robot)."""
 
-NARROW_CONES_MAX_LOAD = 2.0
+NARROW_CONES_MAX_LOAD = 3.5
 """-: the largest :func:`motor_load` at which the expert plans with the narrow cones of ``ExpertConfig.friction``
-(the paper robot: 1.72; Go1 2.31, Solo12 2.95, HyQ 3.95, ANYmal C 4.17)."""
+(the paper robot: 1.72, Go1 2.31, Solo12 2.95 plan with them; HyQ 3.95 and ANYmal C 4.17 do not). In the ``hard``
+world at their scale Go1 and Solo12 walk its friction-0.37 and 0.40 worlds with them, which they fall in with cones of
+0.5 (docs/robustness.md#every-robot)."""
 
 
 def motor_load(robot: RobotDescription) -> float:

@@ -27,15 +27,15 @@ def test_the_paper_robot_gets_the_defaults():
     ("name", "load", "friction"),
     [
         ("paper", 1.717, 0.25),
-        ("go1", 2.310, 0.5),
-        ("solo12", 2.948, 0.5),
+        ("go1", 2.310, 0.25),
+        ("solo12", 2.948, 0.25),
         ("hyq", 3.950, 0.5),
         ("anymal_c", 4.166, 0.5),
     ],
 )
 def test_the_cones_are_narrow_only_where_the_motors_hold_the_robot_easily(name, load, friction):
-    """The paper robot: 50 kg x 9.81 m/s^2 x 0.42 m / 120 N m = 1.717 (below 2: cones of 0.25); the others' weakest
-    hip-flexion or knee motor works harder (Go1: 13.1 kg, 0.426 m, 23.7 N m: 2.31) and keeps cones of 0.5."""
+    """The paper robot: 50 kg x 9.81 m/s^2 x 0.42 m / 120 N m = 1.717 (below 3.5: cones of 0.25; Go1: 13.1 kg,
+    0.426 m, 23.7 N m: 2.31); HyQ's and ANYmal C's weakest hip-flexion or knee motors work harder and keep 0.5."""
     robot = load_robot(name)
     assert motor_load(robot) == pytest.approx(load, abs=1e-3)
     assert ExpertConfig.for_robot(robot).friction == friction
