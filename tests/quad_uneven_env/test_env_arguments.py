@@ -79,6 +79,9 @@ BAD = [
     ("command", "fast", "command must be None or a mapping"),
     ("course_frame", 1, "course_frame must be true or false, got 1 of type int"),
     ("course_frame", "yes", "course_frame must be true or false, got 'yes' of type str"),
+    ("proprio_history", -1, "proprio_history must be an integer in [0, 50] (control steps), got -1"),
+    ("proprio_history", 51, "proprio_history must be an integer in [0, 50] (control steps), got 51"),
+    ("proprio_history", True, "proprio_history must be an integer in [0, 50] (control steps), got True of type bool"),
     ("height_scan", {"size_x": "1"}, "height_scan.size_x must be a number in [0, 10] (m), got '1' of type str"),
     (
         "height_scan",
