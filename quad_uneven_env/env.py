@@ -87,7 +87,9 @@ class QuadUnevenEnv(gym.Env):
     command): ``course_heading`` (2, [-1, 1]: sin and cos of the trunk's yaw about world z, measured from the
     course's +x axis, the direction the robot walks and ``info["distance"]`` counts) and ``course_lateral``
     (1, [-10, 10] m: the trunk origin's world y minus the spawn point's, its sideways offset from the course's
-    centre line). The default observation does not change.
+    centre line). The default observation does not change. With ``proprio_history=H`` (0-50 control steps)
+    ``joint_pos_history``, ``joint_vel_history`` and ``prev_action_history`` (H x 12 each: the H previous
+    observations' values, oldest first; :mod:`quad_uneven_env.history`) are appended after everything else.
 
     **Reward**: the sum of named terms (weights ``reward_weights``, see
     :class:`quad_uneven_env.config.RewardWeights`), each reported in ``info["reward_terms"]``:
