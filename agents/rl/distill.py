@@ -100,10 +100,11 @@ class DistillConfig:
     """hidden layer sizes of the policy (and of the untrained value) network."""
     log_std_init: float = -1.0
     """initial log standard deviation of the Gaussian policy (for a PPO fine-tuning; unused by the labels)."""
-    pd_kp: float = 100.0
-    """N m/rad, the student's servo stiffness (``joint_pd``'s ``pd_kp``)."""
-    pd_kd: float = 3.0
-    """N m s/rad, the student's servo damping (``pd_kd``)."""
+    pd_kp: float | None = None
+    """N m/rad, the student's servo stiffness (``joint_pd``'s ``pd_kp``; None: the robot's default, 100 for the
+    paper robot: :func:`quad_uneven_env.env_config.default_pd_gains`)."""
+    pd_kd: float | None = None
+    """N m s/rad, the student's servo damping (``pd_kd``; None: the robot's default, 3 for the paper robot)."""
     pd_action_scale: float = 1.0
     """rad per unit of action (``pd_action_scale``; the labels stay within [-1, 1] at 1.0)."""
     gait_period: float | None = None
@@ -141,8 +142,8 @@ class DistillConfig:
             ("batch_size", self.batch_size >= 1, "an integer >= 1"),
             ("learning_rate", self.learning_rate > 0, "a number > 0"),
             ("net_arch", len(self.net_arch) >= 1 and all(n >= 1 for n in self.net_arch), "sizes >= 1"),
-            ("pd_kp", self.pd_kp > 0, "a number > 0 (N m/rad)"),
-            ("pd_kd", self.pd_kd >= 0, "a number >= 0 (N m s/rad)"),
+            ("pd_kp", self.pd_kp is None or self.pd_kp > 0, "None or a number > 0 (N m/rad)"),
+            ("pd_kd", self.pd_kd is None or self.pd_kd >= 0, "None or a number >= 0 (N m s/rad)"),
             ("pd_action_scale", 0 < self.pd_action_scale <= math.pi, "in (0, pi] (rad)"),
             ("gait_period", self.gait_period is None or self.gait_period > 0, "None or a number > 0 (s)"),
             ("course_frame", isinstance(self.course_frame, bool), "True or False"),
@@ -185,13 +186,21 @@ class DistillConfig:
         """s: the observation's gait clock period."""
         return float(self.gait_period or sum(self.expert_config().durations))
 
+    def servo_gains(self) -> tuple[float, float]:
+        """(N m/rad, N m s/rad): the student's servo stiffness and damping, the robot's defaults where not given."""
+        from quad_uneven_env.env_config import default_pd_gains
+
+        kp, kd = default_pd_gains(self.robot())
+        return (kp if self.pd_kp is None else self.pd_kp), (kd if self.pd_kd is None else self.pd_kd)
+
     def student_env_kwargs(self) -> dict[str, Any]:
         """The ``QuadUneven-v0`` arguments the student acts with (recorded in ``rl_meta.json``)."""
+        kp, kd = self.servo_gains()
         return {
             **self.env_kwargs,
             "action_mode": "joint_pd",
-            "pd_kp": self.pd_kp,
-            "pd_kd": self.pd_kd,
+            "pd_kp": kp,
+            "pd_kd": kd,
             "pd_action_scale": self.pd_action_scale,
             "gait_period": self.clock_period(),
             **({"course_frame": True} if self.course_frame else {}),
@@ -324,7 +333,8 @@ def rollout(job: RolloutJob) -> dict[str, Any]:
         **{**cfg.student_env_kwargs(), "action_mode": "torque"},
     )
     u = env.unwrapped
-    teacher = DaggerTeacher(env, cfg.expert_config(), cfg.pd_kp, cfg.pd_kd, cfg.pd_action_scale)
+    kp, kd = cfg.servo_gains()
+    teacher = DaggerTeacher(env, cfg.expert_config(), kp, kd, cfg.pd_action_scale)
     u.set_controller(teacher)
     rng = np.random.default_rng(list(job.rng_seed))
     obs, info = env.reset(seed=task.seed)
@@ -348,7 +358,7 @@ def rollout(job: RolloutJob) -> dict[str, Any]:
         student_acts = job.student is not None and rng.random() >= job.beta
         teacher.begin_step(student_acts)
         obs_next, _, terminated, truncated, info = env.step(student_action)
-        label = expert_label(ref.q_joints, teacher.first_tau, u.action_map.home_joints, cfg.pd_kp, cfg.pd_action_scale)
+        label = expert_label(ref.q_joints, teacher.first_tau, u.action_map.home_joints, kp, cfg.pd_action_scale)
         rows_obs.append(obs)
         rows_label.append(label)
         rows_student.append(student_action)

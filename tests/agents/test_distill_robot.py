@@ -14,6 +14,7 @@ from agents.evaluation.policies import PolicyError
 from agents.evaluation.run import evaluate
 from agents.evaluation.suites import suite_from_dict
 from agents.expert import ExpertConfig
+from quad_uneven_env.env_config import default_pd_gains
 from quad_uneven_env.robot.description import load_robot
 
 pytest.importorskip("stable_baselines3")
@@ -46,6 +47,9 @@ def test_a_go1_student_learns_on_the_scaled_suite_with_the_scaled_teacher(go1_ru
     assert meta["robot"] == "go1" and meta["env_kwargs"]["robot"] == "go1"
     teacher = ExpertConfig.for_robot(go1, {"recovery": False})
     assert meta["env_kwargs"]["gait_period"] == pytest.approx(sum(teacher.durations))
+    # the robot's own servo (26.6 N m/rad, 0.80 N m s/rad for 13 kg), not the paper robot's 100 and 3
+    assert (meta["env_kwargs"]["pd_kp"], meta["env_kwargs"]["pd_kd"]) == default_pd_gains(go1)
+    assert meta["env_kwargs"]["pd_kp"] == pytest.approx(26.575, abs=1e-3)
     # the suite as evaluate --scale-terrain runs it: lengths x factor, time limit x sqrt(factor)
     assert meta["terrain"][1]["amplitude"] == pytest.approx(0.04 * factor)
     assert meta["max_episode_steps"] == round(0.6 * math.sqrt(factor) / 0.02)
