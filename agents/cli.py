@@ -34,7 +34,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from agents.cli_backend import add_backend_arguments, backend_options
 from agents.cli_baselines import add_baselines_parser
@@ -274,8 +274,8 @@ def _suite_option(name: str) -> Suite:
         raise SuiteError(f"invalid suite {name!r}: {e}") from None
 
 
-def run_evaluate_command(args: argparse.Namespace) -> int:
-    """Handler of ``quad-uneven evaluate``: 0 on success, 2 on an invalid suite, policy or argument."""
+def _env_kwargs_option(args: argparse.Namespace) -> dict[str, Any]:
+    """The env kwargs of ``--env-kwargs`` with ``--robot`` as ``robot``; :raises ValueError: if they name two robots."""
     env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
     if args.robot is not None:
         if env_kwargs.get("robot", args.robot) != args.robot:
@@ -283,6 +283,12 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
                 f"--robot {excerpt(args.robot)} and --env-kwargs robot {excerpt(env_kwargs['robot'])} differ: give one"
             )
         env_kwargs["robot"] = args.robot
+    return env_kwargs
+
+
+def run_evaluate_command(args: argparse.Namespace) -> int:
+    """Handler of ``quad-uneven evaluate``: 0 on success, 2 on an invalid suite, policy or argument."""
+    env_kwargs = _env_kwargs_option(args)
     expert_config = _json_object(args.expert_config, "--expert-config")
     if expert_config and args.policy != "expert":
         raise ValueError(f"--expert-config is for --policy expert only, got --policy {args.policy!r}")
@@ -640,13 +646,7 @@ def run_distill_command(args: argparse.Namespace) -> int:
     expert = _json_object(args.expert_config, "--expert-config")
     net_arch = _layer_sizes(args.net_arch, "--net-arch")
     height_scan = None if args.height_scan is None else _json_object(args.height_scan, "--height-scan")
-    env_kwargs = _json_object(args.env_kwargs, "--env-kwargs")
-    if args.robot is not None:
-        if env_kwargs.get("robot", args.robot) != args.robot:
-            raise ValueError(
-                f"--robot {excerpt(args.robot)} and --env-kwargs robot {excerpt(env_kwargs['robot'])} differ: give one"
-            )
-        env_kwargs["robot"] = args.robot
+    env_kwargs = _env_kwargs_option(args)
     backend = backend_options(args)
     suite = _suite_option(args.suite)
     if args.scale_terrain:
