@@ -778,7 +778,9 @@ def add_robustness_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentP
         help="sweep one factor of the simulated world (others nominal): success rate and stability index curves",
         description="Run the expert (or a policy) on rough terrain for every value of one factor, the rest of the "
         "world nominal; write DIR/robustness_FACTOR.json, DIR/robustness_FACTOR.png and each value's evaluation "
-        "under DIR/FACTOR/ (one suite entry per value). Exit code 2 on invalid input.",
+        "under DIR/FACTOR/ (one suite entry per value). With --robot, at the robot's scale: terrain and goal "
+        "magnified by its leg length, values written for the paper's robot and scaled as the presets' (payload x "
+        "mass ratio). Exit code 2 on invalid input.",
     )
     p.add_argument("--factor", required=True, choices=list(FACTORS), help="the factor to sweep")
     p.add_argument("--out", type=Path, required=True, help="output directory DIR")
@@ -788,6 +790,23 @@ def add_robustness_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentP
     p.add_argument("--goal", type=float, default=3.0, help="goal distance along +x (m, default 3)")
     p.add_argument("--policy", default="expert", help="'expert' (default), 'zero' or an SB3 model .zip")
     p.add_argument("--model", choices=("nominal", "oracle"), default=None, help="the expert's model (default nominal)")
+    p.add_argument(
+        "--expert-config",
+        default="{}",
+        help='JSON object of agents.expert.ExpertConfig fields for --policy expert, e.g. \'{"adaptation": '
+        '"learned"}\' (default: the defaults)',
+    )
+    p.add_argument(
+        "--terrain",
+        default=None,
+        help="terrain kind, preset (configs/terrain/) or YAML path (default: rough, 5 cm amplitude, 0.6 m wavelength)",
+    )
+    p.add_argument(
+        "--robot",
+        default=None,
+        help="the robot: a shipped name (quad_uneven_env.robots()) or a robot YAML path; swept at its scale "
+        "(default: the paper's robot); docs/robots.md",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_robustness_command)
     return p
@@ -819,6 +838,22 @@ def run_robustness_command(args: argparse.Namespace) -> int:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
     if args.model is not None and args.policy != "expert":
         raise ValueError(f"--model is the expert's model, for --policy expert only, got --policy {args.policy!r}")
+    expert_config = _json_object(args.expert_config, "--expert-config")
+    if expert_config and args.policy != "expert":
+        raise ValueError(f"--expert-config is for --policy expert only, got --policy {args.policy!r}")
+    if args.model is not None:
+        if expert_config.get("model", args.model) != args.model:
+            raise ValueError(f"--model {args.model} and --expert-config model {excerpt(expert_config['model'])} differ")
+        expert_config["model"] = args.model
+    terrain = None
+    if args.terrain is not None:
+        from quad_uneven_env.terrain import parse_terrain_spec
+
+        try:
+            spec = parse_terrain_spec(args.terrain)
+        except ValueError as err:
+            raise ValueError(f"--terrain: {err}") from None
+        terrain = {"kind": spec.kind, "params": dict(spec.params)}
     summary = robustness_sweep(
         args.factor,
         args.out,
@@ -827,7 +862,9 @@ def run_robustness_command(args: argparse.Namespace) -> int:
         workers=args.workers,
         policy=args.policy,
         goal_distance=args.goal,
-        expert_config=None if args.model is None else {"model": args.model},
+        terrain=terrain,
+        expert_config=expert_config or None,
+        robot=args.robot,
         progress=not args.no_progress,
     )
     for pt in summary["points"]:

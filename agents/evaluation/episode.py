@@ -23,11 +23,12 @@ from agents.evaluation.metrics import (
     cost_of_transport,
     stability_metrics,
     timing_metrics,
+    torque_peak_fractions,
 )
 from agents.evaluation.policies import expert_model_of, make_policy, make_policy_env
 from agents.evaluation.suites import EpisodeTask
 from agents.waypoints import WaypointFollower, load_waypoints
-from quad_uneven_env.constants import LEG_NAMES
+from quad_uneven_env.constants import JOINT_NAMES, LEG_NAMES
 from quad_uneven_env.fields import clip, excerpt
 from quad_uneven_env.randomization import factor_values
 from quad_uneven_env.spatial import wrap_angle, yaw_of_quat
@@ -175,6 +176,11 @@ def _factors(drawn: dict[str, float] | None, pushes: list[dict[str, Any]]) -> di
     }
 
 
+def _strength(drawn: dict[str, Any] | None) -> np.ndarray:
+    """-, (12,): each motor's drawn strength (1 where the world does not randomize it)."""
+    return np.array([(drawn or {}).get(f"motor_strength_{name}", 1.0) for name in JOINT_NAMES])
+
+
 def _end_reason(info: dict[str, Any]) -> str:
     if info["diverged"]:
         return "diverged"
@@ -241,6 +247,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig, observer: EpisodeObserver | Non
     work, success, end_reason, fall_reason, error = 0.0, False, "time_limit", None, None
     step = 0
     residual = "residual_torque" in info  # a residual model's env reports its residual torque (N m)
+    peak_torque = np.zeros(len(u.idx.torque_limit))  # N m, per joint, sampled at every control step
     residual_sum = 0.0
     try:
         if observer is not None:
@@ -272,6 +279,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig, observer: EpisodeObserver | Non
             yaws.append(yaws[-1] + wrap_angle(y - yaws[-1]))  # unwrapped
             if not info["diverged"]:
                 work += float(np.abs(u.data.actuator_force * u.data.qvel[6:]).sum()) * dt
+                np.maximum(peak_torque, np.abs(u.data.actuator_force), out=peak_torque)
             if writer is not None and step % frame_every == 0:
                 writer.append_data(env.render())
             if terminated:
@@ -322,6 +330,7 @@ def run_task(task: EpisodeTask, cfg: EvalConfig, observer: EpisodeObserver | Non
         "failure_count": len(failure_log) if failure_log is not None else None,
         "expert_model": expert_model_of(policy),
         "mean_residual_torque": residual_sum / step if residual and step else None,
+        "torque_peak_fraction": torque_peak_fractions(peak_torque, u.idx.torque_limit, _strength(drawn)),
         "command": task.command,
         "waypoints_reached": follower.reached if follower is not None else None,
         "waypoints_total": len(follower.config.points) if follower is not None else None,

@@ -125,6 +125,24 @@ def command_metrics(dt: float, xy: np.ndarray, yaw: np.ndarray, commands: np.nda
     }
 
 
+JOINT_TYPES = ("HAA", "HFE", "KFE")
+"""The joint types of :func:`torque_peak_fractions` (each leg's abduction, hip flexion and knee, in that order)."""
+
+
+def torque_peak_fractions(peak_torque: np.ndarray, torque_limit: np.ndarray, strength: np.ndarray) -> dict[str, float]:
+    """-: per joint type, the largest applied torque over its available torque, the worst of the four legs.
+
+    :param peak_torque: (12,) N m, the largest |applied torque| of each joint over an episode (leg-major order).
+    :param torque_limit: (12,) N m, the nominal motor limits.
+    :param strength: (12,) -, each motor's torque factor (randomized motor strength; 1 nominal); a motor above 1
+        still saturates at the nominal limit, so its available torque is ``min(strength, 1) x limit``.
+    :returns: ``{"HAA": f, "HFE": f, "KFE": f}``, 1 where a motor gave all it had.
+    """
+    available = np.asarray(torque_limit, dtype=float) * np.minimum(np.asarray(strength, dtype=float), 1.0)
+    fraction = (np.abs(np.asarray(peak_torque, dtype=float)) / available).reshape(4, 3).max(axis=0)
+    return {name: float(f) for name, f in zip(JOINT_TYPES, fraction, strict=True)}
+
+
 def timing_metrics(times_ms: Sequence[float] | None) -> dict[str, float | None]:
     """Median and 95th percentile (ms) of the policy's planner times; None if it exposes none."""
     if times_ms is None or len(times_ms) == 0:

@@ -127,6 +127,7 @@ EPISODE_FIELDS: dict[str, Kind] = {
     "machine": optional(object_of(STR)),
     "randomization": optional(OBJECT),
     "factors": optional(object_of(NUMBER)),
+    "torque_peak_fraction": optional(object_of(NUMBER)),
     "pushes": optional(list_of(PUSH)),
     "video": optional(STR),
 }

@@ -12,6 +12,11 @@ Typical use::
 writes ``DIR/robustness_friction.json`` (the numbers), ``DIR/robustness_friction.png`` (the curves) and
 the evaluation itself under ``DIR/friction/`` (results.json, report.md: one suite entry per value).
 Factors, values and units: :data:`FACTORS`; docs/robustness.md shows the expert's curves.
+
+On another robot (``robot=``, ``--robot``) the sweep runs at the robot's scale: the terrain and goal magnified by its
+leg length (the suite's ``scale: leg_length``) and the values read as the randomization presets' are, written for the
+paper's robot and scaled by dynamic similarity (``scale: robot``: payload x mass ratio, impulse x m sqrt(s); friction,
+motor strength and latency as written).
 """
 
 from __future__ import annotations
@@ -70,6 +75,12 @@ FACTORS: dict[str, Factor] = {
         ),
         Factor("push", "push impulse (N s), every 4-6 s for 0.1 s", (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0), _push),
         Factor(
+            "motor_strength",
+            "motor strength (-): every joint's torque gain, saturated at its motor limit",
+            (1.0, 0.9, 0.8, 0.7, 0.6, 0.5),
+            lambda v: {"motor_strength": [v, v]},
+        ),
+        Factor(
             "latency",
             "actuation latency (ms)",
             (0.0, 2.0, 4.0, 6.0, 8.0, 10.0),
@@ -94,6 +105,7 @@ def robustness_sweep(
     goal_distance: float = 3.0,
     time_limit: float = 60.0,
     expert_config: Mapping[str, Any] | None = None,
+    robot: str | None = None,
     progress: bool = True,
 ) -> dict[str, Any]:
     """Sweep ``factor`` over ``values``; write ``out/robustness_<factor>.json`` and ``.png``; return the JSON content.
@@ -104,6 +116,9 @@ def robustness_sweep(
     :param terrain: ``{"kind": ..., "params": {...}}`` (None: :data:`DEFAULT_TERRAIN`).
     :param goal_distance: m along +x that make an episode a success; ``time_limit`` s per episode.
     :param expert_config: fields of :class:`agents.expert.ExpertConfig` (e.g. ``{"model": "oracle"}``).
+    :param robot: the env's ``robot`` (a shipped name or a robot YAML path; None: the paper's robot). Given, the
+        terrain and goal are magnified to the robot (``goal_distance`` then reads in paper-robot metres) and the
+        values are the paper robot's, scaled like the presets' (``scale: robot``).
     :raises ValueError: on an unknown factor, no values, ``seeds`` < 1, or what :func:`evaluate` rejects.
     """
     if factor not in FACTORS:
@@ -117,20 +132,22 @@ def robustness_sweep(
     terrain = dict(terrain or DEFAULT_TERRAIN)
     out = Path(out)
     randomizations = [f.randomization(v) for v in values]
+    if robot is not None:
+        randomizations = [{"scale": "robot", **r} for r in randomizations]
     entry = {"kind": terrain["kind"], "params": dict(terrain.get("params", {})), "seeds": list(range(seeds))}
-    suite = suite_from_dict(
-        {
-            "name": f"robustness-{factor}",
-            "goal_distance": goal_distance,
-            "time_limit": time_limit,
-            "terrains": [{**entry, "randomization": r} for r in randomizations],
-        },
-        source=f"robustness {factor}",
-    )
+    raw_suite = {
+        "name": f"robustness-{factor}",
+        "goal_distance": goal_distance,
+        "time_limit": time_limit,
+        "terrains": [{**entry, "randomization": r} for r in randomizations],
+    }
+    if robot is not None:
+        raw_suite["scale"] = "leg_length"
+    suite = suite_from_dict(raw_suite, source=f"robustness {factor}")
     with output_dir(out, "robustness", keep=True) as manifest:
         out = manifest.out
         return _sweep(factor, out, suite, values, randomizations, seeds, workers, policy, terrain, goal_distance,
-                      expert_config, progress)  # fmt: skip
+                      expert_config, robot, progress)  # fmt: skip
 
 
 def _sweep(
@@ -145,12 +162,15 @@ def _sweep(
     terrain: Mapping[str, Any],
     goal_distance: float,
     expert_config: Mapping[str, Any] | None,
+    robot: str | None,
     progress: bool,
 ) -> dict[str, Any]:
     """The evaluation and the files of :func:`robustness_sweep` (its arguments checked, ``out`` prepared)."""
     f = FACTORS[factor]
     # One evaluation, one entry per value: the workers start (and compile the controller) once.
-    results = evaluate(suite, policy, out / factor, workers=workers, expert_config=expert_config, progress=progress)
+    env_kwargs = None if robot is None else {"robot": robot}
+    results = evaluate(suite, policy, out / factor, workers=workers, env_kwargs=env_kwargs,
+                       expert_config=expert_config, progress=progress)  # fmt: skip
     points = []
     for i, (v, randomization) in enumerate(zip(values, randomizations, strict=True)):
         group = results["summary"]["by_entry"][i]
@@ -176,6 +196,7 @@ def _sweep(
             "policy": policy,
             "expert_model": results["meta"].get("expert_model"),
             "expert_config": dict(expert_config or {}),
+            "robot": robot,
             "terrain": terrain,
             "goal_distance": goal_distance,
             "seeds": seeds,
@@ -206,8 +227,10 @@ def plot_robustness(summary: Mapping[str, Any], path: Path) -> Path:
         ax.set_xlabel(summary["label"])
         ax.grid(alpha=0.3)
     model = summary.get("expert_model")
+    robot = summary.get("robot")
     fig.suptitle(
-        f"{summary['policy']}{f' ({model[0]} model)' if model else ''}: {summary['terrain']['kind']}, "
+        f"{summary['policy']}{f' ({model[0]} model)' if model else ''}{f', {robot}' if robot else ''}: "
+        f"{summary['terrain']['kind']}, "
         f"{summary['goal_distance']:g} m goal, {summary['seeds']} seeds per value",
         fontsize=10,
     )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from agents.cli import main
@@ -60,3 +61,40 @@ def test_every_factor_fixes_one_randomization_value():
             load_randomization(f.randomization(v))  # valid for the env
     with pytest.raises(ValueError, match="factor must be one of"):
         robustness_sweep("gravity", "unused")
+
+
+def test_torque_peak_fractions_by_hand():
+    from agents.evaluation.metrics import torque_peak_fractions
+
+    limit = np.tile([10.0, 20.0, 40.0], 4)
+    peak = np.zeros(12)
+    peak[[0, 4, 11]] = [5.0, -20.0, 14.0]  # LF HAA half its limit, RF HFE at its limit, RH KFE 14 of 40
+    strength = np.ones(12)
+    strength[11] = 0.5  # RH KFE has 20 N m: 14 is 0.7 of it
+    strength[4] = 1.3  # a strong motor still saturates at its limit
+    assert torque_peak_fractions(peak, limit, strength) == pytest.approx({"HAA": 0.5, "HFE": 1.0, "KFE": 0.7})
+
+
+@pytest.mark.slow  # ~15 s: the sweep on Go1 at its scale, on stairs
+def test_robustness_sweep_on_another_robot_runs_at_its_scale(tmp_path):
+    from agents.evaluation.run import robot_scale
+
+    code = main(["robustness", "--factor", "motor_strength", "--values", "1.0,0.6", "--seeds", "1", "--goal", "0.2",
+                 "--robot", "go1", "--terrain", "stairs_up", "--expert-config", '{"adaptation": "knee"}',
+                 "--out", str(tmp_path), "--no-progress"])  # fmt: skip
+    assert code == 0
+    summary = json.loads((tmp_path / "robustness_motor_strength.json").read_text())
+    assert summary["robot"] == "go1" and summary["terrain"]["kind"] == "stairs"
+    assert summary["expert_config"] == {"adaptation": "knee"}
+    assert [p["randomization"] for p in summary["points"]] == [
+        {"scale": "robot", "motor_strength": [1.0, 1.0]},
+        {"scale": "robot", "motor_strength": [0.6, 0.6]},
+    ]
+    results = json.loads((tmp_path / "motor_strength" / "results.json").read_text())
+    assert results["meta"]["goal_distance"] == pytest.approx(0.2 * robot_scale("go1"))
+    assert results["meta"]["entries"][0].startswith(f"stairs(length={8 * robot_scale('go1'):g}")
+    weak = next(e for e in results["episodes"] if e["entry"] == 1)
+    assert weak["randomization"]["motor_strength_LF_HFE"] == 0.6
+    for e in results["episodes"]:
+        assert set(e["torque_peak_fraction"]) == {"HAA", "HFE", "KFE"}
+        assert all(0.0 < f <= 1.0 + 1e-9 for f in e["torque_peak_fraction"].values())
