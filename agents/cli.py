@@ -613,6 +613,13 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
         action="store_true",
         help="DIR may hold an earlier distillation: delete the files its manifest lists first",
     )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the distillation in DIR after its last finished round, with the same options (only "
+        "--budget-min, --dagger-rounds and where the rollouts run may change); the same result as an unstopped run",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_distill_command)
     return p
 
@@ -663,7 +670,9 @@ def run_distill_command(args: argparse.Namespace) -> int:
     except TypeError as err:  # an unknown field
         raise ValueError(f"--expert-config: {err}") from None
     with sigterm_as_keyboard_interrupt():
-        summary = distill(suite, args.out, cfg, overwrite=args.overwrite)
+        summary = distill(
+            suite, args.out, cfg, overwrite=args.overwrite, resume=args.resume, progress=not args.no_progress
+        )
     print(f"model: {(Path(args.out) / 'model.zip').resolve()}")
     print(f"curve: {(Path(args.out) / 'distill_curve.png').resolve()}")
     print(f"wall time: {summary['wall_time_s']:.0f} s")

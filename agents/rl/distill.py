@@ -49,6 +49,7 @@ from typing import Any
 import gymnasium as gym
 import mujoco
 import numpy as np
+from tqdm.auto import tqdm
 
 from agents.evaluation.ray_backend import check_backend, map_on_ray
 from agents.evaluation.run import suite_episodes
@@ -389,23 +390,39 @@ def rollout(job: RolloutJob) -> dict[str, Any]:
 
 
 def run_rollouts(
-    jobs: list[RolloutJob], workers: int, backend: str = "pool", address: str | None = None, ship_code: bool = False
+    jobs: list[RolloutJob],
+    workers: int,
+    backend: str = "pool",
+    address: str | None = None,
+    ship_code: bool = False,
+    done: Callable[[], None] | None = None,
 ) -> list[dict[str, Any]]:
     """:func:`rollout` of every job, in order (``workers`` processes, or Ray tasks with ``backend="ray"``:
-    :func:`agents.evaluation.ray_backend.map_on_ray`; the results do not depend on either)."""
+    :func:`agents.evaluation.ray_backend.map_on_ray`; the results do not depend on either); ``done`` is called as
+    each episode finishes (a progress bar)."""
+    tick = done or (lambda: None)
     if backend == "ray":
         results: list[dict[str, Any] | None] = [None] * len(jobs)
 
         def keep(i: int, result: dict[str, Any]) -> None:
             results[i] = result
+            tick()
 
         map_on_ray(rollout, jobs, keep, address=address, num_cpus=workers, ship_code=ship_code)
         return [r for r in results if r is not None]
     if workers <= 1 or len(jobs) <= 1:
-        return [rollout(j) for j in jobs]
+        ordered = []
+        for j in jobs:
+            ordered.append(rollout(j))
+            tick()
+        return ordered
     ctx = multiprocessing.get_context("spawn")
     with concurrent.futures.ProcessPoolExecutor(min(workers, len(jobs)), mp_context=ctx) as pool:
-        return list(pool.map(rollout, jobs))
+        futures = [pool.submit(rollout, j) for j in jobs]
+        for f in concurrent.futures.as_completed(futures):
+            f.result()
+            tick()
+        return [f.result() for f in futures]
 
 
 # ------------------------------------------------------------------------------------------------ training
@@ -508,7 +525,13 @@ def _check_suite(suite: Suite) -> None:
 
 
 def distill(
-    suite: Suite, out: str | Path, cfg: DistillConfig, overwrite: bool = False, log: Callable[[str], None] = print
+    suite: Suite,
+    out: str | Path,
+    cfg: DistillConfig,
+    overwrite: bool = False,
+    resume: bool = False,
+    log: Callable[[str], None] = print,
+    progress: bool = False,
 ) -> dict[str, Any]:
     """Behaviour cloning from the expert on ``suite``'s episodes, then ``cfg.dagger_rounds`` DAgger rounds.
 
@@ -518,18 +541,27 @@ def distill(
 
     Writes into ``out``: the student (``model.zip``, ``model_obs_norm.npz``, ``rl_meta.json``, after every round;
     each round's also in ``rounds/round_K/``, a folder ``evaluate`` reads, for selection on validation episodes),
-    ``distill_summary.json`` (per round: data, rollouts, losses) and ``distill_curve.png``.
+    ``distill_summary.json`` (per round: data, rollouts, losses) and ``distill_curve.png``. Each round folder also
+    keeps ``round_state.npz`` (the round's samples and the network's weights): with ``resume`` a stopped run
+    continues after its last finished round, with the same result as a run never stopped (the rollouts and the
+    fits are seeded by round).
 
+    :param progress: a progress bar over the rollout episodes of every round.
+    :param resume: continue the run in ``out`` (its config must equal ``cfg`` but for ``budget_min``,
+        ``dagger_rounds`` and where the rollouts run: :data:`RESUME_FREE_FIELDS`).
     :return: the summary.
-    :raises ValueError: on a suite with commands or waypoints, an invalid expert field, or an unusable ``out``.
+    :raises ValueError: on a suite with commands or waypoints, an invalid expert field, an unusable ``out``, or a
+        ``resume`` whose run is missing or differs.
     """
     import torch
 
     _check_suite(suite)
     cfg.expert_config()  # its errors before any work
+    if resume and overwrite:
+        raise ValueError("resume and overwrite exclude each other: resume keeps DIR's rounds, overwrite deletes them")
     suite, tasks = suite_episodes(suite, cfg.env_kwargs, cfg.episodes, cfg.seed_offset)
     start = time.perf_counter()
-    with output_dir(out, "distill", DISTILL_OUTPUTS, overwrite=overwrite) as manifest:
+    with output_dir(out, "distill", DISTILL_OUTPUTS, overwrite=overwrite, keep=resume) as manifest:
         out = manifest.out
         torch.set_num_threads(1)
         model = make_student(cfg, {"kind": tasks[0].kind, **tasks[0].params})
@@ -539,7 +571,12 @@ def distill(
         norm: ObsNormalization | None = None
         rounds: list[dict[str, Any]] = []
         summary: dict[str, Any] = {"config": _config_dict(cfg), "suite": suite.name, "rounds": rounds}
-        for k in range(cfg.dagger_rounds + 1):
+        if resume:
+            rounds[:], norm = _resume(out, cfg, suite.name, model, data_obs, data_labels)
+            log(f"resumed after round {len(rounds) - 1}: {sum(len(o) for o in data_obs)} samples")
+        remaining = max(cfg.dagger_rounds + 1 - len(rounds), 0) * len(tasks)
+        bar = tqdm(total=remaining, desc="rollouts", unit="ep", disable=not progress)
+        for k in range(len(rounds), cfg.dagger_rounds + 1):
             elapsed = (time.perf_counter() - start) / 60.0
             if k > 0 and elapsed >= cfg.budget_min:
                 log(f"budget of {cfg.budget_min:g} min reached after round {k - 1}")
@@ -552,7 +589,7 @@ def distill(
                 for t in tasks
             ]
             t0 = time.perf_counter()
-            results = run_rollouts(jobs, cfg.workers, cfg.backend, cfg.address, cfg.ship_code)
+            results = run_rollouts(jobs, cfg.workers, cfg.backend, cfg.address, cfg.ship_code, done=bar.update)
             rollout_s = time.perf_counter() - t0
             obs = np.concatenate([r["obs"] for r in results])
             labels = np.concatenate([r["labels"] for r in results])
@@ -588,15 +625,76 @@ def distill(
                 + f"; loss {losses[-1]:.4f} on {len(all_obs)} samples"
             )
             save_student(model, norm, out, meta)
-            save_student(model, norm, out / "rounds" / f"round_{k}", meta)  # each round's student, to select from
+            round_dir = out / "rounds" / f"round_{k}"
+            save_student(model, norm, round_dir, meta)  # each round's student, to select from
+            _save_round_state(round_dir, model, obs, labels)
             summary["wall_time_s"] = time.perf_counter() - start
             (out / "distill_summary.json").write_text(json.dumps(summary, indent=2))
             manifest.add_new()
+        bar.close()
         plot_distill_curve(rounds, out / "distill_curve.png", title=f"distillation on {suite.name}")
         summary["model"] = str(out / "model.zip")
         summary["wall_time_s"] = time.perf_counter() - start
         (out / "distill_summary.json").write_text(json.dumps(summary, indent=2))
     return summary
+
+
+ROUND_STATE = "round_state.npz"
+"""In each ``rounds/round_K/``: the round's samples (``obs``, ``labels``) and the student's weights after it
+(``weight:NAME``), what ``resume`` reads."""
+
+RESUME_FREE_FIELDS = ("budget_min", "dagger_rounds", "workers", "backend", "address", "ship_code")
+"""The :class:`DistillConfig` fields a resumed run may change (none changes what a round computes)."""
+
+
+def _save_round_state(round_dir: Path, model: Any, obs: np.ndarray, labels: np.ndarray) -> None:
+    weights = {f"weight:{k}": v.detach().cpu().numpy() for k, v in model.policy.state_dict().items()}
+    tmp = round_dir / f".{ROUND_STATE}.tmp.npz"
+    np.savez(tmp, obs=obs, labels=labels, **weights)
+    tmp.replace(round_dir / ROUND_STATE)  # a run stopped while writing leaves the round unfinished, not corrupt
+
+
+def _resume(
+    out: Path,
+    cfg: DistillConfig,
+    suite_name: str,
+    model: Any,
+    data_obs: list[np.ndarray],
+    data_labels: list[np.ndarray],
+) -> tuple[list[dict[str, Any]], ObsNormalization]:
+    """Load the finished rounds of the run in ``out`` into ``data_obs``/``data_labels`` and ``model``; :return: their
+    summary rows and the observation statistics. :raises ValueError: naming what is missing or differs."""
+    import torch
+
+    path = out / "distill_summary.json"
+    try:
+        summary = json.loads(path.read_text())
+        rows, recorded = list(summary["rounds"]), dict(summary["config"])
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise ValueError(f"--resume: {path} is not a distillation's summary ({type(err).__name__}: {err})") from None
+    if summary.get("suite") != suite_name:
+        raise ValueError(f"--resume: DIR's run distilled suite {summary.get('suite')!r}, not {suite_name!r}")
+    wanted = json.loads(json.dumps(_config_dict(cfg)))
+    for name in sorted(set(wanted) | set(recorded)):
+        if name not in RESUME_FREE_FIELDS and wanted.get(name) != recorded.get(name):
+            raise ValueError(
+                f"--resume: {name} is {excerpt(wanted.get(name))} here but {excerpt(recorded.get(name))} in DIR's "
+                f"run; only {list(RESUME_FREE_FIELDS)} may change"
+            )
+    if not rows:
+        raise ValueError("--resume: DIR's run has no finished round; start it again without --resume")
+    for k in range(len(rows)):
+        state = out / "rounds" / f"round_{k}" / ROUND_STATE
+        if not state.is_file():
+            raise ValueError(f"--resume: {state} is missing (written by every finished round)")
+        with np.load(state) as f:
+            data_obs.append(f["obs"])
+            data_labels.append(f["labels"])
+            if k == len(rows) - 1:
+                weights = {n.split(":", 1)[1]: torch.as_tensor(f[n]) for n in f.files if n.startswith("weight:")}
+    model.policy.load_state_dict(weights)
+    last = out / "rounds" / f"round_{len(rows) - 1}" / "model.zip"
+    return rows, ObsNormalization.load(norm_path(last))
 
 
 def _config_dict(cfg: DistillConfig) -> dict[str, Any]:

@@ -223,6 +223,35 @@ def test_the_same_seed_gives_the_same_student(tiny_run, tmp_path):
     assert not np.array_equal(wa["action_net.weight"], wc["action_net.weight"])
 
 
+def test_a_stopped_run_resumes_to_the_same_student(tiny_run, tmp_path, capsys):
+    """Behaviour cloning only (the budget stops it after round 0), then ``--resume``: the student, the data and the
+    summary of the run that was never stopped; a resume with another option is refused naming it."""
+    from agents.rl.distill import ROUND_STATE, distill
+
+    out, summary = tiny_run
+    part = tmp_path / "part"
+    first = distill(suite_from_dict(TINY, source="test"), part, tiny_config(budget_min=1e-9), log=lambda _: None)
+    assert [r["round"] for r in first["rounds"]] == [0] and first["stopped_by_budget"]
+    assert (part / "rounds" / "round_0" / ROUND_STATE).is_file()
+    suite_file = tmp_path / "tiny.yaml"
+    suite_file.write_text(json.dumps(TINY))
+    argv = ["distill", "--suite", str(suite_file), "--out", str(part), "--dagger-rounds", "1", "--episodes", "1",
+            "--epochs", "2", "--net-arch", "16", "--resume"]  # fmt: skip
+    assert main([*argv, "--seed", "4"]) == 2  # the run's seed is 3
+    err = capsys.readouterr().err
+    assert err.startswith("error: --resume: seed is 4 here but 3 in DIR's run") and err.count("\n") == 1
+    resumed = distill(suite_from_dict(TINY, source="test"), part, tiny_config(), resume=True, log=lambda _: None)
+    for r, s in zip(summary["rounds"], resumed["rounds"], strict=True):
+        for key in ("steps", "student_steps", "loss", "loss_first", "mean_distance", "label_rmse_on_policy"):
+            assert r.get(key) == s.get(key), key
+    wa, wb = policy_weights(out / "model.zip"), policy_weights(part / "model.zip")
+    assert wa.keys() == wb.keys() and all(np.array_equal(wa[k], wb[k]) for k in wa)
+    with pytest.raises(ValueError, match="resume and overwrite exclude each other"):
+        distill(suite_from_dict(TINY, source="test"), part, tiny_config(), resume=True, overwrite=True)
+    with pytest.raises(ValueError, match="distillation's summary"):
+        distill(suite_from_dict(TINY, source="test"), tmp_path / "empty", tiny_config(), resume=True)
+
+
 def test_the_course_frame_is_the_students_default_and_can_be_left_out(monkeypatch, tmp_path):
     """``DistillConfig.course_frame`` (True by default) puts the env's ``course_frame`` into the student's env;
     ``--no-course-frame`` leaves it out (the env's default layout)."""
@@ -233,7 +262,7 @@ def test_the_course_frame_is_the_students_default_and_can_be_left_out(monkeypatc
     with pytest.raises(ValueError, match=r"distill\.course_frame must be True or False, got 1"):
         tiny_config(course_frame=1)
     seen = []
-    monkeypatch.setattr(module, "distill", lambda suite, out, cfg, overwrite: seen.append(cfg) or {"wall_time_s": 0})
+    monkeypatch.setattr(module, "distill", lambda suite, out, cfg, **_: seen.append(cfg) or {"wall_time_s": 0})
     assert main(["distill", "--suite", "smoke", "--out", str(tmp_path / "a"), "--no-course-frame"]) == 0
     assert main(["distill", "--suite", "smoke", "--out", str(tmp_path / "b")]) == 0
     assert [c.course_frame for c in seen] == [False, True]
