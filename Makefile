@@ -50,20 +50,23 @@ HELD_OUT := robust_extreme:100 robust_extreme:300 robust_extreme:400 robust_extr
   robust_hard:100 targets:0
 EVAL := $(PY) -m agents.cli evaluate --workers 2 --overwrite
 
+comma := ,
+
 # $(call ship,RUN,MODEL): a training run's model files into the shipped folder MODEL.
 ship = mkdir -p $(2) && for f in $(MODEL_FILES); do cp $(1)/$$f $(2)/$$f; done
 
-# $(call against_expert,MODEL,TAG): the expert and MODEL on every HELD_OUT suite:seed offset (runs/eval_S_K_expert,
-# runs/eval_S_K_TAG), their paired comparisons (runs/compare_S_K_TAG/comparison.md) and the robust_extreme sets
-# 100-119, 300-319 and 400-419 pooled (runs/compare_robust_extreme_pooled_TAG).
-define against_expert
+# $(call against_base,MODEL,TAG,BASE): MODEL and the expert it sits on (ExpertConfig JSON BASE, as in its
+# rl_meta.json) on every HELD_OUT suite:seed offset (runs/eval_S_K_base_TAG, runs/eval_S_K_TAG), their paired
+# comparisons (runs/compare_S_K_TAG/comparison.md) and the robust_extreme sets 100, 300 and 400 pooled
+# (runs/compare_robust_extreme_pooled_TAG).
+define against_base
 	for run in $(HELD_OUT); do \
 	  s=$${run%%:*}; seed=$${run##*:}; name=$${s}_$$seed; \
-	  $(EVAL) --policy expert --suite $$s --seed $$seed --out runs/eval_$${name}_expert && \
+	  $(EVAL) --policy expert --expert-config '$(3)' --suite $$s --seed $$seed --out runs/eval_$${name}_base_$(2) && \
 	  $(EVAL) --policy $(1)/model.zip --suite $$s --seed $$seed --out runs/eval_$${name}_$(2) && \
-	  $(PY) -m agents.cli compare --baseline runs/eval_$${name}_expert --candidate runs/eval_$${name}_$(2) \
+	  $(PY) -m agents.cli compare --baseline runs/eval_$${name}_base_$(2) --candidate runs/eval_$${name}_$(2) \
 	    --out runs/compare_$${name}_$(2) || exit 1; done
-	$(PY) -m agents.cli compare --baseline $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_expert) \
+	$(PY) -m agents.cli compare --baseline $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_base_$(2)) \
 	  --candidate $(foreach k,100 300 400,runs/eval_robust_extreme_$(k)_$(2)) \
 	  --out runs/compare_robust_extreme_pooled_$(2)
 endef
@@ -74,13 +77,13 @@ strength-estimator: venv
 	$(PY) -m agents.cli fit-strength --seeds 1000-1199 --workers 2 --plot docs/rl_strength_estimator_fit.png
 
 # Retrains models/ppo_residual_adaptive (models/ppo_residual_adaptive/README.md): PPO residual over the expert with
-# the knee adaptation, configs/rl/ppo_residual_adaptive.yaml (75 min of training on 2 cores, seeded), then the expert
-# and the agent on the held-out seeds of robust_extreme and robust_hard and on targets, with their paired
-# comparisons (runs/compare_*_residual). About 3 h in all.
+# the knee adaptation, configs/rl/ppo_residual_adaptive.yaml (75 min of training on 2 cores, seeded), then its base
+# (the knee expert with cones of 0.5) and the agent on the held-out seeds of robust_extreme and robust_hard and on
+# targets, with their paired comparisons (runs/compare_*_residual). About 3 h in all.
 rl-baseline: venv
 	$(PY) -m agents.cli train --config configs/rl/ppo_residual_adaptive.yaml --out runs/ppo_residual_adaptive --overwrite
 	$(call ship,runs/ppo_residual_adaptive,models/ppo_residual_adaptive)
-	$(call against_expert,models/ppo_residual_adaptive,residual)
+	$(call against_base,models/ppo_residual_adaptive,residual,{"adaptation": "knee"$(comma) "friction": 0.5})
 
 # Retrains models/ppo_scratch (models/ppo_scratch/README.md): PPO from scratch on QuadUneven-v0 in joint_pd mode,
 # configs/rl/ppo_scratch.yaml (35 min of training on 2 cores, seeded), then it and the expert on the rough suite
