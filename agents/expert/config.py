@@ -187,10 +187,8 @@ def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
     ``sqrt(s)`` (equal Froude number); the stability margin with ``m s`` (the same static margin in leg
     lengths); the computed-torque gains (per unit mass) with ``1 / s`` (stiffness) and ``1 / sqrt(s)``
     (damping), the same damping ratio at a natural frequency scaled like the gait's. The COG height is the
-    robot's standing COG height times the paper robot's ratio of its walking to its standing COG height, and where
-    :func:`motor_load` is at least :data:`NARROW_CONES_MAX_LOAD` no lower than the robot's COG at the paper robot's
-    walking leg extension (:func:`paper_stance_ratio`; HyQ's standing pose is a crouch, and a bent knee costs torque
-    its motors do not have: docs/robustness.md#every-robot). The force QP's cones are the narrow default where :func:`motor_load` is below :data:`NARROW_CONES_MAX_LOAD`, else
+    robot's standing COG height times the paper robot's ratio of its walking to its standing COG height. The
+    force QP's cones are the narrow default where :func:`motor_load` is below :data:`NARROW_CONES_MAX_LOAD`, else
     :data:`SCALED_ROBOT_FRICTION`. The robot YAML's ``gait`` overrides them.
     """
     from planners.robot_geometry import robot_geometry
@@ -216,8 +214,6 @@ def scaled_settings(robot: RobotDescription) -> dict[str, Any]:
     else:
         paper = robot_geometry(None)
         cog_height = base.cog_height * standing_cog_height(robot) / _standing_cog_height(WholeBody(paper), 0.36)
-        if motor_load(robot) >= NARROW_CONES_MAX_LOAD:
-            cog_height = max(cog_height, stance_cog_height(robot, paper_stance_ratio()))
     return {
         "durations": durations,
         "stride": base.stride * s if g.stride is None else g.stride,
@@ -241,30 +237,6 @@ def standing_cog_height(robot: RobotDescription) -> float:
 
     wb = WholeBody(robot_geometry(robot))
     return float(robot.standing_height + wb.com_offset(robot.standing_joints.reshape(4, 3))[2])
-
-
-def paper_stance_ratio() -> float:
-    """-: the paper robot's walking leg extension, its shoulders' height above its feet over its leg length when its
-    COG is at ``ExpertConfig().cog_height`` (0.81)."""
-    from scipy.optimize import brentq
-
-    from quad_uneven_env.robot.description import load_robot
-
-    paper = load_robot("paper")
-    cog = ExpertConfig().cog_height
-    return float(brentq(lambda e: stance_cog_height(paper, e) - cog, 0.5, 0.97))
-
-
-def stance_cog_height(robot: RobotDescription, extension: float) -> float:
-    """m, ``robot``'s COG above flat ground with its feet under their standing points, ``extension`` (-) leg lengths
-    below its shoulders (the leg extension: 1 is a straight leg)."""
-    from planners.robot_geometry import robot_geometry
-    from planners.wholebody import WholeBody
-
-    geom = robot_geometry(robot)
-    q = geom.standing_legs(extension * geom.leg_length)
-    trunk_height = extension * geom.leg_length - float(geom.shoulders_B[:, 2].mean()) + geom.foot_radius
-    return float(trunk_height + WholeBody(geom).com_offset(q)[2])
 
 
 def _standing_cog_height(wb: Any, standing_height: float) -> float:

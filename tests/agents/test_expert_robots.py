@@ -41,49 +41,6 @@ def test_the_cones_are_narrow_only_where_the_motors_hold_the_robot_easily(name, 
     assert ExpertConfig.for_robot(robot).friction == friction
 
 
-def test_the_stance_cog_height_is_mujocos_at_that_pose():
-    """``stance_cog_height`` against MuJoCo's whole-body COM of the robot posed with its feet ``e`` leg lengths below
-    its shoulders and its lowest foot sphere on the ground; the paper robot walks at e = 0.76."""
-    import mujoco
-
-    from agents.expert.config import paper_stance_ratio, stance_cog_height
-
-    assert paper_stance_ratio() == pytest.approx(0.764, abs=1e-3)
-    assert stance_cog_height(load_robot("paper"), paper_stance_ratio()) == pytest.approx(ExpertConfig().cog_height)
-    for name in ("paper", "hyq", "go1"):
-        env = gym.make("QuadUneven-v0", robot=name, terrain="flat")
-        env.reset(seed=0)
-        u = env.unwrapped
-        geom = robot_geometry(u.robot)
-        for e in (0.7, 0.85):
-            u.data.qpos[:7] = (0, 0, 0, 1, 0, 0, 0)
-            u.data.qpos[7:] = geom.standing_legs(e * geom.leg_length).reshape(-1)
-            mujoco.mj_kinematics(u.model, u.data)
-            mujoco.mj_comPos(u.model, u.data)
-            feet_bottom = u.data.site_xpos[u.idx.foot_sites, 2].min() - u.robot.foot_radius
-            com = u.data.subtree_com[u.idx.trunk_body, 2] - feet_bottom
-            assert stance_cog_height(u.robot, e) == pytest.approx(com, abs=2e-3), (name, e)
-        env.close()
-
-
-@pytest.mark.parametrize("name", URDF_ROBOTS)
-def test_heavy_robots_walk_no_lower_than_the_paper_robots_stance(name):
-    """Where the motors work hard (motor load >= 3.5: HyQ, ANYmal C) the COG height is at least the robot's at the
-    paper robot's leg extension (less knee torque than a crouch); the others keep the height scaled from their
-    standing pose."""
-    from agents.expert.config import NARROW_CONES_MAX_LOAD, paper_stance_ratio, stance_cog_height
-
-    desc = load_robot(name)
-    cfg = ExpertConfig.for_robot(desc)
-    at_paper_stance = stance_cog_height(desc, paper_stance_ratio())
-    if motor_load(desc) >= NARROW_CONES_MAX_LOAD:
-        assert cfg.cog_height == pytest.approx(at_paper_stance, abs=1e-4)  # both crouch lower when standing
-    else:
-        assert cfg.cog_height < at_paper_stance  # Go1 and Solo12 walk lower, with torque to spare
-    if name == "hyq":
-        assert cfg.cog_height == pytest.approx(0.5867, abs=1e-3)  # crouched from its standing pose: 0.525
-
-
 @pytest.mark.parametrize("name", URDF_ROBOTS)
 def test_settings_scale_with_the_robot(name):
     """Lengths ~ leg length s, times ~ sqrt(s) (equal Froude number), margin ~ mass x s, gains ~ 1/s, 1/sqrt(s)."""
