@@ -4,10 +4,10 @@ For each robot and leg extension e (the feet e leg lengths below the shoulders, 
 posed in MuJoCo with its feet under their standing points, one foot moved half a stride forward (the expert's
 stride for the robot, where a stance leg's hip works hardest), and that foot carries a third of the robot's weight
 vertically (the three-legged support of the crawl). The joint torques are J^T f (MuJoCo's foot-site Jacobian),
-printed over the motor limits (ab/ad, hip, knee), beside the COG height of the pose
-(``agents.expert.config.stance_cog_height``) and the expert's walking COG height.
+printed over the motor limits (ab/ad, hip, knee), beside the COG height of the pose (MuJoCo's whole-body COM above
+the feet's lowest point) and the expert's walking COG height.
 
-Usage: ``python benchmarks/stance_torque.py [--robots paper,hyq,anymal_c] [--extensions 0.66,0.7,0.76,0.8,0.85]``.
+Usage: ``python benchmarks/stance_torque.py [--robots paper,hyq,anymal_c] [--extensions 0.67,0.7,0.76,0.8,0.85]``.
 docs/robustness.md#where-the-falls-start quotes its lines.
 """
 
@@ -21,13 +21,12 @@ import numpy as np
 
 import quad_uneven_env  # noqa: F401  (registers QuadUneven-v0)
 from agents.expert import ExpertConfig
-from agents.expert.config import paper_stance_ratio, stance_cog_height
 from planners.robot_geometry import robot_geometry
 
 
-def stance_torque_fractions(name: str, extension: float) -> np.ndarray:
+def stance_torque_fractions(name: str, extension: float) -> tuple[np.ndarray, float]:
     """-, (3,): |ab/ad, hip, knee torque| / limit of the front-left leg holding a third of the weight at
-    ``extension`` (-), its foot half a stride ahead of its standing point."""
+    ``extension`` (-), its foot half a stride ahead of its standing point; and m, the COG height of the pose."""
     env = gym.make("QuadUneven-v0", robot=name, terrain="flat")
     env.reset(seed=0)
     u = env.unwrapped
@@ -43,26 +42,27 @@ def stance_torque_fractions(name: str, extension: float) -> np.ndarray:
     mujoco.mj_jacSite(u.model, u.data, jac, None, u.idx.foot_sites[0])
     force = np.array([0.0, 0.0, u.robot.total_mass * 9.81 / 3.0])
     torque = jac[:, 6:9].T @ force
+    feet_bottom = u.data.site_xpos[u.idx.foot_sites, 2].min() - u.robot.foot_radius
+    cog_height = float(u.data.subtree_com[u.idx.trunk_body, 2] - feet_bottom)
     env.close()
-    return np.abs(torque) / u.idx.torque_limit[:3]
+    return np.abs(torque) / u.idx.torque_limit[:3], cog_height
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", default="paper,hyq,anymal_c", help="comma-separated robot names")
-    parser.add_argument("--extensions", default="0.66,0.7,0.76,0.8,0.85", help="comma-separated leg extensions (-)")
+    parser.add_argument("--extensions", default="0.67,0.7,0.76,0.8,0.85", help="comma-separated leg extensions (-)")
     args = parser.parse_args()
     extensions = [float(e) for e in args.extensions.split(",")]
-    print(f"the paper robot walks at leg extension {paper_stance_ratio():.3f}")
     for name in args.robots.split(","):
         from quad_uneven_env.robot.description import load_robot
 
         desc = load_robot(name)
         print(f"{name}: walking COG height {ExpertConfig.for_robot(desc).cog_height:.3f} m")
         for e in extensions:
-            f = stance_torque_fractions(name, e)
+            f, cog_height = stance_torque_fractions(name, e)
             print(
-                f"  extension {e:.2f} (COG {stance_cog_height(desc, e):.3f} m): "
+                f"  extension {e:.2f} (COG {cog_height:.3f} m): "
                 f"torque / limit ab/ad {f[0]:.2f}, hip {f[1]:.2f}, knee {f[2]:.2f}"
             )
 
