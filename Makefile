@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out/demo
 
-.PHONY: venv demo test test-slow lint bench docs strength-estimator rl-baseline rl-scratch distilled clean
+.PHONY: venv demo test test-slow lint bench docs strength-estimator rl-baseline rl-plan rl-scratch distilled clean
 
 $(STAMP): pyproject.toml setup.py Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -84,6 +84,14 @@ rl-baseline: venv
 	$(PY) -m agents.cli train --config configs/rl/ppo_residual_adaptive.yaml --out runs/ppo_residual_adaptive --overwrite
 	$(call ship,runs/ppo_residual_adaptive,models/ppo_residual_adaptive)
 	$(call against_base,models/ppo_residual_adaptive,residual,{"adaptation": "knee"$(comma) "friction": 0.5})
+
+# Trains the plan-level residual (QuadUnevenPlan-v0, configs/rl/ppo_plan.yaml: PPO over the adaptive expert's stride,
+# cycle time, margin, COG height and clearance, 75 min on 2 cores, seeded) into runs/ppo_plan, then it and its base
+# (the expert with the learned adaptation) on the held-out sets with their paired comparisons
+# (runs/compare_*_plan). About 3 h in all.
+rl-plan: venv
+	$(PY) -m agents.cli train --config configs/rl/ppo_plan.yaml --out runs/ppo_plan --overwrite
+	$(call against_base,runs/ppo_plan,plan,{"adaptation": "learned"})
 
 # Retrains models/ppo_scratch (models/ppo_scratch/README.md): PPO from scratch on QuadUneven-v0 in joint_pd mode,
 # configs/rl/ppo_scratch.yaml (35 min of training on 2 cores, seeded), then it and the expert on the rough suite
