@@ -86,7 +86,7 @@ rl-baseline: venv
 	$(call against_base,models/ppo_residual_adaptive,residual,{"adaptation": "knee"$(comma) "friction": 0.5})
 
 # Trains the plan-level residual (QuadUnevenPlan-v0, configs/rl/ppo_plan.yaml: PPO over the adaptive expert's stride,
-# cycle time, margin, COG height and clearance, 75 min on 2 cores, seeded) into runs/ppo_plan, then it and its base
+# cycle time, margin, COG height and clearance, 85 min on 2 cores, seeded) into runs/ppo_plan, then it and its base
 # (the expert with the learned adaptation) on the held-out sets with their paired comparisons
 # (runs/compare_*_plan). About 3 h in all.
 rl-plan: venv
