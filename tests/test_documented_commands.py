@@ -65,11 +65,12 @@ SHORTER: dict[str, dict[str, str]] = {
     "train": {"--time-limit-min": "0.5"},
     "distill": {"--suite": "smoke", "--episodes": "1", "--dagger-rounds": "1", "--epochs": "1"},
     "robustness": {"--seeds": "1"},
+    "baselines": {"--episodes": "1"},
     "demo": {"--distance": "0.5"},
 }
 """The substitutions of the slow run, per subcommand: each option set to this value (added if absent). One seed per
 suite entry; trainings stop (and save their model) after 30 s of training; the distillation on the smoke suite with
-one DAgger round and one epoch; one seed per robustness value; the demo walks 0.5 m."""
+one DAgger round and one epoch; one seed per robustness value and per baselines suite entry; the demo walks 0.5 m."""
 
 NOT_RUN: dict[str, Callable[[argparse.Namespace], bool]] = {
     "it needs a running Ray cluster (--address)": lambda a: getattr(a, "address", None) is not None,
