@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import importlib.metadata
 import importlib.util
 import os
 import re
@@ -321,9 +322,20 @@ def _under(path: Path, folders: list[Path]) -> bool:
     return any(path == f or f in path.parents for f in folders)
 
 
+def _installed(module: str) -> bool:
+    """Whether the extra of ``module`` is installed; example-robot-data ships data, not an importable module."""
+    if module == "example_robot_data":
+        try:
+            importlib.metadata.distribution("example-robot-data")
+        except importlib.metadata.PackageNotFoundError:
+            return False
+        return True
+    return importlib.util.find_spec(module) is not None
+
+
 def _why_not_run(cmd: Command, args: argparse.Namespace, skipped_outputs: list[Path]) -> str | None:
     reason = next((why for why, applies in NOT_RUN.items() if applies(args)), None)
-    missing = [m for m, needs in EXTRAS.items() if needs(args) and importlib.util.find_spec(m) is None]
+    missing = [m for m, needs in EXTRAS.items() if needs(args) and not _installed(m)]
     if reason is None and missing:
         reason = f"the extra of {missing} is not installed"
     if reason is None and any(_under(p, skipped_outputs) for p in paths(args, outputs=False)):
