@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from quad_uneven_env.constants import JOINT_KINDS
+
 INDEX_OK_FRACTION = 0.99
 """A success 'keeps the index non-negative' when index >= 0 for at least this fraction of its time."""
 
@@ -125,10 +127,6 @@ def command_metrics(dt: float, xy: np.ndarray, yaw: np.ndarray, commands: np.nda
     }
 
 
-JOINT_TYPES = ("HAA", "HFE", "KFE")
-"""The joint types of :func:`torque_peak_fractions` (each leg's abduction, hip flexion and knee, in that order)."""
-
-
 def torque_peak_fractions(peak_torque: np.ndarray, torque_limit: np.ndarray, strength: np.ndarray) -> dict[str, float]:
     """-: per joint type, the largest applied torque over its available torque, the worst of the four legs.
 
@@ -140,7 +138,7 @@ def torque_peak_fractions(peak_torque: np.ndarray, torque_limit: np.ndarray, str
     """
     available = np.asarray(torque_limit, dtype=float) * np.minimum(np.asarray(strength, dtype=float), 1.0)
     fraction = (np.abs(np.asarray(peak_torque, dtype=float)) / available).reshape(4, 3).max(axis=0)
-    return {name: float(f) for name, f in zip(JOINT_TYPES, fraction, strict=True)}
+    return {name: float(f) for name, f in zip(JOINT_KINDS, fraction, strict=True)}
 
 
 def timing_metrics(times_ms: Sequence[float] | None) -> dict[str, float | None]:
