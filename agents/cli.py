@@ -592,6 +592,13 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
         help="roll out the suite at the robot's scale (the suite's 'scale: leg_length', as evaluate --scale-terrain)",
     )
     p.add_argument(
+        "--pd-action-scale",
+        type=float,
+        default=1.0,
+        help="rad of joint target per unit of the student's action (default 1.0; Go1 needs 2.0: each round reports the "
+        "share of expert labels clipped to +-1, docs/rl.md)",
+    )
+    p.add_argument(
         "--no-course-frame",
         dest="course_frame",
         action="store_false",
@@ -650,6 +657,8 @@ def run_distill_command(args: argparse.Namespace) -> int:
         raise ValueError(f"--budget-min must be a number > 0 (min), got {args.budget_min}")
     if not 0.0 <= args.beta_decay <= 1.0:
         raise ValueError(f"--beta-decay must be in [0, 1], got {args.beta_decay}")
+    if not 0.0 < args.pd_action_scale <= math.pi:
+        raise ValueError(f"--pd-action-scale must be in (0, pi] (rad), got {args.pd_action_scale}")
     expert = _json_object(args.expert_config, "--expert-config")
     net_arch = _layer_sizes(args.net_arch, "--net-arch")
     height_scan = None if args.height_scan is None else _json_object(args.height_scan, "--height-scan")
@@ -663,7 +672,8 @@ def run_distill_command(args: argparse.Namespace) -> int:
     cfg = DistillConfig(
         dagger_rounds=args.dagger_rounds, beta_decay=args.beta_decay, episodes=args.episodes, epochs=args.epochs,
         seed=args.seed, seed_offset=args.seed_offset, budget_min=args.budget_min, expert=expert, net_arch=net_arch,
-        course_frame=args.course_frame, height_scan=height_scan, env_kwargs=env_kwargs, **backend,
+        course_frame=args.course_frame, height_scan=height_scan, env_kwargs=env_kwargs,
+        pd_action_scale=args.pd_action_scale, **backend,
     )  # fmt: skip
     try:
         cfg.expert_config()

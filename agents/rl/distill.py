@@ -107,7 +107,9 @@ class DistillConfig:
     pd_kd: float | None = None
     """N m s/rad, the student's servo damping (``pd_kd``; None: the robot's default, 3 for the paper robot)."""
     pd_action_scale: float = 1.0
-    """rad per unit of action (``pd_action_scale``; the labels stay within [-1, 1] at 1.0)."""
+    """rad per unit of action (``pd_action_scale``). A label beyond [-1, 1] is clipped and the servo cannot apply
+    the expert's torque: each round reports the share of clipped labels per joint type (``labels_clipped``). The
+    paper robot's labels stay within [-1, 1] at 1.0; Go1's knees need 2.0."""
     gait_period: float | None = None
     """s, the observation's gait clock (None: the teacher expert's cycle, the sum of its ``durations``)."""
     course_frame: bool = True
@@ -210,6 +212,16 @@ class DistillConfig:
 
 
 # ------------------------------------------------------------------------------------------------- labels
+CLIPPED_LABELS_WARN = 0.01
+"""Share of a joint type's labels clipped to +-1 above which a round warns (raise ``pd_action_scale``)."""
+
+
+def clipped_label_shares(labels: np.ndarray) -> dict[str, float]:
+    """The share of ``labels`` (N, 12) at the action bound (|label| >= 1 - 1e-6), per joint type (HAA, HFE, KFE)."""
+    at_bound = np.abs(np.asarray(labels).reshape(-1, C.N_LEGS, 3)) >= 1.0 - 1e-6
+    return {kind: float(at_bound[:, :, i].mean()) if len(at_bound) else 0.0 for i, kind in enumerate(C.JOINT_KINDS)}
+
+
 def expert_label(q_ref: np.ndarray, tau: np.ndarray, q_home: np.ndarray, kp: float, scale: float) -> np.ndarray:
     """The ``joint_pd`` action that stands for the expert: ``clip((q_ref + tau / kp - q_home) / scale, -1, 1)``.
 
@@ -596,6 +608,7 @@ def distill(
             acted = np.concatenate([r["student_acted"] for r in results])
             row: dict[str, Any] = {
                 "round": k,
+                "labels_clipped": clipped_label_shares(labels),
                 "beta": beta,
                 "steps": len(obs),
                 "student_steps": int(acted.sum()),
@@ -624,6 +637,13 @@ def distill(
                 + (f", on-policy label rmse {row['label_rmse_on_policy']:.3f}" if "label_rmse_on_policy" in row else "")
                 + f"; loss {losses[-1]:.4f} on {len(all_obs)} samples"
             )
+            worst = max(row["labels_clipped"], key=row["labels_clipped"].get)
+            if row["labels_clipped"][worst] > CLIPPED_LABELS_WARN:
+                log(
+                    f"warning: {row['labels_clipped'][worst]:.1%} of the {worst} labels are clipped to +-1: the "
+                    f"student cannot ask for the expert's torque there; raise --pd-action-scale "
+                    f"(now {cfg.pd_action_scale:g} rad)"
+                )
             save_student(model, norm, out, meta)
             round_dir = out / "rounds" / f"round_{k}"
             save_student(model, norm, round_dir, meta)  # each round's student, to select from

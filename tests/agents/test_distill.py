@@ -78,6 +78,17 @@ def test_expert_label_hand_case():
     assert np.all(label[2:] == 0.0)
 
 
+def test_clipped_label_shares_per_joint_type_hand_case():
+    """Two steps: step 0 has both knees of legs 0 and 1 at +-1 and a hip at 0.999 (inside), step 1 one HFE at -1:
+    KFE 2 of 8 leg-steps, HFE 1 of 8, HAA 0."""
+    from agents.rl.distill import clipped_label_shares
+
+    labels = np.zeros((2, 12), np.float32)
+    labels[0, 2], labels[0, 5], labels[0, 0] = 1.0, -1.0, 0.999
+    labels[1, 7] = -1.0
+    assert clipped_label_shares(labels) == {"HAA": 0.0, "HFE": 1 / 8, "KFE": 2 / 8}
+
+
 def test_labels_are_the_expert_references_and_torques_in_the_action_scale():
     """With the expert acting, the rollout's observations are those of the expert attached alone, and each label
     is (plan's joint angles + the torque the expert applied at the step's first physics step / kp - standing
@@ -161,6 +172,7 @@ def test_a_tiny_run_writes_a_train_folder_that_evaluate_and_export_read(tiny_run
     assert r0["steps"] == 100 and r0["student_steps"] == 0 and r1["beta"] == 0.5
     assert 0 < r1["student_steps"] < r1["steps"] and r1["dataset"] == 100 + r1["steps"]
     assert math.isfinite(r1["label_rmse_on_policy"])
+    assert set(r1["labels_clipped"]) == {"HAA", "HFE", "KFE"} and all(0 <= v <= 1 for v in r1["labels_clipped"].values())
     meta = read_metadata(out / "model.zip")
     assert meta["residual"] is False and meta["algo"] == "ppo" and meta["env_id"] == "QuadUneven-v0"
     assert meta["env_kwargs"] == {
@@ -298,6 +310,9 @@ def policy_weights(path):
         (["--budget-min", "0"], "--budget-min"),
         (["--budget-min", "nan"], "--budget-min"),
         (["--beta-decay", "1.5"], "--beta-decay"),
+        (["--pd-action-scale", "0"], "--pd-action-scale"),
+        (["--pd-action-scale", "nan"], "--pd-action-scale"),
+        (["--pd-action-scale", "4"], "--pd-action-scale"),
         (["--episodes", "0"], "--episodes"),
         (["--workers", "0"], "--workers"),
         (["--height-scan", "{bad"], "--height-scan"),
