@@ -172,7 +172,8 @@ def test_a_tiny_run_writes_a_train_folder_that_evaluate_and_export_read(tiny_run
     assert r0["steps"] == 100 and r0["student_steps"] == 0 and r1["beta"] == 0.5
     assert 0 < r1["student_steps"] < r1["steps"] and r1["dataset"] == 100 + r1["steps"]
     assert math.isfinite(r1["label_rmse_on_policy"])
-    assert set(r1["labels_clipped"]) == {"HAA", "HFE", "KFE"} and all(0 <= v <= 1 for v in r1["labels_clipped"].values())
+    clipped = r1["labels_clipped"]
+    assert set(clipped) == {"HAA", "HFE", "KFE"} and all(0 <= v <= 1 for v in clipped.values())
     meta = read_metadata(out / "model.zip")
     assert meta["residual"] is False and meta["algo"] == "ppo" and meta["env_id"] == "QuadUneven-v0"
     assert meta["env_kwargs"] == {
