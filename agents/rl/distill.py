@@ -218,7 +218,7 @@ CLIPPED_LABELS_WARN = 0.01
 
 def clipped_label_shares(labels: np.ndarray) -> dict[str, float]:
     """The share of ``labels`` (N, 12) at the action bound (|label| >= 1 - 1e-6), per joint type (HAA, HFE, KFE)."""
-    at_bound = np.abs(np.asarray(labels).reshape(-1, C.N_LEGS, 3)) >= 1.0 - 1e-6
+    at_bound = np.abs(np.asarray(labels).reshape(-1, C.N_LEGS, C.N_LEG_JOINTS)) >= 1.0 - 1e-6
     return {kind: float(at_bound[:, :, i].mean()) if len(at_bound) else 0.0 for i, kind in enumerate(C.JOINT_KINDS)}
 
 

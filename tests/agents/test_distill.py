@@ -89,6 +89,23 @@ def test_clipped_label_shares_per_joint_type_hand_case():
     assert clipped_label_shares(labels) == {"HAA": 0.0, "HFE": 1 / 8, "KFE": 2 / 8}
 
 
+def test_a_round_with_clipped_labels_warns_naming_the_option(tmp_path):
+    """At 0.05 rad per unit the standing robot's knee labels (tau / kp alone is ~0.1 rad) sit at the bound: the
+    summary's share is high and the log names --pd-action-scale; at 1 rad the same episode clips nothing."""
+    from agents.rl.distill import distill
+
+    suite = suite_from_dict(TINY, source="test")
+    for scale, out in ((0.05, tmp_path / "narrow"), (1.0, tmp_path / "wide")):
+        lines: list[str] = []
+        summary = distill(suite, out, tiny_config(dagger_rounds=0, pd_action_scale=scale), log=lines.append)
+        clipped = summary["rounds"][0]["labels_clipped"]
+        warned = [line for line in lines if line.startswith("warning:")]
+        if scale < 1:
+            assert clipped["KFE"] > 0.5 and len(warned) == 1 and "--pd-action-scale" in warned[0]
+        else:
+            assert max(clipped.values()) == 0.0 and not warned
+
+
 def test_labels_are_the_expert_references_and_torques_in_the_action_scale():
     """With the expert acting, the rollout's observations are those of the expert attached alone, and each label
     is (plan's joint angles + the torque the expert applied at the step's first physics step / kp - standing
