@@ -599,13 +599,6 @@ def add_distill_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
         "share of expert labels clipped to +-1, docs/rl.md)",
     )
     p.add_argument(
-        "--expert-acts",
-        choices=("torque", "servo"),
-        default="torque",
-        help="how the expert acts at its steps of the rollouts: 'torque' (its 500 Hz torques, default) or 'servo' "
-        "(its label as the student's joint target: the student's own channel)",
-    )
-    p.add_argument(
         "--no-course-frame",
         dest="course_frame",
         action="store_false",
@@ -680,7 +673,7 @@ def run_distill_command(args: argparse.Namespace) -> int:
         dagger_rounds=args.dagger_rounds, beta_decay=args.beta_decay, episodes=args.episodes, epochs=args.epochs,
         seed=args.seed, seed_offset=args.seed_offset, budget_min=args.budget_min, expert=expert, net_arch=net_arch,
         course_frame=args.course_frame, height_scan=height_scan, env_kwargs=env_kwargs,
-        pd_action_scale=args.pd_action_scale, expert_acts=args.expert_acts, **backend,
+        pd_action_scale=args.pd_action_scale, **backend,
     )  # fmt: skip
     try:
         cfg.expert_config()

@@ -69,9 +69,6 @@ DISTILL_OUTPUTS = (
 )  # fmt: skip
 """Top-level names ``distill`` writes in its ``--out`` (``--overwrite`` deletes what the manifest lists)."""
 
-EXPERT_ACTS = ("torque", "servo")
-"""How the expert acts in a rollout (:attr:`DistillConfig.expert_acts`)."""
-
 NORM_EPSILON = 1e-8
 """``epsilon`` of the saved observation statistics."""
 
@@ -120,10 +117,6 @@ class DistillConfig:
     height_scan: dict[str, float] | None = None
     """the student env's ``height_scan`` grid (``size_x``, ``size_y``, ``resolution``, m; None: the env's default,
     1.0 x 0.6 m at 0.1 m)."""
-    expert_acts: str = "torque"
-    """how the expert acts at its steps of a rollout: ``"torque"`` (its 500 Hz torques) or ``"servo"`` (its label
-    as the ``joint_pd`` target, the student's own channel: DAgger's mixture of the two policies in one action
-    space)."""
     expert: dict[str, Any] = dataclasses.field(default_factory=lambda: {"recovery": False})
     """the teacher's :class:`agents.expert.ExpertConfig` fields (over :meth:`ExpertConfig.for_robot` of the robot)."""
     env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
@@ -157,7 +150,6 @@ class DistillConfig:
             ("pd_action_scale", 0 < self.pd_action_scale <= math.pi, "in (0, pi] (rad)"),
             ("gait_period", self.gait_period is None or self.gait_period > 0, "None or a number > 0 (s)"),
             ("course_frame", isinstance(self.course_frame, bool), "True or False"),
-            ("expert_acts", self.expert_acts in EXPERT_ACTS, f"one of {list(EXPERT_ACTS)}"),
             ("budget_min", self.budget_min > 0, "a number > 0 (min)"),
             ("workers", self.workers >= 1, "an integer >= 1"),
             ("env_kwargs", isinstance(self.env_kwargs, dict), "a mapping of QuadUneven-v0 arguments"),
@@ -245,33 +237,26 @@ def expert_label(q_ref: np.ndarray, tau: np.ndarray, q_home: np.ndarray, kp: flo
 
 class DaggerTeacher:
     """A physics-rate controller (:class:`quad_uneven_env.env.PhysicsController`) for an env in
-    ``action_mode="torque"``: the expert's hook runs at every physics step; while :attr:`student_acts` the
-    ``joint_pd`` servo tracks the student's action, otherwise the expert acts: with its own torques
-    (``expert_servo=False``), or through the student's channel (``expert_servo=True``): its label of the control
-    step's first physics step, held as the servo's target for the control step.
+    ``action_mode="torque"``: the expert's hook runs at every physics step; the torques applied are the expert's,
+    or, while :attr:`student_acts`, the ``joint_pd`` servo's towards the action.
 
     :param env: the env (wrapped or not) it is installed on.
     :param expert_config: the teacher's settings.
     :param kp: N m/rad, servo stiffness.
     :param kd: N m s/rad, servo damping.
     :param scale: rad per unit of action.
-    :param expert_servo: the expert acts through the servo (its label as the target) rather than by torque.
     """
 
-    def __init__(
-        self, env: gym.Env, expert_config: ExpertConfig, kp: float, kd: float, scale: float, expert_servo: bool = False
-    ) -> None:
+    def __init__(self, env: gym.Env, expert_config: ExpertConfig, kp: float, kd: float, scale: float) -> None:
         self.env = env.unwrapped
         self.expert = ExpertPolicy(env, expert_config)
         """the teacher (held as ``.expert``: the env's reset reaches it through :meth:`reset`)."""
         self.kp, self.kd, self.scale = kp, kd, scale
-        self.expert_servo = bool(expert_servo)
         self.student_acts = False
-        """the student's action (True) or the expert (False) acts during the coming control step."""
+        """apply the servo's torques (True) or the expert's (False) during the coming control step."""
         self.first_tau = np.zeros(C.N_JOINTS)
         """(12,) N m: the expert's torques at the first physics step of the last control step (its observed state)."""
         self._tau = np.zeros(C.N_JOINTS)
-        self._target = np.zeros(C.N_JOINTS)
         self._first = True
 
     def begin_step(self, student_acts: bool) -> None:
@@ -284,22 +269,18 @@ class DaggerTeacher:
         self.expert.reset(model, data, terrain)
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> np.ndarray:
-        """Joint torques (N m): the servo's towards the acting policy's target, or the expert's own."""
+        """Joint torques (N m): the servo's towards ``q_home + scale x action`` or the expert's."""
         u = self.env
         if not self.expert.torques_into(model, data, action, self._tau, u.idx.torque_limit):
             self._tau[:] = np.clip(self.expert(model, data, action), -u.idx.torque_limit, u.idx.torque_limit)
         if self._first:
             self.first_tau[:] = self._tau
             self._first = False
-            if self.student_acts:
-                u.action_map.joint_targets_into(np.asarray(action), self.scale, self._target)
-            elif self.expert_servo:
-                ref, _ = self.expert.planned_now(float(data.time))
-                label = expert_label(ref.q_joints, self._tau, u.action_map.home_joints, self.kp, self.scale)
-                u.action_map.joint_targets_into(label, self.scale, self._target)
-        if not (self.student_acts or self.expert_servo):
+        if not self.student_acts:
             return self._tau.copy()
-        return self.kp * (self._target - data.qpos[7:]) - self.kd * data.qvel[6:]
+        target = np.empty(C.N_JOINTS)
+        u.action_map.joint_targets_into(np.asarray(action), self.scale, target)
+        return self.kp * (target - data.qpos[7:]) - self.kd * data.qvel[6:]
 
 
 # ------------------------------------------------------------------------------------------------ student
@@ -366,7 +347,7 @@ def rollout(job: RolloutJob) -> dict[str, Any]:
     )
     u = env.unwrapped
     kp, kd = cfg.servo_gains()
-    teacher = DaggerTeacher(env, cfg.expert_config(), kp, kd, cfg.pd_action_scale, cfg.expert_acts == "servo")
+    teacher = DaggerTeacher(env, cfg.expert_config(), kp, kd, cfg.pd_action_scale)
     u.set_controller(teacher)
     rng = np.random.default_rng(list(job.rng_seed))
     obs, info = env.reset(seed=task.seed)

@@ -167,32 +167,6 @@ def test_teacher_applies_the_joint_pd_servo_when_the_student_acts():
     assert np.abs(teacher.first_tau).max() > 1.0  # the expert kept computing its torques meanwhile
 
 
-def test_an_expert_acting_through_the_servo_applies_its_label():
-    """``expert_servo=True``: over a control step the teacher applies the servo towards the expert's label of its
-    first physics step, i.e. tau_expert + kp (q_ref - q) - kd qd at that step (the label's definition), and holds that
-    target through the step (the later physics steps: kp (target - q) - kd qd with the first step's target)."""
-    from agents.expert import ExpertConfig
-    from agents.rl.distill import DaggerTeacher
-
-    env = gym.make("QuadUneven-v0", terrain="flat", gait_period=3.1)
-    teacher = DaggerTeacher(env, ExpertConfig(recovery=False), 80.0, 2.0, 1.0, expert_servo=True)
-    env.unwrapped.set_controller(teacher)
-    env.reset(seed=4)
-    for _ in range(30):  # into the walk: the plan's angles and the robot's differ
-        teacher.begin_step(False)
-        env.step(np.zeros(12))
-    m, d = env.unwrapped.model, env.unwrapped.data
-    teacher.begin_step(False)
-    q, qd = d.qpos[7:].copy(), d.qvel[6:].copy()
-    tau = teacher(m, d, np.zeros(12))
-    ref, _ = teacher.expert.planned_now(float(d.time))
-    want = teacher.first_tau + 80.0 * (ref.q_joints - q) - 2.0 * qd
-    np.testing.assert_allclose(tau, want, rtol=0, atol=1e-6)
-    assert np.abs(ref.q_joints - q).max() > 1e-3 and np.abs(tau - teacher.first_tau).max() > 0.1
-    d.qpos[7:] += 0.01  # a later physics step of the same control step: the same target, the new state
-    np.testing.assert_allclose(teacher(m, d, np.zeros(12)) - tau, -80.0 * 0.01 * np.ones(12), atol=1e-6)
-
-
 # ------------------------------------------------------------------------------------------ the run itself
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
@@ -354,7 +328,6 @@ def policy_weights(path):
         (["--budget-min", "0"], "--budget-min"),
         (["--budget-min", "nan"], "--budget-min"),
         (["--beta-decay", "1.5"], "--beta-decay"),
-        (["--expert-acts", "both"], "--expert-acts"),
         (["--pd-action-scale", "0"], "--pd-action-scale"),
         (["--pd-action-scale", "nan"], "--pd-action-scale"),
         (["--pd-action-scale", "4"], "--pd-action-scale"),
