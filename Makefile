@@ -123,7 +123,7 @@ distilled: venv
 
 # Retrains models/distilled_go1 (models/distilled_go1/README.md): the same distillation on Go1 at its scale, with
 # joint targets of 2 rad per unit (Go1's soft servo needs the range for the expert's knee torques), 4 episodes an
-# entry and 11 DAgger rounds (about 35 min on 2 cores), then it and the expert on the held-out targets at Go1's scale.
+# entry and 11 DAgger rounds (about 40 min on 2 cores), then it and the expert on the held-out targets at Go1's scale.
 distilled-go1: venv
 	$(PY) -m agents.cli distill --suite targets --robot go1 --scale-terrain --out runs/distilled_go1 --episodes 4 \
 	  --dagger-rounds 11 --beta-decay 0.8 --epochs 15 --height-scan '{"resolution": 0.05}' --pd-action-scale 2 \
